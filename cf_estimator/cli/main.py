@@ -1,0 +1,54 @@
+"""``cf-estimator`` command line: one sub-command per module ``cf_estimator.cli.<name>_cmd``.
+
+Each command module provides ``register(subparsers)``, which adds its parser and sets
+``run=<callable(args) -> int>``. Errors meant for the user are raised as :class:`CliError`
+and printed as one line on stderr; argparse usage errors exit with 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+#: Sub-command modules, in the order ``--help`` lists them.
+COMMANDS: tuple[str, ...] = ("design",)
+
+
+class CliError(Exception):
+    """A user-facing error: printed as ``cf-estimator: error: <message>``, exit ``code``."""
+
+    def __init__(self, message: str, code: int = 1) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The top-level parser with every sub-command registered."""
+    parser = argparse.ArgumentParser(
+        prog="cf-estimator",
+        description="Complementary-filter attitude estimation: design, simulate, replay, tune.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name in COMMANDS:
+        importlib.import_module(f"cf_estimator.cli.{name}_cmd").register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``cf-estimator`` console script; returns the exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.run(args) or 0)
+    except CliError as exc:
+        print(f"cf-estimator: error: {exc}", file=sys.stderr)
+        return exc.code
+    except KeyboardInterrupt:
+        print("cf-estimator: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
