@@ -15,11 +15,11 @@ e_m = γ̂ − γ_mag and regulator W2(s) = r1 + r2/s, so that the error obeys
 δ = s²/A·δ1 + (k1 s² + k2 s + k3)/A·δ2 + (r1 s + r2) s/A·δ3 with
 A(s) = s³ + (k1+r1)s² + (k2+r2)s + k3.
 
-Discretisation (variable dt, from the sample stamps): predict with the gyro, γ⁻ = γ̂ + ω·dt;
-form the error from the prediction; saturate; aperiodic unit by backward Euler
-f ← f + dt/(T+dt)·(sat(e) − f); integral states by backward Euler (z ← z + k2·dt·f); correct
-γ̂ = γ⁻ − g·f − dt·z with g = k1·dt/(1 + k1·dt), the backward-Euler gain of the proportional
-path. With k2 = k3 = 0, no saturation and T = 0 this is exactly seed 001's
+Discretisation (variable dt, from the sample stamps), the same as the 3-D step: predict with
+the gyro corrected by the integral states, γ⁻ = γ̂ + (ω − z)·dt; form the error from the
+prediction; saturate; aperiodic unit by backward Euler f ← f + dt/(T+dt)·(sat(e) − f); integral
+states by backward Euler (z ← z + k2·dt·f, used from the next sample on); correct
+γ̂ = γ⁻ − g·f with g = k1·dt/(1 + k1·dt), the backward-Euler gain of the proportional path. With k2 = k3 = 0, no saturation and T = 0 this is exactly seed 001's
 γ̂ₙ = α(γ̂ₙ₋₁ + dt·ω) + (1 − α)·γ_acc with α = 1/(1 + k1·dt); for small dt all paths converge to
 the continuous transfer functions above.
 """
@@ -79,7 +79,7 @@ class AxisFilter:
     ) -> float:
         """Advance one sample: gyro rate [rad/s], accelerometer angle [rad], dt [s]; returns γ̂ [rad]."""
         p = self.params
-        predicted = self.angle_rad + gyro_rad_s * dt_s
+        predicted = self.angle_rad + (gyro_rad_s - self.integral_1 - self.mag_integral) * dt_s
         error = predicted - accel_angle_rad
         self.error_rad = error
         clipped_error = error
@@ -94,11 +94,11 @@ class AxisFilter:
         # W1 = k1 + (k2 + k3/s)/s: integral_2' = k3·f, integral_1' = k2·f + integral_2 [rad/s]
         self.integral_2 += p.k3 * dt_s * f
         self.integral_1 += dt_s * (p.k2 * f + self.integral_2)
-        correction = proportional_step_gain(p.k1, dt_s) * f + dt_s * self.integral_1
+        correction = proportional_step_gain(p.k1, dt_s) * f
         if mag_angle_rad is not None and (p.r1 or p.r2):
             mag_error = predicted - mag_angle_rad
             self.mag_integral += p.r2 * dt_s * mag_error
-            correction += proportional_step_gain(p.r1, dt_s) * mag_error + dt_s * self.mag_integral
+            correction += proportional_step_gain(p.r1, dt_s) * mag_error
         self.angle_rad = predicted - correction
         return self.angle_rad
 

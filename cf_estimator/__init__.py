@@ -1,0 +1,33 @@
+"""cf_estimator: complementary-filter attitude estimation (roll, pitch, yaw) from IMU + magnetometer.
+
+The public Python API is the filter core; the ROS node, the bag replay and the CLI are adapters.
+"""
+
+from cf_estimator.core import (
+    AxisFilter,
+    AxisParams,
+    BatchedFilter,
+    ComplementaryFilter,
+    EstimateResult,
+    FilterParams,
+    FilterStatus,
+    estimate,
+    estimate_many,
+)
+from cf_estimator.schema import ParameterError
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "AxisFilter",
+    "AxisParams",
+    "BatchedFilter",
+    "ComplementaryFilter",
+    "EstimateResult",
+    "FilterParams",
+    "FilterStatus",
+    "ParameterError",
+    "__version__",
+    "estimate",
+    "estimate_many",
+]

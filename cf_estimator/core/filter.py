@@ -1,0 +1,231 @@
+"""The 3-D complementary filter for one stream of samples (plain floats: fast per sample).
+
+Usage::
+
+    f = ComplementaryFilter(FilterParams())
+    q = f.update(gyro_rad_s, accel_m_s2, dt_s, mag)   # (w, x, y, z), q_world_from_sensor
+
+The first valid accelerometer sample initialises roll/pitch (and yaw from the magnetometer when
+one is given; otherwise yaw starts at 0 and is fixed by the first usable magnetometer sample).
+The equations live in :mod:`cf_estimator.core.step`; every decision they take is readable
+through :meth:`ComplementaryFilter.status`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+
+from cf_estimator.core import quaternion as quat
+from cf_estimator.core.ops import FloatOps
+from cf_estimator.core.params import FilterParams
+from cf_estimator.core.step import (
+    MAG_STATUS_NAMES,
+    PHASE_NAMES,
+    PHASE_STARTUP,
+    StepState,
+    step,
+)
+from cf_estimator.schema import as_dict
+
+Vector = Sequence[float]
+_SQRT_HALF = math.sqrt(0.5)
+
+
+def step_params(params: FilterParams) -> SimpleNamespace:
+    """The parameter view the step reads: FilterParams fields plus derived flags."""
+    view = SimpleNamespace(**as_dict(params))
+    view.mag_full = params.mag_mode == "full"
+    return view
+
+
+def valid_vector(v: Vector | None) -> bool:
+    """True when v is three finite components with a non-zero norm."""
+    if v is None or len(v) != 3:
+        return False
+    x, y, z = float(v[0]), float(v[1]), float(v[2])
+    return math.isfinite(x + y + z) and (x * x + y * y + z * z) > 0.0
+
+
+def orientation_from_vectors(accel: Vector, mag: Vector | None = None) -> np.ndarray:
+    """q_enu_from_sensor that explains a static accelerometer (and magnetometer) reading.
+
+    Roll/pitch from the gravity direction; yaw from the horizontal magnetic field (magnetic
+    north = ENU +y) when ``mag`` is given and not parallel to gravity, else yaw = 0.
+    """
+    up = np.asarray(accel, dtype=float)
+    up = up / np.linalg.norm(up)
+    if mag is not None:
+        east = np.cross(np.asarray(mag, dtype=float), up)
+        norm = np.linalg.norm(east)
+        if norm > 1e-9 * np.linalg.norm(mag):
+            east /= norm
+            north = np.cross(up, east)
+            return quat.from_matrix(np.vstack([east, north, up]))
+    roll = math.atan2(up[1], up[2])
+    pitch = math.atan2(-up[0], math.hypot(up[1], up[2]))
+    return quat.from_euler(roll, pitch, 0.0)
+
+
+@dataclass(frozen=True)
+class FilterStatus:
+    """What the filter decided at the last sample (for diagnostics; frames and units given)."""
+
+    phase: str  #: uninitialized | startup | running | recovering
+    time_since_init_s: float
+    error_rad: tuple[float, float, float]  #: raw accelerometer error e = â × ĝ, sensor frame
+    error_norm_rad: float  #: |e| ≈ tilt error (including linear-acceleration effects)
+    clipped: bool  #: the saturation unit was active
+    processed_error_rad: tuple[float, float, float]  #: after saturation and aperiodic unit
+    gyro_bias_rad_s: tuple[float, float, float]  #: bias estimate, sensor frame
+    at_rest: bool
+    accel_used: bool
+    mag_status: str  #: none | used | rejected | disabled
+    heading_initialized: bool
+    yaw_error_rad: float  #: last heading error seen by the magnetometer channel
+    recovery_count: int
+    mag_yaw_rate_correction_rad_s: float  #: integral of the heading channel, world vertical
+
+
+class ComplementaryFilter:
+    """Compensation-scheme attitude filter (seeds 000/003/004); see module docstrings."""
+
+    def __init__(self, params: FilterParams | None = None, *, initial_orientation: Vector | None = None):
+        self._params = params if params is not None else FilterParams()
+        self._view = step_params(self._params)
+        self._state = StepState(0.0, False)
+        self._initialized = False
+        if initial_orientation is not None:
+            self.initialize(initial_orientation)
+
+    # -- parameters --------------------------------------------------------------------------
+    @property
+    def params(self) -> FilterParams:
+        """The parameters in force."""
+        return self._params
+
+    def set_params(self, params: FilterParams) -> None:
+        """Apply new (already validated) parameters; attitude, bias and phase are kept."""
+        if not isinstance(params, FilterParams):
+            raise TypeError("params must be a FilterParams")
+        self._params = params
+        self._view = step_params(params)
+
+    # -- state ---------------------------------------------------------------------------------
+    @property
+    def initialized(self) -> bool:
+        """True once an attitude exists (after the first valid accelerometer sample)."""
+        return self._initialized
+
+    def reset(self) -> None:
+        """Forget everything: the next valid accelerometer sample initialises again."""
+        self._state = StepState(0.0, False)
+        self._initialized = False
+
+    def initialize(self, q_world_from_sensor: Vector, *, heading_known: bool = True) -> None:
+        """Start from a given attitude (in this filter's world frame); starts the start-up phase."""
+        q = quat.normalize(np.asarray(q_world_from_sensor, dtype=float))
+        if self._params.world_frame == "ned":
+            q = quat.ned_to_enu(q)
+        self.reset()
+        s = self._state
+        s.qw, s.qx, s.qy, s.qz = (float(c) for c in q)
+        s.heading_initialized = heading_known
+        s.phase = PHASE_STARTUP
+        self._initialized = True
+
+    def initialize_from(self, accel_m_s2: Vector, mag: Vector | None = None) -> bool:
+        """Initialise from one accelerometer (and magnetometer) sample; False if not valid."""
+        if not valid_vector(accel_m_s2):
+            return False
+        use_mag = self._params.use_mag and valid_vector(mag)
+        q = orientation_from_vectors(accel_m_s2, mag if use_mag else None)
+        self.initialize(self._to_output(q), heading_known=use_mag)
+        return True
+
+    def update(
+        self, gyro_rad_s: Vector, accel_m_s2: Vector | None, dt_s: float, mag: Vector | None = None
+    ) -> tuple[float, float, float, float] | None:
+        """Process one sample; returns q_world_from_sensor (w, x, y, z) or None before init.
+
+        gyro [rad/s] must be finite and dt [s] > 0 (ValueError otherwise); an invalid or
+        missing accelerometer/magnetometer sample is skipped for this step (gyro-only).
+        Magnetometer units are free (only the direction and relative norm are used).
+        """
+        if not self._initialized:
+            self.initialize_from(accel_m_s2, mag) if accel_m_s2 is not None else None
+            return self.orientation_tuple() if self._initialized else None
+        gx, gy, gz = (float(c) for c in gyro_rad_s)
+        if not math.isfinite(gx + gy + gz):
+            raise ValueError(f"gyro sample is not finite: {tuple(gyro_rad_s)!r}")
+        if not (dt_s > 0.0 and math.isfinite(dt_s)):
+            raise ValueError(f"dt must be a positive finite number of seconds, got {dt_s!r}")
+        acc = tuple(float(c) for c in accel_m_s2) if valid_vector(accel_m_s2) else None
+        mg = tuple(float(c) for c in mag) if valid_vector(mag) else None  # type: ignore[union-attr]
+        step(self._state, self._view, (gx, gy, gz), acc, mg, float(dt_s), FloatOps)  # type: ignore[arg-type]
+        return self.orientation_tuple()
+
+    # -- outputs -----------------------------------------------------------------------------
+    def _to_output(self, q_enu: Any) -> np.ndarray:
+        q = np.asarray(q_enu, dtype=float)
+        return quat.enu_to_ned(q) if self._params.world_frame == "ned" else q
+
+    def orientation_tuple(self) -> tuple[float, float, float, float]:
+        """q_world_from_sensor (w, x, y, z) in the configured world frame, as floats."""
+        s = self._state
+        if self._params.world_frame == "ned":
+            return (
+                -_SQRT_HALF * (s.qx + s.qy),
+                _SQRT_HALF * (s.qw + s.qz),
+                _SQRT_HALF * (s.qw - s.qz),
+                _SQRT_HALF * (s.qy - s.qx),
+            )
+        return (s.qw, s.qx, s.qy, s.qz)
+
+    @property
+    def orientation(self) -> np.ndarray:
+        """q_world_from_sensor (w, x, y, z) as an array (NaN before initialisation)."""
+        if not self._initialized:
+            return np.full(4, np.nan)
+        return np.array(self.orientation_tuple())
+
+    @property
+    def gyro_bias_rad_s(self) -> np.ndarray:
+        """Gyro-bias estimate [rad/s], sensor frame.
+
+        The regulator's integral state b plus the heading channel's world-vertical rate
+        correction z_m seen on the sensor axes at the current attitude: b − Rᵀ·ẑ·z_m.
+        """
+        s = self._state
+        up = (2.0 * (s.qx * s.qz - s.qw * s.qy), 2.0 * (s.qy * s.qz + s.qw * s.qx),
+              1.0 - 2.0 * (s.qx * s.qx + s.qy * s.qy))
+        return np.array([s.bx, s.by, s.bz]) - s.z_m * np.array(up)
+
+    def status(self) -> FilterStatus:
+        """The internal decisions of the last step (see :class:`FilterStatus`)."""
+        s = self._state
+        return FilterStatus(
+            phase=PHASE_NAMES[int(s.phase)] if self._initialized else PHASE_NAMES[0],
+            time_since_init_s=float(s.time_s),
+            error_rad=(float(s.ex), float(s.ey), float(s.ez)),
+            error_norm_rad=float(s.error_norm),
+            clipped=bool(s.clipped),
+            processed_error_rad=(float(s.fx), float(s.fy), float(s.fz)),
+            gyro_bias_rad_s=tuple(float(c) for c in self.gyro_bias_rad_s),  # type: ignore[arg-type]
+            at_rest=bool(s.at_rest),
+            accel_used=bool(s.accel_used),
+            mag_status=MAG_STATUS_NAMES[int(s.mag_status)],
+            heading_initialized=bool(s.heading_initialized),
+            yaw_error_rad=float(s.yaw_error_rad),
+            recovery_count=int(s.recovery_count),
+            mag_yaw_rate_correction_rad_s=float(s.z_m),
+        )
+
+    def state_snapshot(self) -> StepState:
+        """A copy of the full internal state (for tests and debugging)."""
+        return self._state.copy()

@@ -1,0 +1,278 @@
+"""The 3-D compensation-scheme step: the filter's equations, written once for floats and arrays.
+
+One sample, in the order the code runs (world frame ENU inside; q = q_world_from_sensor)::
+
+    1. predict   q⁻ = q ⊗ Exp((ω − b)·dt)  ⊗-left  Exp_z(z_m·dt)          (gyro, bias b, yaw-rate z_m)
+    2. error     e  = â × ĝ,  â = a/|a|,  ĝ = R⁻ᵀ·ẑ                      (≈ small-angle tilt error,
+                                                                            no component about â)
+    3. saturate  e_s = e·min(1, L/|e|)                                     (by norm, keeps direction)
+    4. aperiodic l ← l + dt/(T+dt)·(R⁻·e_s − l);  f = R⁻ᵀ·l               (1/(T s+1) in the world frame)
+    5. regulator c ← c + k3·dt·f;  b ← b − dt·(k2·f + c);  q ← q⁻ ⊗ Exp(g(k1)·f)
+                 (W1 = k1 + k2/s + k3/s²; g(k) = k·dt/(1+k·dt) is the backward-Euler gain;
+                  −b, the integral state, is the gyro-bias estimate)
+    6. magnet.   'yaw':  e_ψ = atan2(m_E, m_N) of the measured field in the world frame, saturated,
+                         q ← Exp_z(g(r1)·e_ψ) ⊗ q, z_m ← z_m + r2·dt_m·e_ψ  (heading only: a
+                         rotation about the world vertical never changes roll/pitch)
+                 'full': e_m = m̂ × (R⁻ᵀ·m_ref) through W2 = r1 + r2/s on all axes (seed 004)
+
+Phases: STARTUP (after initialisation, for startup_duration_s: gain startup_k1, no clip, no lag,
+no bias learning) → RUNNING → RECOVERING (error clipped without a break for recovery_trigger_s:
+a real attitude error, e.g. after gyro over-range; same as STARTUP until |e| < L/2) → RUNNING.
+While at rest (gyro and accelerometer steady for rest_time_s) the bias also follows the gyro.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+PHASE_UNINITIALIZED = 0
+PHASE_STARTUP = 1
+PHASE_RUNNING = 2
+PHASE_RECOVERING = 3
+PHASE_NAMES = {0: "uninitialized", 1: "startup", 2: "running", 3: "recovering"}
+
+MAG_NONE = 0  # no magnetometer sample at this step
+MAG_USED = 1  # used for heading
+MAG_REJECTED = 2  # norm or dip off the learned reference: disturbance, ignored
+MAG_DISABLED = 3  # use_mag is off
+MAG_STATUS_NAMES = {0: "none", 1: "used", 2: "rejected", 3: "disabled"}
+
+#: Low-pass time constant of the rest detector's gyro/accelerometer means [s].
+REST_LOWPASS_TIME_CONSTANT_S = 0.5
+#: Magnetometer samples averaged for the field reference (norm, dip) after start-up.
+MAG_REFERENCE_SAMPLES = 20
+#: A magnetic field rejected this long [s] is taken as the new normal and re-learned.
+MAG_RELEARN_AFTER_S = 20.0
+#: Longest time [s] one magnetometer sample's correction may stand for (sparse magnetometers).
+MAG_MAX_DT_S = 1.0
+
+
+class StepState:
+    """Filter state; each attribute is a float/bool (one filter) or an array (P parameter sets).
+
+    Frames and units: q* = q_world(ENU)_from_sensor; b* gyro-bias estimate [rad/s, sensor];
+    c* k3-path state [rad/s², sensor]; l* aperiodic-unit state [rad, world]; z_m yaw-rate
+    correction [rad/s, world z]; e* last raw error [rad, sensor]; f* last processed error.
+    """
+
+    FIELDS = (
+        "qw qx qy qz bx by bz cx cy cz lx ly lz z_m time_s clip_timer_s recovering "
+        "rest_timer_s glx gly glz alx aly alz at_rest mag_ref_norm mag_ref_dip mag_ref_count "
+        "mag_disturbed mag_reject_timer_s mag_last_time_s heading_initialized "
+        "ex ey ez error_norm fx fy fz clipped accel_used mag_status yaw_error_rad phase "
+        "recovery_count"
+    ).split()
+
+    BOOL_FIELDS = ("recovering", "at_rest", "mag_disturbed", "heading_initialized", "clipped",
+                   "accel_used")
+
+    def __init__(self, zero: Any, false: Any) -> None:
+        """``zero``/``false``: 0.0/False for one filter, or zero/False arrays of shape (P,)."""
+        for name in self.FIELDS:
+            setattr(self, name, zero * 1.0)
+        for name in self.BOOL_FIELDS:
+            setattr(self, name, false & True)
+        self.qw = zero + 1.0
+        self.mag_last_time_s = zero - 1.0
+
+    def copy(self) -> StepState:
+        """A copy (arrays copied too)."""
+        new = StepState.__new__(StepState)
+        for name in self.FIELDS:
+            value = getattr(self, name)
+            setattr(new, name, value.copy() if hasattr(value, "copy") else value)
+        return new
+
+
+def _mul(aw: Any, ax: Any, ay: Any, az: Any, bw: Any, bx: Any, by: Any, bz: Any) -> tuple:
+    return (
+        aw * bw - ax * bx - ay * by - az * bz,
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+    )
+
+
+def _exp(vx: Any, vy: Any, vz: Any, o: Any) -> tuple:
+    angle = o.sqrt(vx * vx + vy * vy + vz * vz)
+    k = o.sin_half_over(angle)
+    return o.cos(0.5 * angle), k * vx, k * vy, k * vz
+
+
+def _rotate(qw: Any, qx: Any, qy: Any, qz: Any, vx: Any, vy: Any, vz: Any) -> tuple:
+    """v' = q ⊗ v ⊗ q* (sensor → world for q_world_from_sensor)."""
+    tx = 2.0 * (qy * vz - qz * vy)
+    ty = 2.0 * (qz * vx - qx * vz)
+    tz = 2.0 * (qx * vy - qy * vx)
+    return (
+        vx + qw * tx + (qy * tz - qz * ty),
+        vy + qw * ty + (qz * tx - qx * tz),
+        vz + qw * tz + (qx * ty - qy * tx),
+    )
+
+
+def _normalize(s: StepState, o: Any) -> None:
+    n = o.sqrt(s.qw * s.qw + s.qx * s.qx + s.qy * s.qy + s.qz * s.qz)
+    s.qw, s.qx, s.qy, s.qz = s.qw / n, s.qx / n, s.qy / n, s.qz / n
+
+
+def step(
+    s: StepState,
+    p: Any,
+    gyro: tuple[float, float, float],
+    accel: tuple[float, float, float] | None,
+    mag: tuple[float, float, float] | None,
+    dt: float,
+    o: Any,
+) -> None:
+    """Advance the state one sample (see the module docstring).
+
+    ``p`` has the FilterParams field names (floats, or arrays for a batch) plus ``mag_full``.
+    ``accel``/``mag`` are None when absent or invalid at this sample (the caller checks
+    finiteness and non-zero norm). ``dt`` > 0 [s].
+    """
+    gx, gy, gz = gyro
+    s.time_s = s.time_s + dt
+    startup = s.time_s <= p.startup_duration_s
+    fast = startup | s.recovering
+    learn = o.not_(fast)
+
+    # 1. predict with the bias-corrected gyro, then the magnetometer's yaw-rate correction
+    dw, dx, dy, dz = _exp((gx - s.bx) * dt, (gy - s.by) * dt, (gz - s.bz) * dt, o)
+    qw, qx, qy, qz = _mul(s.qw, s.qx, s.qy, s.qz, dw, dx, dy, dz)
+    half = 0.5 * s.z_m * dt
+    cw, cz = o.cos(half), o.sin(half)
+    s.qw, s.qx, s.qy, s.qz = cw * qw - cz * qz, cw * qx - cz * qy, cw * qy + cz * qx, cw * qz + cz * qw
+
+    s.clipped = s.clipped & False
+    s.accel_used = accel is not None
+    if accel is not None:
+        ax, ay, az = accel
+        an = o.sqrt(ax * ax + ay * ay + az * az)
+        ux, uy, uz = ax / an, ay / an, az / an
+        # 2. predicted gravity (up) direction in the sensor frame: third row of R
+        vx = 2.0 * (s.qx * s.qz - s.qw * s.qy)
+        vy = 2.0 * (s.qy * s.qz + s.qw * s.qx)
+        vz = 1.0 - 2.0 * (s.qx * s.qx + s.qy * s.qy)
+        ex, ey, ez = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+        en = o.sqrt(ex * ex + ey * ey + ez * ez)
+        s.ex, s.ey, s.ez, s.error_norm = ex, ey, ez, en
+        # 3. saturation by norm
+        limit = p.saturation_limit_rad
+        clipped = p.use_saturation & learn & (en > limit)
+        scale = o.where(clipped, limit / o.maximum(en, 1e-300), 1.0)
+        # 4. aperiodic unit in the world frame (weight 1 = unit bypassed)
+        wx, wy, wz = _rotate(s.qw, s.qx, s.qy, s.qz, ex * scale, ey * scale, ez * scale)
+        weight = o.where(fast, 1.0, dt / (p.aperiodic_time_constant_s + dt))
+        s.lx = s.lx + weight * (wx - s.lx)
+        s.ly = s.ly + weight * (wy - s.ly)
+        s.lz = s.lz + weight * (wz - s.lz)
+        fx, fy, fz = _rotate(s.qw, -s.qx, -s.qy, -s.qz, s.lx, s.ly, s.lz)
+        s.fx, s.fy, s.fz = fx, fy, fz
+        # 5. PI(+k3) regulator: integral states are the bias estimate
+        k3dt = o.where(learn, p.k3 * dt, 0.0)
+        s.cx, s.cy, s.cz = s.cx + k3dt * fx, s.cy + k3dt * fy, s.cz + k3dt * fz
+        ldt = o.where(learn, dt, 0.0)
+        s.bx = s.bx - ldt * (p.k2 * fx + s.cx)
+        s.by = s.by - ldt * (p.k2 * fy + s.cy)
+        s.bz = s.bz - ldt * (p.k2 * fz + s.cz)
+        k1 = o.where(fast, o.maximum(p.k1, p.startup_k1), p.k1)
+        gain = k1 * dt / (1.0 + k1 * dt)
+        dw, dx, dy, dz = _exp(gain * fx, gain * fy, gain * fz, o)
+        s.qw, s.qx, s.qy, s.qz = _mul(s.qw, s.qx, s.qy, s.qz, dw, dx, dy, dz)
+        # recovery: a long unbroken clip is a real attitude error, not a disturbance
+        s.clip_timer_s = o.where(clipped, s.clip_timer_s + dt, 0.0)
+        enter = (p.recovery_trigger_s > 0.0) & (s.clip_timer_s >= p.recovery_trigger_s) & learn
+        leave = s.recovering & (en < 0.5 * limit)
+        s.recovery_count = s.recovery_count + o.where(enter, 1, 0)
+        s.recovering = o.where(s.recovering, o.not_(leave), enter)
+        s.clip_timer_s = o.where(enter, 0.0, s.clip_timer_s)
+        s.clipped = clipped
+
+        # rest detection and direct bias learning at rest
+        lw = dt / (REST_LOWPASS_TIME_CONSTANT_S + dt)
+        s.glx, s.gly, s.glz = s.glx + lw * (gx - s.glx), s.gly + lw * (gy - s.gly), s.glz + lw * (gz - s.glz)
+        s.alx, s.aly, s.alz = s.alx + lw * (ax - s.alx), s.aly + lw * (ay - s.aly), s.alz + lw * (az - s.alz)
+        gdev = o.sqrt((gx - s.glx) ** 2 + (gy - s.gly) ** 2 + (gz - s.glz) ** 2)
+        adev = o.sqrt((ax - s.alx) ** 2 + (ay - s.aly) ** 2 + (az - s.alz) ** 2)
+        still = (
+            (gdev < p.rest_gyro_threshold_rad_s)
+            & (adev < p.rest_accel_threshold_m_s2)
+            & (o.sqrt(s.glx**2 + s.gly**2 + s.glz**2) < p.bias_limit_rad_s * 1.7320508075688772)
+        )
+        s.rest_timer_s = o.where(still, s.rest_timer_s + dt, 0.0)
+        s.at_rest = p.rest_bias_learning & learn & (s.rest_timer_s >= p.rest_time_s)
+        bw = o.where(s.at_rest, dt / (p.rest_bias_time_constant_s + dt), 0.0)
+        s.bx, s.by, s.bz = s.bx + bw * (s.glx - s.bx), s.by + bw * (s.gly - s.by), s.bz + bw * (s.glz - s.bz)
+    lim = p.bias_limit_rad_s
+    s.bx = o.minimum(o.maximum(s.bx, -lim), lim)
+    s.by = o.minimum(o.maximum(s.by, -lim), lim)
+    s.bz = o.minimum(o.maximum(s.bz, -lim), lim)
+
+    s.mag_reject_timer_s = o.where(s.mag_disturbed, s.mag_reject_timer_s + dt, 0.0)
+    s.mag_status = o.where(p.use_mag, MAG_NONE, MAG_DISABLED)
+    if mag is not None:
+        _magnetometer(s, p, mag, fast, learn, o)
+    _normalize(s, o)
+    s.phase = o.where(s.recovering, PHASE_RECOVERING, o.where(startup, PHASE_STARTUP, PHASE_RUNNING))
+
+
+def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: Any) -> None:
+    """Step 6: heading correction from one magnetometer sample (any unit)."""
+    mx, my, mz = mag
+    mn = o.sqrt(mx * mx + my * my + mz * mz)
+    ux, uy, uz = mx / mn, my / mn, mz / mn
+    wx, wy, wz = _rotate(s.qw, s.qx, s.qy, s.qz, ux, uy, uz)
+    horizontal = o.sqrt(wx * wx + wy * wy)
+    dip = o.atan2(-wz, horizontal)
+    dt_m = o.minimum(o.where(s.mag_last_time_s < 0.0, 0.0, s.time_s - s.mag_last_time_s), MAG_MAX_DT_S)
+
+    # field reference (norm, dip): learned at start and after a long rejection
+    learning = p.use_mag & (s.mag_ref_count < MAG_REFERENCE_SAMPLES)
+    relearn = s.mag_reject_timer_s > MAG_RELEARN_AFTER_S
+    s.mag_ref_count = o.where(relearn, 0, s.mag_ref_count)
+    s.mag_reject_timer_s = o.where(relearn, 0.0, s.mag_reject_timer_s)
+    n = s.mag_ref_count + 1
+    s.mag_ref_norm = o.where(learning, s.mag_ref_norm + (mn - s.mag_ref_norm) / n, s.mag_ref_norm)
+    s.mag_ref_dip = o.where(learning, s.mag_ref_dip + (dip - s.mag_ref_dip) / n, s.mag_ref_dip)
+    s.mag_ref_count = o.where(learning, n, s.mag_ref_count)
+    off_norm = o.maximum(mn / o.maximum(s.mag_ref_norm, 1e-300) - 1.0, 1.0 - mn / o.maximum(s.mag_ref_norm, 1e-300))
+    off_dip = o.maximum(dip - s.mag_ref_dip, s.mag_ref_dip - dip)
+    disturbed = (
+        p.mag_rejection
+        & o.not_(learning)
+        & ((off_norm > p.mag_norm_tolerance) | (off_dip > p.mag_dip_tolerance_rad))
+    )
+    s.mag_disturbed = disturbed
+    usable = p.use_mag & o.not_(disturbed) & (horizontal > 1e-3)
+    s.mag_status = o.where(p.use_mag, o.where(disturbed, MAG_REJECTED, MAG_USED), MAG_DISABLED)
+    s.mag_last_time_s = o.where(usable, s.time_s, s.mag_last_time_s)
+    first = usable & o.not_(s.heading_initialized)
+    s.heading_initialized = s.heading_initialized | usable
+
+    r1 = o.where(fast, o.maximum(p.r1, p.startup_k1), p.r1)
+    gain = o.where(usable, r1 * dt_m / (1.0 + r1 * dt_m), 0.0)
+    ldt = o.where(usable & learn, dt_m, 0.0)
+    limit = o.where(fast, 4.0, p.mag_saturation_limit_rad)
+
+    # 'yaw' mode (and the first heading fix of either mode): rotate about the world vertical
+    yaw_error = o.atan2(wx, wy)
+    s.yaw_error_rad = o.where(usable, yaw_error, 0.0)
+    yaw_c = o.minimum(o.maximum(yaw_error, -limit), limit)
+    yaw_mode = o.not_(p.mag_full) | first
+    angle = o.where(first, yaw_error, o.where(yaw_mode, gain * yaw_c, 0.0))
+    s.z_m = s.z_m + o.where(yaw_mode & o.not_(first), p.r2 * ldt * yaw_c, 0.0)
+    cw, cz = o.cos(0.5 * angle), o.sin(0.5 * angle)
+    s.qw, s.qx, s.qy, s.qz = cw * s.qw - cz * s.qz, cw * s.qx - cz * s.qy, cw * s.qy + cz * s.qx, cw * s.qz + cz * s.qw
+
+    # 'full' mode (seed 004): vector error against the reference field, all axes
+    full = p.mag_full & o.not_(first) & usable
+    rx, ry, rz = 0.0 * s.mag_ref_dip, o.cos(s.mag_ref_dip), -o.sin(s.mag_ref_dip)
+    px, py, pz = _rotate(s.qw, -s.qx, -s.qy, -s.qz, rx, ry, rz)
+    ex, ey, ez = uy * pz - uz * py, uz * px - ux * pz, ux * py - uy * px
+    en = o.sqrt(ex * ex + ey * ey + ez * ez)
+    scale = o.where(full, o.minimum(1.0, limit / o.maximum(en, 1e-300)), 0.0)
+    ex, ey, ez = ex * scale, ey * scale, ez * scale
+    s.bx, s.by, s.bz = s.bx - p.r2 * ldt * ex, s.by - p.r2 * ldt * ey, s.bz - p.r2 * ldt * ez
+    dw, dx, dy, dz = _exp(gain * ex, gain * ey, gain * ez, o)
+    s.qw, s.qx, s.qy, s.qz = _mul(s.qw, s.qx, s.qy, s.qz, dw, dx, dy, dz)
