@@ -13,7 +13,7 @@ import sys
 from collections.abc import Sequence
 
 #: Sub-command modules, in the order ``--help`` lists them.
-COMMANDS: tuple[str, ...] = ("design",)
+COMMANDS: tuple[str, ...] = ("design", "bench", "tune", "demo", "simulate", "replay")
 
 
 class CliError(Exception):
@@ -51,4 +51,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    # under ``python -m`` this file is also imported as cf_estimator.cli.main; use that copy so
+    # the CliError the commands raise is the one main() catches
+    from cf_estimator.cli.main import main as _main
+
+    sys.exit(_main())

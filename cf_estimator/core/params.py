@@ -39,7 +39,7 @@ class FilterParams:
         group="error path",
     )
     saturation_limit_rad: float = param(
-        0.02, "rad", "Saturation level of the accelerometer error |e| (e ~ small-angle tilt "
+        0.01, "rad", "Saturation level of the accelerometer error |e| (e ~ small-angle tilt "
         "error). Keep it above about 2*gyro_bias*17.7 s for the seed gains or bias is not tracked.",
         minimum=0.0, maximum=2.0, minimum_exclusive=True, group="error path",
     )

@@ -111,6 +111,18 @@ def _rotate(qw: Any, qx: Any, qy: Any, qz: Any, vx: Any, vy: Any, vz: Any) -> tu
     )
 
 
+def _turn_heading(s: StepState, angle: Any, o: Any) -> None:
+    """q ← Exp_z(angle) ⊗ q (a world-vertical rotation), and the world-frame lag state with it.
+
+    Turning the lag state too keeps the tilt path exactly independent of heading corrections:
+    f = Rᵀ·l is unchanged, so the magnetometer can never move roll/pitch.
+    """
+    cw, cz = o.cos(0.5 * angle), o.sin(0.5 * angle)
+    s.qw, s.qx, s.qy, s.qz = cw * s.qw - cz * s.qz, cw * s.qx - cz * s.qy, cw * s.qy + cz * s.qx, cw * s.qz + cz * s.qw
+    c, sn = cw * cw - cz * cz, 2.0 * cw * cz
+    s.lx, s.ly = c * s.lx - sn * s.ly, sn * s.lx + c * s.ly
+
+
 def _normalize(s: StepState, o: Any) -> None:
     n = o.sqrt(s.qw * s.qw + s.qx * s.qx + s.qy * s.qy + s.qz * s.qz)
     s.qw, s.qx, s.qy, s.qz = s.qw / n, s.qx / n, s.qy / n, s.qz / n
@@ -140,9 +152,8 @@ def step(
     # 1. predict with the bias-corrected gyro, then the magnetometer's yaw-rate correction
     dw, dx, dy, dz = _exp((gx - s.bx) * dt, (gy - s.by) * dt, (gz - s.bz) * dt, o)
     qw, qx, qy, qz = _mul(s.qw, s.qx, s.qy, s.qz, dw, dx, dy, dz)
-    half = 0.5 * s.z_m * dt
-    cw, cz = o.cos(half), o.sin(half)
-    s.qw, s.qx, s.qy, s.qz = cw * qw - cz * qz, cw * qx - cz * qy, cw * qy + cz * qx, cw * qz + cz * qw
+    s.qw, s.qx, s.qy, s.qz = qw, qx, qy, qz
+    _turn_heading(s, s.z_m * dt, o)
 
     s.clipped = s.clipped & False
     s.accel_used = accel is not None
@@ -262,8 +273,7 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
     yaw_mode = o.not_(p.mag_full) | first
     angle = o.where(first, yaw_error, o.where(yaw_mode, gain * yaw_c, 0.0))
     s.z_m = s.z_m + o.where(yaw_mode & o.not_(first), p.r2 * ldt * yaw_c, 0.0)
-    cw, cz = o.cos(0.5 * angle), o.sin(0.5 * angle)
-    s.qw, s.qx, s.qy, s.qz = cw * s.qw - cz * s.qz, cw * s.qx - cz * s.qy, cw * s.qy + cz * s.qx, cw * s.qz + cz * s.qw
+    _turn_heading(s, angle, o)
 
     # 'full' mode (seed 004): vector error against the reference field, all axes
     full = p.mag_full & o.not_(first) & usable
