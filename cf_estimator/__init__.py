@@ -1,4 +1,4 @@
-"""cf_estimator: complementary-filter attitude estimation (roll, pitch, yaw) from IMU + magnetometer.
+"""cf_estimator: complementary-filter attitude (roll, pitch, yaw) from IMU and magnetometer.
 
 The public Python API is the filter core; the ROS node, the bag replay and the CLI are adapters.
 """

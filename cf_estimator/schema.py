@@ -1,4 +1,4 @@
-"""Parameter schema: one declaration per parameter drives validation, ROS declarations, YAML and CLI.
+"""Parameter schema: one declaration per parameter drives validation, ROS, YAML and the CLI.
 
 A parameter is a dataclass field created with :func:`param`. Its metadata (unit, description,
 range, choices, read-only flag) is the schema; :func:`specs_of` reads it back, :func:`validate`
@@ -75,7 +75,7 @@ class ParamSpec:
 
 
 def coerce(spec: ParamSpec, value: Any) -> Any:
-    """Convert ``value`` to the spec's kind without loosening meaning (no float→bool, no str→float)."""
+    """Convert ``value`` to the spec's kind, never loosely (no float→bool, no str→float)."""
     kind = spec.kind
     if kind == "bool":
         if isinstance(value, bool):

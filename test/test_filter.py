@@ -23,8 +23,13 @@ def rotating_truth(n: int, seed: int, max_rate: float = 2.0, q0=None):
     t = np.arange(n) * DT
     freqs = rng.uniform(0.05, 0.7, (3, 3))
     phases = rng.uniform(0, 2 * np.pi, (3, 3))
-    gyro = np.stack([sum(max_rate / 3 * np.sin(2 * np.pi * freqs[a, k] * t + phases[a, k])
-                         for k in range(3)) for a in range(3)], axis=1)
+    gyro = np.stack(
+        [
+            sum(max_rate / 3 * np.sin(2 * np.pi * freqs[a, k] * t + phases[a, k]) for k in range(3))
+            for a in range(3)
+        ],
+        axis=1,
+    )
     q = np.empty((n, 4))
     q[0] = quat.from_euler(0.3, -0.4, 2.5) if q0 is None else q0
     for k in range(1, n):
@@ -50,13 +55,19 @@ def static_run(q_true, n, bias=(0.0, 0.0, 0.0), params=None, seed=0, noise=True,
     "use_saturation, aperiodic, mag_mode",
     list(itertools.product([False, True], [0.0, 3.0], ["yaw", "full"])),
 )
-def test_exact_sensors_give_the_truth_for_every_error_path_setting(use_saturation, aperiodic, mag_mode):
+def test_exact_sensors_give_the_truth_for_every_error_path_setting(
+    use_saturation, aperiodic, mag_mode
+):
     # Compensation scheme: the error signal contains only sensor errors, so with exact sensors
     # the output is the truth whatever saturation and aperiodic unit do to the error.
     _, q, gyro = rotating_truth(3000, seed=7)
     acc, mag = exact_sensors(q)
-    params = FilterParams(use_saturation=use_saturation, aperiodic_time_constant_s=aperiodic,
-                          mag_mode=mag_mode, saturation_limit_rad=0.005)
+    params = FilterParams(
+        use_saturation=use_saturation,
+        aperiodic_time_constant_s=aperiodic,
+        mag_mode=mag_mode,
+        saturation_limit_rad=0.005,
+    )
     res = estimate(gyro, acc, mag, rate_hz=1 / DT, params=params)
     err = quat.angle_between(res.quaternion, q)
     assert np.max(err) < 1e-3
@@ -91,8 +102,14 @@ def test_ned_output_is_the_enu_output_rotated():
 @pytest.mark.parametrize("mag_mode", ["yaw", "full"])
 def test_regulator_integral_learns_the_gyro_bias_within_5_percent(mag_mode):
     bias = np.array([0.02, -0.015, 0.01])
-    params = FilterParams(rest_bias_learning=False, k2=0.05, r2=0.02, r1=0.3, mag_mode=mag_mode,
-                          saturation_limit_rad=0.05)
+    params = FilterParams(
+        rest_bias_learning=False,
+        k2=0.05,
+        r2=0.02,
+        r1=0.3,
+        mag_mode=mag_mode,
+        saturation_limit_rad=0.05,
+    )
     q_true = quat.from_euler(0.2, -0.3, 1.0)
     res = static_run(q_true, 40000, bias=bias, params=params)
     f_bias = res.gyro_bias_rad_s[-1]
@@ -118,7 +135,10 @@ def test_magnetometer_channel_removes_yaw_drift():
     q_true = quat.from_euler(0.0, 0.0, 0.0)  # 6-D starts at yaw 0: compare drift from there
     with_mag = static_run(q_true, 12000, bias=bias, params=FilterParams(r2=0.02, **common))
     without = static_run(q_true, 12000, bias=bias, params=FilterParams(use_mag=False, **common))
-    yaw_err = lambda r: abs(quat.to_euler(quat.multiply(r.quaternion[-1], quat.conjugate(q_true)))[2])  # noqa: E731
+
+    def yaw_err(r):
+        return abs(quat.to_euler(quat.multiply(r.quaternion[-1], quat.conjugate(q_true)))[2])
+
     assert math.degrees(yaw_err(with_mag)) < 0.5
     assert math.degrees(yaw_err(without)) > 50  # 0.01 rad/s for 120 s ≈ 69°
 
@@ -160,8 +180,13 @@ def test_startup_phase_converges_and_then_runs():
 
 
 def test_long_clipped_error_triggers_recovery_and_the_filter_recovers():
-    params = FilterParams(use_mag=False, startup_duration_s=0.0, recovery_trigger_s=5.0,
-                          saturation_limit_rad=0.01, k1=0.5)
+    params = FilterParams(
+        use_mag=False,
+        startup_duration_s=0.0,
+        recovery_trigger_s=5.0,
+        saturation_limit_rad=0.01,
+        k1=0.5,
+    )
     q_true = quat.from_euler(0.0, 0.0, 0.0)
     acc, _ = exact_sensors(q_true)
     f = ComplementaryFilter(params, initial_orientation=quat.from_euler(0.6, 0.0, 0.0))

@@ -8,6 +8,7 @@ import time
 import numpy as np
 import pytest
 
+from cf_estimator.core.quaternion import from_euler as quat_from_euler_zyx
 from cf_estimator.scenarios import (
     SCENARIOS,
     SensorModel,
@@ -22,7 +23,6 @@ from cf_estimator.scenarios import (
     uav_flight,
     vibration,
 )
-from cf_estimator.scenarios.quat import quat_from_euler_zyx
 
 G = 9.80665
 

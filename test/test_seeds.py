@@ -22,10 +22,14 @@ K1, K2 = 0.03, 0.001  # seed 000's choice, "k1 = 0,03 s^-1; k2 = 0,001 s^-2"
 DT = 0.01
 
 
-def run_axis(params: AxisParams, gyro: np.ndarray, accel_angle: np.ndarray, mag_angle=None, angle0=0.0):
+def run_axis(
+    params: AxisParams, gyro: np.ndarray, accel_angle: np.ndarray, mag_angle=None, angle0=0.0
+):
     f = AxisFilter(params, angle_rad=angle0)
     mags = [None] * len(gyro) if mag_angle is None else mag_angle
-    return np.array([f.update(w, a, DT, m) for w, a, m in zip(gyro, accel_angle, mags, strict=True)])
+    return np.array(
+        [f.update(w, a, DT, m) for w, a, m in zip(gyro, accel_angle, mags, strict=True)]
+    )
 
 
 def lsim(num, den, u, t):
@@ -139,8 +143,13 @@ def test_seed004_filter_without_magnetometer_keeps_exactly_the_vertical_drift():
     q_true = quat.from_euler(PHI, THETA, PSI)
     accel = quat.rotate(quat.conjugate(q_true), [0, 0, 9.80665])
     params = FilterParams(
-        k1=1.0, k2=0.25, use_saturation=False, aperiodic_time_constant_s=0.0, use_mag=False,
-        startup_duration_s=0.0, rest_bias_learning=False,
+        k1=1.0,
+        k2=0.25,
+        use_saturation=False,
+        aperiodic_time_constant_s=0.0,
+        use_mag=False,
+        startup_duration_s=0.0,
+        rest_bias_learning=False,
     )
     f = ComplementaryFilter(params, initial_orientation=q_true)
     for _ in range(int(100 / DT)):

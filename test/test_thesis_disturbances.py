@@ -16,7 +16,9 @@ from cf_estimator import FilterParams, estimate
 from cf_estimator.core import quaternion as quat
 from cf_estimator.scenarios import make_scenario
 
-LIMIT_ARCMIN = 90.0  # thesis: "Measurement accuracy ±90 [arc]minutes at multiple impacts, vibration"
+LIMIT_ARCMIN = (
+    90.0  # thesis: "Measurement accuracy ±90 [arc]minutes at multiple impacts, vibration"
+)
 
 
 def inclination_arcmin(q_est: np.ndarray, q_ref: np.ndarray) -> np.ndarray:

@@ -19,7 +19,8 @@ Discretisation (variable dt, from the sample stamps), the same as the 3-D step: 
 the gyro corrected by the integral states, γ⁻ = γ̂ + (ω − z)·dt; form the error from the
 prediction; saturate; aperiodic unit by backward Euler f ← f + dt/(T+dt)·(sat(e) − f); integral
 states by backward Euler (z ← z + k2·dt·f, used from the next sample on); correct
-γ̂ = γ⁻ − g·f with g = k1·dt/(1 + k1·dt), the backward-Euler gain of the proportional path. With k2 = k3 = 0, no saturation and T = 0 this is exactly seed 001's
+γ̂ = γ⁻ − g·f with g = k1·dt/(1 + k1·dt), the backward-Euler gain of the proportional path.
+With k2 = k3 = 0, no saturation and T = 0 this is exactly seed 001's
 γ̂ₙ = α(γ̂ₙ₋₁ + dt·ω) + (1 − α)·γ_acc with α = 1/(1 + k1·dt); for small dt all paths converge to
 the continuous transfer functions above.
 """
@@ -75,9 +76,13 @@ class AxisFilter:
     clipped: bool = False
 
     def update(
-        self, gyro_rad_s: float, accel_angle_rad: float, dt_s: float, mag_angle_rad: float | None = None
+        self,
+        gyro_rad_s: float,
+        accel_angle_rad: float,
+        dt_s: float,
+        mag_angle_rad: float | None = None,
     ) -> float:
-        """Advance one sample: gyro rate [rad/s], accelerometer angle [rad], dt [s]; returns γ̂ [rad]."""
+        """One sample: gyro rate [rad/s], accelerometer angle [rad], dt [s]; returns γ̂ [rad]."""
         p = self.params
         predicted = self.angle_rad + (gyro_rad_s - self.integral_1 - self.mag_integral) * dt_s
         error = predicted - accel_angle_rad

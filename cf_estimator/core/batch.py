@@ -54,7 +54,9 @@ def sample_times(n: int, rate_hz: float | None, timestamps_s: ArrayLike | None) 
         raise ValueError("timestamps_s contains NaN/Inf")
     bad = np.flatnonzero(np.diff(t) <= 0.0)
     if bad.size:
-        raise ValueError(f"timestamps_s must increase strictly (first problem at index {bad[0] + 1})")
+        raise ValueError(
+            f"timestamps_s must increase strictly (first problem at index {bad[0] + 1})"
+        )
     return t
 
 

@@ -42,7 +42,9 @@ class BatchedFilter:
         self._state = StepState(np.zeros(self.size), np.zeros(self.size, dtype=bool))
         self.initialized = False
 
-    def initialize_from(self, accel_m_s2: Sequence[float], mag: Sequence[float] | None = None) -> bool:
+    def initialize_from(
+        self, accel_m_s2: Sequence[float], mag: Sequence[float] | None = None
+    ) -> bool:
         """Initialise all filters from one sample (as the single filter does); False if invalid."""
         if not valid_vector(accel_m_s2):
             return False

@@ -95,7 +95,9 @@ class FilterStatus:
 class ComplementaryFilter:
     """Compensation-scheme attitude filter (seeds 000/003/004); see module docstrings."""
 
-    def __init__(self, params: FilterParams | None = None, *, initial_orientation: Vector | None = None):
+    def __init__(
+        self, params: FilterParams | None = None, *, initial_orientation: Vector | None = None
+    ):
         self._params = params if params is not None else FilterParams()
         self._view = step_params(self._params)
         self._state = StepState(0.0, False)
@@ -202,8 +204,11 @@ class ComplementaryFilter:
         correction z_m seen on the sensor axes at the current attitude: b − Rᵀ·ẑ·z_m.
         """
         s = self._state
-        up = (2.0 * (s.qx * s.qz - s.qw * s.qy), 2.0 * (s.qy * s.qz + s.qw * s.qx),
-              1.0 - 2.0 * (s.qx * s.qx + s.qy * s.qy))
+        up = (
+            2.0 * (s.qx * s.qz - s.qw * s.qy),
+            2.0 * (s.qy * s.qz + s.qw * s.qx),
+            1.0 - 2.0 * (s.qx * s.qx + s.qy * s.qy),
+        )
         return np.array([s.bx, s.by, s.bz]) - s.z_m * np.array(up)
 
     def status(self) -> FilterStatus:

@@ -21,127 +21,228 @@ class FilterParams:
     """Parameters of the complementary filter (units in every field's description)."""
 
     k1: float = param(
-        0.5, "1/s", "Proportional gain of the accelerometer channel (seed W1 = k1 + k2/s + k3/s^2).",
-        minimum=0.0, maximum=100.0, group="gains",
+        0.5,
+        "1/s",
+        "Proportional gain of the accelerometer channel (seed W1 = k1 + k2/s + k3/s^2).",
+        minimum=0.0,
+        maximum=100.0,
+        group="gains",
     )
     k2: float = param(
-        0.005, "1/s^2", "Integral gain of the accelerometer channel; its state is the gyro-bias "
+        0.005,
+        "1/s^2",
+        "Integral gain of the accelerometer channel; its state is the gyro-bias "
         "estimate (0 disables bias learning from the accelerometer).",
-        minimum=0.0, maximum=100.0, group="gains",
+        minimum=0.0,
+        maximum=100.0,
+        group="gains",
     )
     k3: float = param(
-        0.0, "1/s^3", "Double-integral gain of W1 (seed 004's full variant; 0 = off). Requires "
+        0.0,
+        "1/s^3",
+        "Double-integral gain of W1 (seed 004's full variant; 0 = off). Requires "
         "(k1+r1)(k2+r2) > k3 for stability.",
-        minimum=0.0, maximum=10.0, group="gains",
+        minimum=0.0,
+        maximum=10.0,
+        group="gains",
     )
     use_saturation: bool = param(
-        True, "", "Clip the error vector by norm before the aperiodic unit and the regulator.",
+        True,
+        "",
+        "Clip the error vector by norm before the aperiodic unit and the regulator.",
         group="error path",
     )
     saturation_limit_rad: float = param(
-        0.01, "rad", "Saturation level of the accelerometer error |e| (e ~ small-angle tilt "
+        0.01,
+        "rad",
+        "Saturation level of the accelerometer error |e| (e ~ small-angle tilt "
         "error). Keep it above about 2*gyro_bias*17.7 s for the seed gains or bias is not tracked.",
-        minimum=0.0, maximum=2.0, minimum_exclusive=True, group="error path",
+        minimum=0.0,
+        maximum=2.0,
+        minimum_exclusive=True,
+        group="error path",
     )
     aperiodic_time_constant_s: float = param(
-        3.0, "s", "Time constant T of the aperiodic unit 1/(T*s+1) on the clipped error, applied "
+        3.0,
+        "s",
+        "Time constant T of the aperiodic unit 1/(T*s+1) on the clipped error, applied "
         "in the world frame (0 = off). Must satisfy T < k1/k2 for stability.",
-        minimum=0.0, maximum=1000.0, group="error path",
+        minimum=0.0,
+        maximum=1000.0,
+        group="error path",
     )
     startup_duration_s: float = param(
-        2.0, "s", "Start-up phase after initialisation: gain startup_k1, no clip, no aperiodic "
+        2.0,
+        "s",
+        "Start-up phase after initialisation: gain startup_k1, no clip, no aperiodic "
         "unit, no bias learning (0 = none).",
-        minimum=0.0, maximum=60.0, group="phases",
+        minimum=0.0,
+        maximum=60.0,
+        group="phases",
     )
     startup_k1: float = param(
-        5.0, "1/s", "Proportional gain of both channels during the start-up phase and recovery.",
-        minimum=0.0, maximum=100.0, group="phases",
+        5.0,
+        "1/s",
+        "Proportional gain of both channels during the start-up phase and recovery.",
+        minimum=0.0,
+        maximum=100.0,
+        group="phases",
     )
     recovery_trigger_s: float = param(
-        10.0, "s", "If the filtered error stays at the saturation level this long, it is a real "
+        10.0,
+        "s",
+        "If the filtered error stays at the saturation level this long, it is a real "
         "attitude error, not a disturbance: recover with startup_k1 and no clip (0 = never).",
-        minimum=0.0, maximum=3600.0, group="phases",
+        minimum=0.0,
+        maximum=3600.0,
+        group="phases",
     )
     use_mag: bool = param(
-        True, "", "Use the magnetometer for heading (False: 6-D, yaw drifts with the gyro).",
+        True,
+        "",
+        "Use the magnetometer for heading (False: 6-D, yaw drifts with the gyro).",
         group="magnetometer",
     )
     mag_mode: str = param(
-        "yaw", "", "'yaw': magnetometer corrects heading only (never roll/pitch); 'full': seed "
+        "yaw",
+        "",
+        "'yaw': magnetometer corrects heading only (never roll/pitch); 'full': seed "
         "004's full-vector channel W2 on all axes.",
-        choices=MAG_MODES, group="magnetometer",
+        choices=MAG_MODES,
+        group="magnetometer",
     )
     r1: float = param(
-        0.1, "1/s", "Proportional gain of the magnetometer channel (seed 004 W2 = r1 + r2/s).",
-        minimum=0.0, maximum=100.0, group="magnetometer",
+        0.1,
+        "1/s",
+        "Proportional gain of the magnetometer channel (seed 004 W2 = r1 + r2/s).",
+        minimum=0.0,
+        maximum=100.0,
+        group="magnetometer",
     )
     r2: float = param(
-        0.0, "1/s^2", "Integral gain of the magnetometer channel (yaw-rate bias in 'yaw' mode).",
-        minimum=0.0, maximum=100.0, group="magnetometer",
+        0.0,
+        "1/s^2",
+        "Integral gain of the magnetometer channel (yaw-rate bias in 'yaw' mode).",
+        minimum=0.0,
+        maximum=100.0,
+        group="magnetometer",
     )
     mag_saturation_limit_rad: float = param(
-        0.2, "rad", "Saturation level of the magnetometer (heading) error.",
-        minimum=0.0, maximum=4.0, minimum_exclusive=True, group="magnetometer",
+        0.2,
+        "rad",
+        "Saturation level of the magnetometer (heading) error.",
+        minimum=0.0,
+        maximum=4.0,
+        minimum_exclusive=True,
+        group="magnetometer",
     )
     mag_rejection: bool = param(
-        True, "", "Ignore magnetometer samples whose norm or dip angle departs from the reference "
+        True,
+        "",
+        "Ignore magnetometer samples whose norm or dip angle departs from the reference "
         "learned at start-up (magnetic disturbances).",
         group="magnetometer",
     )
     mag_norm_tolerance: float = param(
-        0.2, "1", "Relative norm deviation above which a magnetometer sample is a disturbance.",
-        minimum=0.0, maximum=10.0, minimum_exclusive=True, group="magnetometer",
+        0.2,
+        "1",
+        "Relative norm deviation above which a magnetometer sample is a disturbance.",
+        minimum=0.0,
+        maximum=10.0,
+        minimum_exclusive=True,
+        group="magnetometer",
     )
     mag_dip_tolerance_rad: float = param(
-        0.17, "rad", "Dip-angle deviation above which a magnetometer sample is a disturbance.",
-        minimum=0.0, maximum=3.2, minimum_exclusive=True, group="magnetometer",
+        0.17,
+        "rad",
+        "Dip-angle deviation above which a magnetometer sample is a disturbance.",
+        minimum=0.0,
+        maximum=3.2,
+        minimum_exclusive=True,
+        group="magnetometer",
     )
     rest_bias_learning: bool = param(
-        True, "", "Learn the gyro bias directly while the sensor is at rest.", group="bias",
+        True,
+        "",
+        "Learn the gyro bias directly while the sensor is at rest.",
+        group="bias",
     )
     rest_gyro_threshold_rad_s: float = param(
-        0.035, "rad/s", "Rest detection: low-passed |gyro - bias| below this.",
-        minimum=0.0, maximum=10.0, minimum_exclusive=True, group="bias",
+        0.035,
+        "rad/s",
+        "Rest detection: low-passed |gyro - bias| below this.",
+        minimum=0.0,
+        maximum=10.0,
+        minimum_exclusive=True,
+        group="bias",
     )
     rest_accel_threshold_m_s2: float = param(
-        0.5, "m/s^2", "Rest detection: low-passed accelerometer within this of its mean.",
-        minimum=0.0, maximum=100.0, minimum_exclusive=True, group="bias",
+        0.5,
+        "m/s^2",
+        "Rest detection: low-passed accelerometer within this of its mean.",
+        minimum=0.0,
+        maximum=100.0,
+        minimum_exclusive=True,
+        group="bias",
     )
     rest_time_s: float = param(
-        1.5, "s", "Rest detection: conditions must hold this long.",
-        minimum=0.0, maximum=600.0, minimum_exclusive=True, group="bias",
+        1.5,
+        "s",
+        "Rest detection: conditions must hold this long.",
+        minimum=0.0,
+        maximum=600.0,
+        minimum_exclusive=True,
+        group="bias",
     )
     rest_bias_time_constant_s: float = param(
-        3.0, "s", "Time constant of the direct bias update while at rest.",
-        minimum=0.0, maximum=3600.0, minimum_exclusive=True, group="bias",
+        3.0,
+        "s",
+        "Time constant of the direct bias update while at rest.",
+        minimum=0.0,
+        maximum=3600.0,
+        minimum_exclusive=True,
+        group="bias",
     )
     bias_limit_rad_s: float = param(
-        0.1, "rad/s", "Bound on each component of the gyro-bias estimate (anti-windup).",
-        minimum=0.0, maximum=10.0, minimum_exclusive=True, group="bias",
+        0.1,
+        "rad/s",
+        "Bound on each component of the gyro-bias estimate (anti-windup).",
+        minimum=0.0,
+        maximum=10.0,
+        minimum_exclusive=True,
+        group="bias",
     )
     world_frame: str = param(
-        "enu", "", "World frame of the output orientation: 'enu' (REP-103, z up, yaw from east) "
+        "enu",
+        "",
+        "World frame of the output orientation: 'enu' (REP-103, z up, yaw from east) "
         "or 'ned' (z down, yaw from north).",
-        choices=WORLD_FRAMES, read_only=True, group="frames",
+        choices=WORLD_FRAMES,
+        read_only=True,
+        group="frames",
     )
     gravity_m_s2: float = param(
-        9.80665, "m/s^2", "Local gravity magnitude (unit checks and rest detection).",
-        minimum=1.0, maximum=30.0, group="frames",
+        9.80665,
+        "m/s^2",
+        "Local gravity magnitude (unit checks and rest detection).",
+        minimum=1.0,
+        maximum=30.0,
+        group="frames",
     )
 
     def __post_init__(self) -> None:
         validate_fields(self)
-        if self.aperiodic_time_constant_s > 0.0 and self.k2 > 0.0:
-            if self.aperiodic_time_constant_s * self.k2 >= self.k1:
-                raise ParameterError(
-                    "aperiodic_time_constant_s: the loop T*s^3 + s^2 + k1*s + k2 is unstable "
-                    f"unless T < k1/k2 = {self.k1 / self.k2:.4g} s "
-                    f"(got T = {self.aperiodic_time_constant_s:g} s)"
-                )
+        if self.k2 > 0.0 and self.aperiodic_time_constant_s * self.k2 >= self.k1:
+            raise ParameterError(
+                "aperiodic_time_constant_s: the loop T*s^3 + s^2 + k1*s + k2 is unstable "
+                f"unless T < k1/k2 = {self.k1 / self.k2:.4g} s "
+                f"(got T = {self.aperiodic_time_constant_s:g} s)"
+            )
         if self.k3 > 0.0:
             r1, r2 = (self.r1, self.r2) if self.use_mag and self.mag_mode == "full" else (0.0, 0.0)
             if (self.k1 + r1) * (self.k2 + r2) <= self.k3:
                 raise ParameterError(
                     "k3: the loop s^3 + (k1+r1)s^2 + (k2+r2)s + k3 is unstable unless "
-                    f"(k1+r1)(k2+r2) > k3 (got {(self.k1 + r1) * (self.k2 + r2):.4g} <= {self.k3:g})"
+                    f"(k1+r1)(k2+r2) > k3 (got {(self.k1 + r1) * (self.k2 + r2):.4g} "
+                    f"<= {self.k3:g})"
                 )

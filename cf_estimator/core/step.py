@@ -2,18 +2,19 @@
 
 One sample, in the order the code runs (world frame ENU inside; q = q_world_from_sensor)::
 
-    1. predict   q⁻ = q ⊗ Exp((ω − b)·dt)  ⊗-left  Exp_z(z_m·dt)          (gyro, bias b, yaw-rate z_m)
-    2. error     e  = â × ĝ,  â = a/|a|,  ĝ = R⁻ᵀ·ẑ                      (≈ small-angle tilt error,
-                                                                            no component about â)
-    3. saturate  e_s = e·min(1, L/|e|)                                     (by norm, keeps direction)
-    4. aperiodic l ← l + dt/(T+dt)·(R⁻·e_s − l);  f = R⁻ᵀ·l               (1/(T s+1) in the world frame)
-    5. regulator c ← c + k3·dt·f;  b ← b − dt·(k2·f + c);  q ← q⁻ ⊗ Exp(g(k1)·f)
-                 (W1 = k1 + k2/s + k3/s²; g(k) = k·dt/(1+k·dt) is the backward-Euler gain;
-                  −b, the integral state, is the gyro-bias estimate)
-    6. magnet.   'yaw':  e_ψ = atan2(m_E, m_N) of the measured field in the world frame, saturated,
-                         q ← Exp_z(g(r1)·e_ψ) ⊗ q, z_m ← z_m + r2·dt_m·e_ψ  (heading only: a
-                         rotation about the world vertical never changes roll/pitch)
-                 'full': e_m = m̂ × (R⁻ᵀ·m_ref) through W2 = r1 + r2/s on all axes (seed 004)
+    1. predict    q⁻ = Exp_z(z_m·dt) ⊗ q ⊗ Exp((ω − b)·dt)
+                  (gyro ω, bias estimate b; z_m: heading channel's world-vertical rate)
+    2. error      e = â × ĝ,  â = a/|a|,  ĝ = R⁻ᵀ·ẑ
+                  (≈ small-angle tilt error; no component about â)
+    3. saturate   e_s = e·min(1, L/|e|)                     (by norm, keeps the direction)
+    4. aperiodic  l ← l + dt/(T+dt)·(R⁻·e_s − l);  f = R⁻ᵀ·l  (1/(T s+1) in the world frame)
+    5. regulator  c ← c + k3·dt·f;  b ← b − dt·(k2·f + c);  q ← q⁻ ⊗ Exp(g(k1)·f)
+                  (W1 = k1 + k2/s + k3/s²; g(k) = k·dt/(1+k·dt), the backward-Euler gain;
+                  b, the integral state, is the gyro-bias estimate)
+    6. magnetom.  'yaw':  e_ψ = atan2(m_E, m_N) of the measured field in the world frame,
+                  saturated; q ← Exp_z(g(r1)·e_ψ) ⊗ q; z_m ← z_m + r2·dt_m·e_ψ (heading only:
+                  a rotation about the world vertical never changes roll/pitch)
+                  'full': e_m = m̂ × (R⁻ᵀ·m_ref) through W2 = r1 + r2/s on all axes (seed 004)
 
 Phases: STARTUP (after initialisation, for startup_duration_s: gain startup_k1, no clip, no lag,
 no bias learning) → RUNNING → RECOVERING (error clipped without a break for recovery_trigger_s:
@@ -55,16 +56,62 @@ class StepState:
     correction [rad/s, world z]; e* last raw error [rad, sensor]; f* last processed error.
     """
 
-    FIELDS = (
-        "qw qx qy qz bx by bz cx cy cz lx ly lz z_m time_s clip_timer_s recovering "
-        "rest_timer_s glx gly glz alx aly alz at_rest mag_ref_norm mag_ref_dip mag_ref_count "
-        "mag_disturbed mag_reject_timer_s mag_last_time_s heading_initialized "
-        "ex ey ez error_norm fx fy fz clipped accel_used mag_status yaw_error_rad phase "
-        "recovery_count"
-    ).split()
+    FIELDS = [
+        "qw",
+        "qx",
+        "qy",
+        "qz",
+        "bx",
+        "by",
+        "bz",
+        "cx",
+        "cy",
+        "cz",
+        "lx",
+        "ly",
+        "lz",
+        "z_m",
+        "time_s",
+        "clip_timer_s",
+        "recovering",
+        "rest_timer_s",
+        "glx",
+        "gly",
+        "glz",
+        "alx",
+        "aly",
+        "alz",
+        "at_rest",
+        "mag_ref_norm",
+        "mag_ref_dip",
+        "mag_ref_count",
+        "mag_disturbed",
+        "mag_reject_timer_s",
+        "mag_last_time_s",
+        "heading_initialized",
+        "ex",
+        "ey",
+        "ez",
+        "error_norm",
+        "fx",
+        "fy",
+        "fz",
+        "clipped",
+        "accel_used",
+        "mag_status",
+        "yaw_error_rad",
+        "phase",
+        "recovery_count",
+    ]
 
-    BOOL_FIELDS = ("recovering", "at_rest", "mag_disturbed", "heading_initialized", "clipped",
-                   "accel_used")
+    BOOL_FIELDS = (
+        "recovering",
+        "at_rest",
+        "mag_disturbed",
+        "heading_initialized",
+        "clipped",
+        "accel_used",
+    )
 
     def __init__(self, zero: Any, false: Any) -> None:
         """``zero``/``false``: 0.0/False for one filter, or zero/False arrays of shape (P,)."""
@@ -118,7 +165,12 @@ def _turn_heading(s: StepState, angle: Any, o: Any) -> None:
     f = Rᵀ·l is unchanged, so the magnetometer can never move roll/pitch.
     """
     cw, cz = o.cos(0.5 * angle), o.sin(0.5 * angle)
-    s.qw, s.qx, s.qy, s.qz = cw * s.qw - cz * s.qz, cw * s.qx - cz * s.qy, cw * s.qy + cz * s.qx, cw * s.qz + cz * s.qw
+    s.qw, s.qx, s.qy, s.qz = (
+        cw * s.qw - cz * s.qz,
+        cw * s.qx - cz * s.qy,
+        cw * s.qy + cz * s.qx,
+        cw * s.qz + cz * s.qw,
+    )
     c, sn = cw * cw - cz * cz, 2.0 * cw * cz
     s.lx, s.ly = c * s.lx - sn * s.ly, sn * s.lx + c * s.ly
 
@@ -202,8 +254,16 @@ def step(
 
         # rest detection and direct bias learning at rest
         lw = dt / (REST_LOWPASS_TIME_CONSTANT_S + dt)
-        s.glx, s.gly, s.glz = s.glx + lw * (gx - s.glx), s.gly + lw * (gy - s.gly), s.glz + lw * (gz - s.glz)
-        s.alx, s.aly, s.alz = s.alx + lw * (ax - s.alx), s.aly + lw * (ay - s.aly), s.alz + lw * (az - s.alz)
+        s.glx, s.gly, s.glz = (
+            s.glx + lw * (gx - s.glx),
+            s.gly + lw * (gy - s.gly),
+            s.glz + lw * (gz - s.glz),
+        )
+        s.alx, s.aly, s.alz = (
+            s.alx + lw * (ax - s.alx),
+            s.aly + lw * (ay - s.aly),
+            s.alz + lw * (az - s.alz),
+        )
         gdev = o.sqrt((gx - s.glx) ** 2 + (gy - s.gly) ** 2 + (gz - s.glz) ** 2)
         adev = o.sqrt((ax - s.alx) ** 2 + (ay - s.aly) ** 2 + (az - s.alz) ** 2)
         still = (
@@ -214,7 +274,11 @@ def step(
         s.rest_timer_s = o.where(still, s.rest_timer_s + dt, 0.0)
         s.at_rest = p.rest_bias_learning & learn & (s.rest_timer_s >= p.rest_time_s)
         bw = o.where(s.at_rest, dt / (p.rest_bias_time_constant_s + dt), 0.0)
-        s.bx, s.by, s.bz = s.bx + bw * (s.glx - s.bx), s.by + bw * (s.gly - s.by), s.bz + bw * (s.glz - s.bz)
+        s.bx, s.by, s.bz = (
+            s.bx + bw * (s.glx - s.bx),
+            s.by + bw * (s.gly - s.by),
+            s.bz + bw * (s.glz - s.bz),
+        )
     lim = p.bias_limit_rad_s
     s.bx = o.minimum(o.maximum(s.bx, -lim), lim)
     s.by = o.minimum(o.maximum(s.by, -lim), lim)
@@ -225,7 +289,9 @@ def step(
     if mag is not None:
         _magnetometer(s, p, mag, fast, learn, o)
     _normalize(s, o)
-    s.phase = o.where(s.recovering, PHASE_RECOVERING, o.where(startup, PHASE_STARTUP, PHASE_RUNNING))
+    s.phase = o.where(
+        s.recovering, PHASE_RECOVERING, o.where(startup, PHASE_STARTUP, PHASE_RUNNING)
+    )
 
 
 def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: Any) -> None:
@@ -236,7 +302,9 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
     wx, wy, wz = _rotate(s.qw, s.qx, s.qy, s.qz, ux, uy, uz)
     horizontal = o.sqrt(wx * wx + wy * wy)
     dip = o.atan2(-wz, horizontal)
-    dt_m = o.minimum(o.where(s.mag_last_time_s < 0.0, 0.0, s.time_s - s.mag_last_time_s), MAG_MAX_DT_S)
+    dt_m = o.minimum(
+        o.where(s.mag_last_time_s < 0.0, 0.0, s.time_s - s.mag_last_time_s), MAG_MAX_DT_S
+    )
 
     # field reference (norm, dip): learned at start and after a long rejection
     learning = p.use_mag & (s.mag_ref_count < MAG_REFERENCE_SAMPLES)
@@ -247,7 +315,9 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
     s.mag_ref_norm = o.where(learning, s.mag_ref_norm + (mn - s.mag_ref_norm) / n, s.mag_ref_norm)
     s.mag_ref_dip = o.where(learning, s.mag_ref_dip + (dip - s.mag_ref_dip) / n, s.mag_ref_dip)
     s.mag_ref_count = o.where(learning, n, s.mag_ref_count)
-    off_norm = o.maximum(mn / o.maximum(s.mag_ref_norm, 1e-300) - 1.0, 1.0 - mn / o.maximum(s.mag_ref_norm, 1e-300))
+    off_norm = o.maximum(
+        mn / o.maximum(s.mag_ref_norm, 1e-300) - 1.0, 1.0 - mn / o.maximum(s.mag_ref_norm, 1e-300)
+    )
     off_dip = o.maximum(dip - s.mag_ref_dip, s.mag_ref_dip - dip)
     disturbed = (
         p.mag_rejection

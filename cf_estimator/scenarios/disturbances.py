@@ -25,8 +25,9 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
+from cf_estimator.core.quaternion import to_matrix as quat_to_matrix
+from cf_estimator.scenarios.integration import FloatArray
 from cf_estimator.scenarios.motion import GRAVITY_M_S2, Truth
-from cf_estimator.scenarios.quat import FloatArray, quat_to_matrix
 
 G = GRAVITY_M_S2
 

@@ -12,9 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cf_estimator.core.quaternion import from_euler as quat_from_euler_zyx
 from cf_estimator.scenarios import disturbances as dist
 from cf_estimator.scenarios.motion import Truth, hover, static, uav_flight
-from cf_estimator.scenarios.quat import quat_from_euler_zyx
 from cf_estimator.scenarios.sensors import ImuData, SensorModel, measure
 
 Window = tuple[float, float, str]

@@ -17,8 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cf_estimator.core.quaternion import to_matrix as quat_to_matrix
+from cf_estimator.scenarios.integration import FloatArray
 from cf_estimator.scenarios.motion import GRAVITY_M_S2, Truth
-from cf_estimator.scenarios.quat import FloatArray, quat_to_matrix
 
 Vec3 = tuple[float, float, float]
 
