@@ -1,0 +1,126 @@
+"""Input validation vocabulary and warn-once sanity checks (units, frames).
+
+Rejection reasons are short snake_case codes: they are the keys of the pipeline's ``rejected``
+counter and of ``rejected.<reason>`` in /diagnostics. The sanity checks never reject anything:
+each raises one warning, once, the first time its condition is seen, because the data are still
+usable (the filter uses directions only) but something upstream is probably misconfigured.
+"""
+
+from __future__ import annotations
+
+import math
+
+# -- rejection reasons of IMU messages (see docs/ros_interface.md, failure-mode table) -------
+MALFORMED = "malformed"  #: a field is missing or has the wrong type
+ZERO_STAMP = "zero_stamp"  #: header.stamp is 0 (driver did not stamp): dt is unknowable
+NONFINITE_GYRO = "nonfinite_gyro"  #: NaN/Inf in angular_velocity
+NONFINITE_ACCEL = "nonfinite_accel"  #: NaN/Inf in linear_acceleration
+ZERO_ACCEL = "zero_accel"  #: |linear_acceleration| == 0 (no direction; driver not filling it)
+DUPLICATE_STAMP = "duplicate_stamp"  #: same stamp as the last processed message (dt = 0)
+OUT_OF_ORDER = "out_of_order"  #: stamp slightly before the last processed one
+TIME_BACKWARDS = "time_backwards"  #: time jumped back and reset_on_time_jump_back is false
+INTERNAL_ERROR = "internal_error"  #: the filter raised (a bug): message dropped, node lives on
+
+REJECT_REASONS = (
+    MALFORMED, ZERO_STAMP, NONFINITE_GYRO, NONFINITE_ACCEL, ZERO_ACCEL, DUPLICATE_STAMP,
+    OUT_OF_ORDER, TIME_BACKWARDS, INTERNAL_ERROR,
+)
+
+# -- reset reasons -----------------------------------------------------------------------------
+RESET_TIME_JUMP_BACK = "time_jump_back"  #: header stamps went back (bag loop)
+RESET_LONG_GAP = "long_gap"  #: stamp gap longer than reset_after_gap_s
+RESET_CLOCK_JUMP = "clock_jump_back"  #: the node clock jumped back (use_sim_time rewind)
+
+# -- sanity thresholds (constants, documented; not parameters) ---------------------------------
+#: Processed samples averaged before judging the accelerometer's units.
+ACCEL_CHECK_SAMPLES = 200
+#: |gyro| above this [rad/s] (~2000 deg/s, beyond most MEMS ranges) suggests deg/s.
+GYRO_IMPLAUSIBLE_RAD_S = 35.0
+#: Magnetometer samples averaged before judging its units.
+MAG_CHECK_SAMPLES = 20
+#: Plausible Earth-field norm [T] (25-65 uT, with margin for local fields).
+MAG_PLAUSIBLE_T = (10e-6, 100e-6)
+
+
+def finite3(x: float, y: float, z: float) -> bool:
+    """True when all three components are finite (one isfinite on the sum: Inf-Inf is NaN)."""
+    return math.isfinite(x + y + z)
+
+
+def frame_id_warning(frame_id: str, what: str) -> tuple[str, str] | None:
+    """``(tag, message)`` when a frame id is empty or starts with '/', else None."""
+    if not frame_id:
+        return (
+            f"{what}_frame_id_empty",
+            f"{what} messages have an empty header.frame_id: consumers (tf2, "
+            "robot_localization) cannot place them; outputs keep the input frame_id",
+        )
+    if frame_id.startswith("/"):
+        return (
+            f"{what}_frame_id_slash",
+            f"{what} header.frame_id '{frame_id}' starts with '/': tf2 frame ids must not "
+            "(REP-105); outputs keep the input frame_id",
+        )
+    return None
+
+
+def accel_units_warning(mean_norm_m_s2: float, gravity_m_s2: float) -> tuple[str, str] | None:
+    """``(tag, message)`` when the mean |a| over the first samples is far from g."""
+    if abs(mean_norm_m_s2 - 1.0) < 0.3:
+        return (
+            "accel_units",
+            f"|linear_acceleration| averages {mean_norm_m_s2:.3g}: looks like units of g, "
+            "ROS wants m/s^2 (attitude still works: only the direction is used; rest detection "
+            "thresholds assume m/s^2)",
+        )
+    if mean_norm_m_s2 < 0.25 * gravity_m_s2:
+        return (
+            "accel_gravity_removed",
+            f"|linear_acceleration| averages {mean_norm_m_s2:.3g} m/s^2, far below g: gravity "
+            "seems removed; a tilt estimate needs the raw specific force (imu/data_raw)",
+        )
+    if abs(mean_norm_m_s2 / gravity_m_s2 - 1.0) > 0.3:
+        return (
+            "accel_norm",
+            f"|linear_acceleration| averages {mean_norm_m_s2:.3g} m/s^2, far from "
+            f"g = {gravity_m_s2:g}: check the accelerometer scale",
+        )
+    return None
+
+
+def gyro_units_warning(norm_rad_s: float) -> tuple[str, str]:
+    """``(tag, message)`` for an implausibly large angular rate."""
+    return (
+        "gyro_units",
+        f"|angular_velocity| reached {norm_rad_s:.3g} rad/s (> {GYRO_IMPLAUSIBLE_RAD_S:g}): "
+        "is the driver publishing deg/s? ROS wants rad/s",
+    )
+
+
+def mag_units_warning(mean_norm: float) -> tuple[str, str] | None:
+    """``(tag, message)`` when the mean |B| is not a plausible Earth field in Tesla."""
+    lo, hi = MAG_PLAUSIBLE_T
+    if lo <= mean_norm <= hi:
+        return None
+    if 0.1 <= mean_norm <= 1.0:
+        guess = "Gauss"
+    elif 10.0 <= mean_norm <= 100.0:
+        guess = "microtesla"
+    elif mean_norm > 100.0:
+        guess = "raw counts or nanotesla"
+    else:
+        guess = "an unexpected scale"
+    return (
+        "mag_units",
+        f"|magnetic_field| averages {mean_norm:.3g}, expected 25e-6..65e-6 T: looks like "
+        f"{guess}. Heading still works (only directions are used)",
+    )
+
+
+def mag_frame_warning(mag_frame: str, imu_frame: str) -> tuple[str, str]:
+    """``(tag, message)`` when the magnetometer and IMU frames differ."""
+    return (
+        "mag_frame_mismatch",
+        f"magnetometer frame_id '{mag_frame}' differs from the IMU's '{imu_frame}': the filter "
+        "assumes both vectors are in the same sensor frame (no tf lookup is done)",
+    )

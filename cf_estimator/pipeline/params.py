@@ -1,0 +1,80 @@
+"""Pipeline parameters: message handling around the filter (time guards, mag freshness, outputs).
+
+One frozen dataclass, validated on construction, that is also the schema (like
+:class:`cf_estimator.core.params.FilterParams`). The node declares these next to the filter's
+parameters; ``read_only`` ones shape the node's wiring (publishers, timer) and need a restart.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from cf_estimator.schema import ParameterError, param, validate_fields
+
+
+@dataclass(frozen=True)
+class PipelineParams:
+    """Parameters of :class:`cf_estimator.pipeline.ImuPipeline` (units in each description)."""
+
+    orientation_covariance_rad2: float = param(
+        0.0003, "rad^2", "Variance reported for roll and pitch (diagonal of "
+        "orientation_covariance, rotation about the world x/y axes); about (1 deg)^2.",
+        minimum=0.0, maximum=100.0, minimum_exclusive=True, group="output",
+    )
+    yaw_covariance_rad2: float = param(
+        0.003, "rad^2", "Variance reported for yaw while the heading is referenced by the "
+        "magnetometer; about (3 deg)^2.",
+        minimum=0.0, maximum=100.0, minimum_exclusive=True, group="output",
+    )
+    unreferenced_yaw_covariance_rad2: float = param(
+        10.0, "rad^2", "Variance reported for yaw while no magnetometer has fixed the heading "
+        "(use_mag false, or no usable sample yet): yaw is then only integrated gyro.",
+        minimum=0.0, maximum=1000.0, minimum_exclusive=True, group="output",
+    )
+    publish_rpy: bool = param(
+        True, "", "Publish roll, pitch, yaw [rad] on imu/rpy (geometry_msgs/Vector3Stamped).",
+        read_only=True, group="output",
+    )
+    rpy_unwrap: bool = param(
+        False, "", "Unwrap roll and yaw on imu/rpy so they stay continuous across +-pi "
+        "(e.g. -190 deg instead of +170 deg); false: roll, yaw in (-pi, pi].",
+        group="output",
+    )
+    mag_timeout_s: float = param(
+        0.5, "s", "Freshness window: a magnetometer sample is used by the next IMU message only "
+        "if their header stamps differ by at most this; older samples are counted stale.",
+        minimum=0.0, maximum=60.0, minimum_exclusive=True, group="time",
+    )
+    max_dt_s: float = param(
+        0.5, "s", "Longest stamp interval integrated as is. Over a longer gap the gyro rate is "
+        "unknown: the message is processed with dt = the recent mean interval (the gap is not "
+        "integrated) and counted as a gap.",
+        minimum=0.0, maximum=60.0, minimum_exclusive=True, group="time",
+    )
+    reset_after_gap_s: float = param(
+        5.0, "s", "A stamp gap longer than this resets the filter and re-initialises it from "
+        "the message after the gap (0 = never; must be >= max_dt_s otherwise).",
+        minimum=0.0, maximum=3600.0, group="time",
+    )
+    time_jump_back_threshold_s: float = param(
+        0.5, "s", "Stamps going back by less than this are out-of-order messages (rejected); by "
+        "more, time jumped back (bag loop, sim-time rewind): see reset_on_time_jump_back.",
+        minimum=0.0, maximum=3600.0, minimum_exclusive=True, group="time",
+    )
+    reset_on_time_jump_back: bool = param(
+        True, "", "On a backward time jump reset the filter and start again from the new "
+        "message (false: reject messages until their stamps pass the last processed one).",
+        group="time",
+    )
+    diagnostics_period_s: float = param(
+        1.0, "s", "Period of the /diagnostics report (the node's timer; steady clock).",
+        minimum=0.05, maximum=60.0, read_only=True, group="diagnostics",
+    )
+
+    def __post_init__(self) -> None:
+        validate_fields(self)
+        if 0.0 < self.reset_after_gap_s < self.max_dt_s:
+            raise ParameterError(
+                f"reset_after_gap_s: {self.reset_after_gap_s:g} s must be 0 (never) or at least "
+                f"max_dt_s = {self.max_dt_s:g} s"
+            )

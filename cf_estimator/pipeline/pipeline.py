@@ -1,0 +1,550 @@
+"""The processing pipeline: message-like objects in, validated filter calls, output contents out.
+
+The node (live) and the bag replay (offline) both call :class:`ImuPipeline`, so the replay tests
+test the node's behaviour. Rules, in the order :meth:`ImuPipeline.on_imu` applies them:
+
+1. Every IMU message is counted as received and ends either *processed* (an output is returned)
+   or *rejected* with a counted reason (None is returned): ``received = processed + rejected``.
+2. Malformed fields, a zero stamp, NaN/Inf gyro or accelerometer, a zero accelerometer vector:
+   rejected. Nothing invalid ever reaches the filter.
+3. ``dt`` comes from header stamps (integer nanoseconds). ``dt = 0``: rejected
+   (``duplicate_stamp``). Slightly negative (< ``time_jump_back_threshold_s``): rejected
+   (``out_of_order``). Further back: the filter is reset and the message starts it again
+   (``reset_on_time_jump_back``), else rejected (``time_backwards``). Longer than
+   ``reset_after_gap_s``: reset and restart. Longer than ``max_dt_s``: the gap is not
+   integrated; the message is processed with the recent mean interval and counted in ``gaps``.
+4. Magnetometer messages only store the latest valid sample. The next processed IMU message
+   passes it to the filter once, if its stamp is within ``mag_timeout_s`` of the IMU stamp
+   (else it is counted stale). NaN components are legal ("not reported"): such samples are
+   counted invalid and ignored. A magnetometer dropout never stops the output.
+5. Unit and frame sanity checks warn once each (see :mod:`cf_estimator.pipeline.checks`).
+
+Per-message cost is kept small: plain floats, no NumPy, no per-message dicts; statistics are
+accumulated incrementally and turned into a report only by :meth:`ImuPipeline.diagnostics`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from time import perf_counter
+from typing import Any
+
+from cf_estimator.core.filter import ComplementaryFilter
+from cf_estimator.core.params import FilterParams
+from cf_estimator.core.step import MAG_DISABLED, MAG_REJECTED, MAG_USED
+from cf_estimator.pipeline import checks
+from cf_estimator.pipeline.diagnostics import DiagnosticsReport, WindowStats, compose_report
+from cf_estimator.pipeline.messages import UNKNOWN_COVARIANCE, covariance9
+from cf_estimator.pipeline.params import PipelineParams
+from cf_estimator.schema import ParameterError, specs_of
+
+Vec3 = tuple[float, float, float]
+_TWO_PI = 2.0 * math.pi
+
+
+@dataclass(slots=True)
+class PipelineOutput:
+    """Contents of the output messages for one processed IMU message.
+
+    ``orientation_xyzw`` is q_world_from_sensor in **ROS order** (x, y, z, w), world frame from
+    FilterParams.world_frame. ``orientation_covariance``: row-major 3x3 about the world x, y, z
+    axes [rad^2]; element 0 is -1 while not initialized. The other vectors and covariances are
+    copied from the input. ``rpy_rad``: aerospace ZYX roll, pitch, yaw [rad] of the same
+    orientation. ``warnings``: warn-once messages first raised by this message (or by
+    magnetometer / rejected messages since the last output), for the adapter to log.
+    """
+
+    stamp_sec: int
+    stamp_nanosec: int
+    frame_id: str
+    orientation_xyzw: tuple[float, float, float, float]
+    orientation_covariance: tuple[float, ...]
+    angular_velocity: Vec3
+    angular_velocity_covariance: tuple[float, ...]
+    linear_acceleration: Vec3
+    linear_acceleration_covariance: tuple[float, ...]
+    rpy_rad: Vec3 | None
+    initialized: bool
+    warnings: list[str] = field(default_factory=list)
+
+
+def _split_changes(changes: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    fnames = {s.name for s in specs_of(FilterParams)}
+    pnames = {s.name for s in specs_of(PipelineParams)}
+    f: dict[str, Any] = {}
+    p: dict[str, Any] = {}
+    for key, value in changes.items():
+        if key in fnames:
+            f[key] = value
+        elif key in pnames:
+            p[key] = value
+        else:
+            raise ParameterError(f"unknown parameter: {key}")
+    return f, p
+
+
+def _covariance(var_tilt: float, var_yaw: float) -> tuple[float, ...]:
+    return (var_tilt, 0.0, 0.0, 0.0, var_tilt, 0.0, 0.0, 0.0, var_yaw)
+
+
+class ImuPipeline:
+    """Validated IMU (+ magnetometer) messages → complementary filter → output contents.
+
+    ``filter_params``/``pipeline_params`` default to the schema defaults. ``diagnostics_name``
+    is the ``name`` of the diagnostic status (the node passes its fully qualified name).
+    """
+
+    def __init__(
+        self,
+        filter_params: FilterParams | None = None,
+        pipeline_params: PipelineParams | None = None,
+        *,
+        diagnostics_name: str = "cf_estimator",
+    ) -> None:
+        self._fp = filter_params if filter_params is not None else FilterParams()
+        self._pp = pipeline_params if pipeline_params is not None else PipelineParams()
+        self._filter = ComplementaryFilter(self._fp)
+        self.diagnostics_name = diagnostics_name
+        # cumulative counters (plain ints: the hot path increments attributes)
+        self._received_imu = 0
+        self._processed = 0
+        self._rejected: dict[str, int] = {}
+        self._resets: dict[str, int] = {}
+        self._gaps = 0
+        self._received_mag = 0
+        self._mag_used = 0
+        self._mag_rejected = 0
+        self._mag_stale = 0
+        self._mag_invalid = 0
+        self._mag_dropped = 0
+        self._mag_disabled = 0
+        self.last_reject_reason = ""
+        # warn-once state
+        self._warned: dict[str, str] = {}
+        self._pending_warnings: list[str] = []
+        self._imu_frame: str | None = None
+        self._mag_frame: str | None = None
+        self._acc_n = 0
+        self._acc_sum = 0.0
+        self._mag_n = 0
+        self._mag_sum = 0.0
+        # diagnostics window
+        self._window = WindowStats()
+        self._previous_counters: dict[str, Any] = {}
+        self._previous_now_s: float | None = None
+        self._last_rpy: Vec3 | None = None
+        self._last_mag_used_ns: int | None = None
+        self._pending_mag: tuple[int, float, float, float] | None = None  # (t_ns, x, y, z)
+        self._av_cov = _CovarianceCache()
+        self._la_cov = _CovarianceCache()
+        self._apply_derived()
+        self._clear_time_state()
+
+    # -- parameters -------------------------------------------------------------------------------
+    @property
+    def filter_params(self) -> FilterParams:
+        """The filter parameters in force."""
+        return self._fp
+
+    @property
+    def pipeline_params(self) -> PipelineParams:
+        """The pipeline parameters in force."""
+        return self._pp
+
+    @property
+    def filter(self) -> ComplementaryFilter:
+        """The filter (read access for tests and tools; do not drive it directly)."""
+        return self._filter
+
+    def _prepare(self, changes: Mapping[str, Any]) -> tuple[FilterParams, PipelineParams]:
+        fchanges, pchanges = _split_changes(changes)
+        pairs = ((FilterParams, self._fp, fchanges), (PipelineParams, self._pp, pchanges))
+        for cls, current, ch in pairs:
+            for spec in specs_of(cls):
+                if spec.read_only and spec.name in ch:
+                    value = spec.check(ch[spec.name])
+                    if value != getattr(current, spec.name):
+                        raise ParameterError(
+                            f"{spec.name} is read-only at run time (restart the node to change it)"
+                        )
+        fp = FilterParams(**{**_as_kwargs(self._fp), **fchanges}) if fchanges else self._fp
+        pp = PipelineParams(**{**_as_kwargs(self._pp), **pchanges}) if pchanges else self._pp
+        return fp, pp
+
+    def validate_changes(self, changes: Mapping[str, Any]) -> tuple[bool, str]:
+        """Check parameter changes without applying them: ``(ok, reason)``."""
+        try:
+            self._prepare(changes)
+        except Exception as exc:  # noqa: BLE001 - any failure is a rejection with its reason
+            return False, str(exc)
+        return True, ""
+
+    def apply_changes(self, changes: Mapping[str, Any]) -> tuple[bool, str]:
+        """Validate and apply parameter changes: ``(ok, reason)``.
+
+        On success the filter keeps its state (attitude, bias, phase); on failure nothing
+        changes. Read-only parameters may only be "changed" to their current value.
+        """
+        try:
+            fp, pp = self._prepare(changes)
+        except Exception as exc:  # noqa: BLE001
+            return False, str(exc)
+        if fp is not self._fp:
+            self._filter.set_params(fp)
+            self._fp = fp
+        self._pp = pp
+        self._apply_derived()
+        return True, ""
+
+    def _apply_derived(self) -> None:
+        pp = self._pp
+        self._cov_referenced = _covariance(pp.orientation_covariance_rad2, pp.yaw_covariance_rad2)
+        self._cov_unreferenced = _covariance(
+            pp.orientation_covariance_rad2, pp.unreferenced_yaw_covariance_rad2
+        )
+        self._max_dt_ns = int(round(pp.max_dt_s * 1e9))
+        self._reset_gap_ns = int(round(pp.reset_after_gap_s * 1e9))  # 0 = never
+        self._jump_back_ns = int(round(pp.time_jump_back_threshold_s * 1e9))
+        self._mag_timeout_ns = int(round(pp.mag_timeout_s * 1e9))
+        self._use_mag = self._fp.use_mag
+        self._ned = self._fp.world_frame == "ned"
+
+    # -- state ------------------------------------------------------------------------------------
+    def _clear_time_state(self) -> None:
+        self._last_ns: int | None = None
+        self._dt_mean = 0.0
+        self._unwrap_prev: Vec3 | None = None
+
+    def reset(self, reason: str) -> None:
+        """Forget the attitude and the time base; the next valid IMU message re-initialises.
+
+        Counted under ``resets[reason]``; a pending magnetometer sample is dropped (it belongs to
+        the old time base).
+        """
+        self._filter.reset()
+        self._clear_time_state()
+        self._resets[reason] = self._resets.get(reason, 0) + 1
+        if self._pending_mag is not None:
+            self._pending_mag = None
+            self._mag_dropped += 1
+
+    @property
+    def initialized(self) -> bool:
+        """True once the filter has an attitude."""
+        return self._filter.initialized
+
+    @property
+    def counters(self) -> dict[str, Any]:
+        """Cumulative counters (a fresh dict; see docs/ros_interface.md)."""
+        return {
+            "received_imu": self._received_imu,
+            "processed": self._processed,
+            "rejected": dict(self._rejected),
+            "resets": dict(self._resets),
+            "gaps": self._gaps,
+            "received_mag": self._received_mag,
+            "mag_used": self._mag_used,
+            "mag_rejected": self._mag_rejected,
+            "mag_stale": self._mag_stale,
+            "mag_invalid": self._mag_invalid,
+            "mag_dropped": self._mag_dropped,
+            "mag_disabled": self._mag_disabled,
+            "mag_pending": 0 if self._pending_mag is None else 1,
+        }
+
+    @property
+    def input_warnings(self) -> dict[str, str]:
+        """Warn-once messages raised so far, tag → text."""
+        return dict(self._warned)
+
+    def _warn(self, tag_text: tuple[str, str] | None) -> None:
+        if tag_text is None:
+            return
+        tag, text = tag_text
+        if tag not in self._warned:
+            self._warned[tag] = text
+            self._pending_warnings.append(text)
+
+    def _reject(self, reason: str) -> None:
+        self._rejected[reason] = self._rejected.get(reason, 0) + 1
+        self.last_reject_reason = reason
+
+    # -- magnetometer -----------------------------------------------------------------------------
+    def on_mag(self, msg: Any) -> None:
+        """Store the latest valid magnetometer sample (any unit; only directions are used)."""
+        self._received_mag += 1
+        try:
+            st = msg.header.stamp
+            t_ns = int(st.sec) * 1_000_000_000 + int(st.nanosec)
+            m = msg.magnetic_field
+            mx, my, mz = float(m.x), float(m.y), float(m.z)
+            frame = msg.header.frame_id
+        except Exception:  # noqa: BLE001 - malformed: counted, never raised
+            self._mag_invalid += 1
+            return
+        if not self._use_mag:
+            self._mag_disabled += 1
+            return
+        n2 = mx * mx + my * my + mz * mz
+        if t_ns == 0 or not math.isfinite(n2) or n2 == 0.0:
+            self._mag_invalid += 1
+            return
+        if frame != self._mag_frame:
+            self._mag_frame = frame
+            self._warn(checks.frame_id_warning(str(frame), "magnetometer"))
+            if self._imu_frame is not None and frame != self._imu_frame:
+                self._warn(checks.mag_frame_warning(str(frame), self._imu_frame))
+        if self._mag_n < checks.MAG_CHECK_SAMPLES:
+            self._mag_n += 1
+            self._mag_sum += math.sqrt(n2)
+            if self._mag_n == checks.MAG_CHECK_SAMPLES:
+                self._warn(checks.mag_units_warning(self._mag_sum / self._mag_n))
+        if self._pending_mag is not None:
+            self._mag_dropped += 1
+        self._pending_mag = (t_ns, mx, my, mz)
+
+    # -- IMU --------------------------------------------------------------------------------------
+    def on_imu(self, msg: Any) -> PipelineOutput | None:
+        """Process one sensor_msgs/Imu-like message; None when it is rejected (reason counted)."""
+        t0 = perf_counter()
+        self._received_imu += 1
+        try:
+            return self._on_imu(msg, t0)
+        except Exception:  # noqa: BLE001 - the pipeline never raises on data
+            self._reject(checks.INTERNAL_ERROR)
+            return None
+
+    def _on_imu(self, msg: Any, t0: float) -> PipelineOutput | None:
+        try:
+            header = msg.header
+            st = header.stamp
+            sec, nsec = int(st.sec), int(st.nanosec)
+            frame = header.frame_id
+            av = msg.angular_velocity
+            gx, gy, gz = float(av.x), float(av.y), float(av.z)
+            la = msg.linear_acceleration
+            ax, ay, az = float(la.x), float(la.y), float(la.z)
+            av_cov = self._av_cov.get(msg.angular_velocity_covariance)
+            la_cov = self._la_cov.get(msg.linear_acceleration_covariance)
+        except Exception:  # noqa: BLE001
+            self._reject(checks.MALFORMED)
+            return None
+        if sec == 0 and nsec == 0:
+            self._reject(checks.ZERO_STAMP)
+            return None
+        if not math.isfinite(gx + gy + gz):
+            self._reject(checks.NONFINITE_GYRO)
+            return None
+        a2 = ax * ax + ay * ay + az * az
+        if not math.isfinite(a2):
+            self._reject(checks.NONFINITE_ACCEL)
+            return None
+        if a2 == 0.0:
+            self._reject(checks.ZERO_ACCEL)
+            return None
+
+        # -- time ---------------------------------------------------------------------------------
+        t_ns = sec * 1_000_000_000 + nsec
+        last = self._last_ns
+        dt = 0.0
+        if last is not None:
+            d_ns = t_ns - last
+            if d_ns <= 0:
+                if d_ns == 0:
+                    self._reject(checks.DUPLICATE_STAMP)
+                    return None
+                if -d_ns < self._jump_back_ns:
+                    self._reject(checks.OUT_OF_ORDER)
+                    return None
+                if not self._pp.reset_on_time_jump_back:
+                    self._reject(checks.TIME_BACKWARDS)
+                    return None
+                self.reset(checks.RESET_TIME_JUMP_BACK)
+            elif self._reset_gap_ns and d_ns > self._reset_gap_ns:
+                self.reset(checks.RESET_LONG_GAP)
+            else:
+                dt = d_ns * 1e-9
+        # -- from here on the message is processed ------------------------------------------------
+        w = self._window
+        if dt > 0.0:
+            if w.n_dt == 0 or dt < w.dt_min:
+                w.dt_min = dt
+            if dt > w.dt_max:
+                w.dt_max = dt
+            w.dt_sum += dt
+            w.n_dt += 1
+            if d_ns > self._max_dt_ns:  # gap: do not integrate over it
+                self._gaps += 1
+                dt = self._dt_mean if self._dt_mean > 0.0 else min(self._pp.max_dt_s, 0.01)
+            elif self._dt_mean > 0.0:
+                self._dt_mean += 0.05 * (dt - self._dt_mean)
+            else:
+                self._dt_mean = dt
+
+        if frame != self._imu_frame:
+            self._imu_frame = frame
+            self._warn(checks.frame_id_warning(str(frame), "IMU"))
+        if self._acc_n < checks.ACCEL_CHECK_SAMPLES:
+            self._acc_n += 1
+            self._acc_sum += math.sqrt(a2)
+            if self._acc_n == checks.ACCEL_CHECK_SAMPLES:
+                self._warn(checks.accel_units_warning(self._acc_sum / self._acc_n,
+                                                      self._fp.gravity_m_s2))
+        g2 = gx * gx + gy * gy + gz * gz
+        if g2 > checks.GYRO_IMPLAUSIBLE_RAD_S**2:
+            self._warn(checks.gyro_units_warning(math.sqrt(g2)))
+
+        # -- magnetometer sample, used once -------------------------------------------------------
+        mag = None
+        pending = self._pending_mag
+        if pending is not None:
+            self._pending_mag = None
+            if not self._use_mag:
+                self._mag_disabled += 1
+            elif abs(t_ns - pending[0]) <= self._mag_timeout_ns:
+                mag = (pending[1], pending[2], pending[3])
+            else:
+                self._mag_stale += 1
+
+        # -- filter -------------------------------------------------------------------------------
+        f = self._filter
+        if f.initialized:
+            q = f.update((gx, gy, gz), (ax, ay, az), dt, mag)
+            s = f._state  # noqa: SLF001 - per-sample flags without building FilterStatus (20 us)
+            if mag is not None:
+                ms = s.mag_status
+                if ms == MAG_USED:
+                    self._mag_used += 1
+                    self._last_mag_used_ns = pending[0]  # type: ignore[index]
+                elif ms == MAG_REJECTED:
+                    self._mag_rejected += 1
+                elif ms == MAG_DISABLED:
+                    self._mag_disabled += 1
+            w.n_err += 1
+            e = s.error_norm
+            w.err_sum += e
+            if e > w.err_max:
+                w.err_max = e
+            if s.clipped:
+                w.n_clipped += 1
+        else:
+            q = f.update((gx, gy, gz), (ax, ay, az), 0.0, mag)
+            if mag is not None:
+                if f._state.heading_initialized:  # noqa: SLF001
+                    self._mag_used += 1
+                    self._last_mag_used_ns = pending[0]  # type: ignore[index]
+                else:  # horizontal component too small to give a heading
+                    self._mag_rejected += 1
+        heading = f._state.heading_initialized  # noqa: SLF001
+        self._last_ns = t_ns
+        self._processed += 1
+
+        # -- output -------------------------------------------------------------------------------
+        if q is None:  # cannot happen after the checks above; keep the contract anyway
+            xyzw: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
+            cov: tuple[float, ...] = UNKNOWN_COVARIANCE
+            rpy = None
+            initialized = False
+        else:
+            qw, qx, qy, qz = q
+            xyzw = (qx, qy, qz, qw)
+            cov = self._cov_referenced if heading else self._cov_unreferenced
+            roll = math.atan2(2.0 * (qw * qx + qy * qz), 1.0 - 2.0 * (qx * qx + qy * qy))
+            sp = 2.0 * (qw * qy - qz * qx)
+            pitch = math.asin(1.0 if sp > 1.0 else (-1.0 if sp < -1.0 else sp))
+            yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+            if self._pp.rpy_unwrap:
+                prev = self._unwrap_prev
+                if prev is not None:
+                    roll += _TWO_PI * round((prev[0] - roll) / _TWO_PI)
+                    yaw += _TWO_PI * round((prev[2] - yaw) / _TWO_PI)
+                self._unwrap_prev = (roll, pitch, yaw)
+            rpy = (roll, pitch, yaw)
+            self._last_rpy = rpy
+            initialized = True
+        warnings = self._pending_warnings
+        if warnings:
+            self._pending_warnings = []
+        else:
+            warnings = []
+        out = PipelineOutput(
+            sec, nsec, str(frame), xyzw, cov, (gx, gy, gz), av_cov, (ax, ay, az), la_cov,
+            rpy, initialized, warnings,
+        )
+        # -- statistics (incremental) -----------------------------------------------------------
+        if w.n == 0:
+            w.first_ns = t_ns
+        w.n += 1
+        w.last_ns = t_ns
+        elapsed = perf_counter() - t0
+        w.proc_sum += elapsed
+        if elapsed > w.proc_max:
+            w.proc_max = elapsed
+        return out
+
+    # -- diagnostics ------------------------------------------------------------------------------
+    def diagnostics(self, now_s: float | None = None) -> DiagnosticsReport:
+        """The report of the period since the last call (then a new period starts).
+
+        ``now_s``: the current time on the clock of the header stamps (the node passes its
+        clock's now); used for the period length and ``stamp_age_s``. Without it (replay) the
+        figures come from stamps and counters only.
+        """
+        counters = self.counters
+        period = None
+        if now_s is not None and self._previous_now_s is not None:
+            period = now_s - self._previous_now_s
+        stamp_age = None
+        if now_s is not None and self._last_ns is not None:
+            stamp_age = now_s - self._last_ns * 1e-9
+        mag_age = None
+        if self._last_mag_used_ns is not None and self._last_ns is not None:
+            mag_age = (self._last_ns - self._last_mag_used_ns) * 1e-9
+        initialized = self._filter.initialized
+        report = compose_report(
+            name=self.diagnostics_name,
+            hardware_id=self._imu_frame or "",
+            counters=counters,
+            previous=self._previous_counters,
+            window=self._window,
+            status=self._filter.status() if initialized else None,
+            initialized=initialized,
+            world_frame=self._fp.world_frame,
+            use_mag=self._fp.use_mag,
+            rpy_rad=self._last_rpy if initialized else None,
+            input_warnings=dict(self._warned),
+            period_s=period,
+            stamp_age_s=stamp_age,
+            mag_age_s=mag_age,
+            mag_timeout_s=self._pp.mag_timeout_s,
+        )
+        self._previous_counters = counters
+        self._previous_now_s = now_s
+        self._window = WindowStats()
+        return report
+
+
+class _CovarianceCache:
+    """Input covariances rarely change: reuse the last tuple when the bytes are equal."""
+
+    __slots__ = ("raw", "value")
+
+    def __init__(self) -> None:
+        self.raw: bytes | None = None
+        self.value: tuple[float, ...] = ()
+
+    def get(self, cov: Any) -> tuple[float, ...]:
+        tobytes = getattr(cov, "tobytes", None)  # array.array (rclpy) and NumPy (rosbags)
+        if tobytes is None:
+            return covariance9(cov)
+        raw = tobytes()
+        if raw != self.raw:
+            self.value = covariance9(cov)
+            self.raw = raw
+        return self.value
+
+
+def _as_kwargs(params: Any) -> dict[str, Any]:
+    return {s.name: getattr(params, s.name) for s in specs_of(params)}

@@ -1,0 +1,157 @@
+"""Parameter files: the shipped YAML, the schema and the dataclass defaults agree key by key."""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from pathlib import Path
+
+import pytest
+import yaml
+
+from cf_estimator.core.params import FilterParams
+from cf_estimator.params_file import (
+    all_specs,
+    build_params,
+    format_value,
+    load_params_file,
+    render_params_yaml,
+)
+from cf_estimator.pipeline.params import PipelineParams
+from cf_estimator.schema import ParameterError, as_dict, specs_of
+
+REPO = Path(__file__).resolve().parents[1]
+SHIPPED = REPO / "config" / "cf_estimator.yaml"
+
+
+def _section(path: Path) -> dict:
+    doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+    assert list(doc) == ["/**"], "the shipped file must use the /** wildcard"
+    return doc["/**"]["ros__parameters"]
+
+
+def test_all_specs_is_filter_then_pipeline_without_duplicates():
+    names = [s.name for s in all_specs()]
+    expected = [s.name for s in specs_of(FilterParams) + specs_of(PipelineParams)]
+    assert names == expected
+    assert len(names) == len(set(names))
+
+
+def test_shipped_yaml_is_the_rendered_defaults():
+    assert SHIPPED.read_text(encoding="utf-8") == render_params_yaml(), (
+        "config/cf_estimator.yaml is stale: run "
+        "`python3 -m cf_estimator.params_file > config/cf_estimator.yaml`"
+    )
+
+
+def test_yaml_schema_and_dataclass_defaults_agree_key_by_key():
+    section = _section(SHIPPED)
+    specs = {s.name: s for s in all_specs()}
+    defaults = {**as_dict(FilterParams()), **as_dict(PipelineParams())}
+    assert list(section) == list(specs) == list(defaults)
+    for name, spec in specs.items():
+        field_default = next(
+            f.default for cls in (FilterParams, PipelineParams)
+            for f in dataclasses.fields(cls) if f.name == name
+        )
+        assert section[name] == spec.default == defaults[name] == field_default, name
+        assert type(section[name]) is type(spec.default), f"{name}: YAML type differs"
+
+
+def test_every_parameter_has_a_comment_with_unit_and_range():
+    text = SHIPPED.read_text(encoding="utf-8")
+    for spec in all_specs():
+        block = re.search(rf"((?:    #.*\n)+)    {spec.name}: ", text)
+        assert block, f"{spec.name}: no comment above it"
+        comment = " ".join(line.strip("# ") for line in block.group(1).splitlines())
+        if spec.unit:
+            assert f"[{spec.unit}]" in comment, spec.name
+        if spec.range_text():
+            assert spec.range_text() in comment, spec.name
+        assert spec.description.split()[0] in comment, spec.name
+
+
+def test_floats_are_always_written_as_floats():
+    text = SHIPPED.read_text(encoding="utf-8")
+    for spec in all_specs():
+        if spec.kind == "float":
+            value = re.search(rf"^    {spec.name}: (\S+)$", text, re.M).group(1)
+            assert "." in value, f"{spec.name}: {value}"
+    spec = next(s for s in all_specs() if s.name == "k1")
+    for x, text in [(0.0, "0.0"), (3.0, "3.0"), (1e-05, "1.0e-05"), (2.5e20, "2.5e+20"),
+                    (1e16, "1.0e+16"), (-0.125, "-0.125")]:
+        assert format_value(spec, x) == text
+        assert yaml.safe_load(text) == x and isinstance(yaml.safe_load(text), float)
+
+
+def test_shipped_file_loads_to_the_defaults_without_warnings():
+    fp, pp, warnings = load_params_file(SHIPPED, "cf_estimator")
+    assert fp == FilterParams() and pp == PipelineParams()
+    assert warnings == []
+
+
+def test_round_trip_of_non_default_values(tmp_path):
+    fp = FilterParams(k1=0.75, k2=1e-5, world_frame="ned", use_mag=False, mag_mode="full")
+    pp = PipelineParams(mag_timeout_s=0.25, publish_rpy=False, reset_after_gap_s=0.0)
+    path = tmp_path / "p.yaml"
+    path.write_text(render_params_yaml(fp, pp), encoding="utf-8")
+    assert load_params_file(path) == (fp, pp, [])
+
+
+def test_node_name_sections_apply_and_others_are_reported(tmp_path):
+    path = tmp_path / "p.yaml"
+    path.write_text(
+        "/**:\n  ros__parameters:\n    k1: 0.6\n    use_sim_time: true\n"
+        "/robot/cf_estimator:\n  ros__parameters:\n    k1: 0.8\n"
+        "imu_filter_madgwick:\n  ros__parameters:\n    gain: 0.1\n",
+        encoding="utf-8",
+    )
+    fp, _, warnings = load_params_file(path, "cf_estimator")
+    assert fp.k1 == 0.8  # later, node-specific section overrides the wildcard
+    assert len(warnings) == 1 and "imu_filter_madgwick" in warnings[0]
+    fp_any, _, warnings_any = load_params_file(path)  # no node name: every section applies
+    assert any("gain" in w for w in warnings_any)
+    assert fp_any.k1 == 0.8
+
+
+def test_unknown_keys_and_missing_section_are_warned(tmp_path):
+    path = tmp_path / "p.yaml"
+    path.write_text("cf_estimator:\n  ros__parameters:\n    k1: 0.6\n    gian: 2.0\n"
+                    "    qos_overrides:\n      /imu/data_raw:\n        subscription:\n"
+                    "          depth: 20\n", encoding="utf-8")
+    fp, _, warnings = load_params_file(path, "cf_estimator")
+    assert fp.k1 == 0.6
+    assert warnings == [f"{path}: unknown parameter 'gian' (ignored)"]
+    flat = tmp_path / "flat.yaml"
+    flat.write_text("k1: 0.6\n", encoding="utf-8")
+    fp, pp, warnings = load_params_file(flat, "cf_estimator")
+    assert fp == FilterParams() and pp == PipelineParams()
+    assert any("no section applies" in w for w in warnings)
+    assert any("ros__parameters" in w for w in warnings)
+
+
+def test_invalid_values_raise_one_line_errors(tmp_path):
+    path = tmp_path / "p.yaml"
+    for body, words in [
+        ("k1: 1", "write 1.0"),
+        ("k1: -0.5", "k1"),
+        ("world_frame: ecef", "world_frame"),
+        ("use_mag: 1", "use_mag"),
+        ("aperiodic_time_constant_s: 500.0", "unstable"),
+    ]:
+        path.write_text(f"/**:\n  ros__parameters:\n    {body}\n", encoding="utf-8")
+        with pytest.raises(ParameterError) as info:
+            load_params_file(path)
+        assert words in str(info.value) and "\n" not in str(info.value)
+
+
+def test_build_params_rejects_unknown_names():
+    with pytest.raises(ParameterError, match="unknown"):
+        build_params({"k9": 1.0})
+    assert build_params({}) == (FilterParams(), PipelineParams())
+
+
+def test_ros_interface_doc_lists_every_parameter():
+    doc = (REPO / "docs" / "ros_interface.md").read_text(encoding="utf-8")
+    missing = [s.name for s in all_specs() if f"| `{s.name}` |" not in doc]
+    assert not missing, f"docs/ros_interface.md lacks parameters: {missing}"
