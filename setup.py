@@ -1,0 +1,50 @@
+"""Packaging for cf_estimator: an ament_python ROS 2 package that is also a plain pip package.
+
+``colcon build`` installs the console scripts into ``lib/cf_estimator`` (see setup.cfg) so
+``ros2 run cf_estimator cf_estimator_node`` finds them; ``pip install .`` puts them on PATH.
+The ``data_files`` below are what colcon (and pip) install under ``share/cf_estimator``:
+the ament index marker, package.xml, the launch files and the parameter YAML.
+"""
+
+from glob import glob
+
+from setuptools import find_namespace_packages, setup
+
+PACKAGE = "cf_estimator"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",  # keep equal to package.xml (test/test_packaging.py checks it)
+    description="Complementary-filter attitude estimation for ROS 2: node, bag replay, tuning.",
+    license="Apache-2.0",
+    python_requires=">=3.11",
+    # Namespace discovery so a sub-package is never silently dropped for a missing __init__.py.
+    packages=find_namespace_packages(
+        include=[PACKAGE, f"{PACKAGE}.*"], exclude=["*.__pycache__", "*.__pycache__.*"]
+    ),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/launch", sorted(glob("launch_scripts/*.launch.py"))),
+        (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
+    ],
+    install_requires=[
+        "numpy",
+        "scipy",
+        "rosbags",
+        "matplotlib",
+        "h5py",
+        "tqdm",
+        "pyyaml",
+    ],
+    extras_require={
+        "test": ["pytest", "hypothesis", "ruff"],
+        "bench": ["vqf", "imufusion", "ahrs"],
+    },
+    entry_points={
+        "console_scripts": [
+            "cf-estimator = cf_estimator.cli.main:main",
+            "cf_estimator_node = cf_estimator.node.cf_estimator_node:main",
+        ],
+    },
+)
