@@ -1,0 +1,521 @@
+"""Bag input/output over ``rosbags``: open ROS 1/ROS 2 bags, pick topics, build and write messages.
+
+Reading: :func:`open_bag` wraps ``rosbags.highlevel.AnyReader`` (ROS 1 ``.bag`` files, ROS 2 bag
+directories with sqlite3 or mcap storage) and turns every ``rosbags`` failure — missing file, not
+a bag, truncated data, undecodable message — into a :class:`BagError` whose message names the file.
+Messages come back in log-time order across topics, exactly as recorded.
+
+Writing: :class:`OutputBag` writes a ROS 2 bag (Jazzy message definitions, storage mcap or
+sqlite3) into a temporary sibling directory and renames it into place only when everything was
+written, so a failed or interrupted run never leaves anything that looks like a complete bag.
+
+Message construction: :func:`imu_message`, :func:`rpy_message`, :func:`diagnostics_message` and
+friends build Jazzy (``Stores.ROS2_JAZZY``) message objects from plain values.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import os
+import shutil
+import tempfile
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+IMU_TYPE = "sensor_msgs/msg/Imu"
+MAG_TYPE = "sensor_msgs/msg/MagneticField"
+VECTOR3_STAMPED_TYPE = "geometry_msgs/msg/Vector3Stamped"
+QUATERNION_STAMPED_TYPE = "geometry_msgs/msg/QuaternionStamped"
+POSE_STAMPED_TYPE = "geometry_msgs/msg/PoseStamped"
+ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
+DIAGNOSTIC_ARRAY_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
+#: Message types accepted as an orientation reference (ground truth, motion capture, odometry).
+REFERENCE_TYPES = (QUATERNION_STAMPED_TYPE, POSE_STAMPED_TYPE, ODOMETRY_TYPE)
+
+STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
+#: rosbag2 metadata version written (Jazzy's rosbag2 writes and reads version 9).
+ROSBAG2_VERSION = 9
+
+
+class BagError(Exception):
+    """A bag could not be read or written; the message names the file and the reason.
+
+    ``code`` is the exit code a command line should use: 2 when the user asked for something
+    that cannot be (missing path, wrong topic, existing output), 1 for bad data.
+    """
+
+    def __init__(self, message: str, code: int = 1) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+@functools.cache
+def typestore() -> Any:
+    """The ROS 2 Jazzy typestore every message written by cf_estimator is defined in."""
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def _short(exc: BaseException) -> str:
+    """One line describing a library exception."""
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text if len(text) <= 200 else text[:197] + "..."
+
+
+# ---------------------------------------------------------------------------------------------
+# reading
+
+
+@dataclass(frozen=True)
+class TopicInfo:
+    """One topic of an input bag."""
+
+    topic: str
+    msgtype: str  #: ROS 2 style type name, e.g. ``sensor_msgs/msg/Imu``
+    count: int
+
+
+@dataclass(frozen=True)
+class BagMessage:
+    """One message of an input bag, deserialized (fields as in the ROS definition)."""
+
+    topic: str
+    msgtype: str
+    log_time_ns: int  #: the time the recorder received it
+    msg: Any
+
+
+def _looks_like_bag(path: Path) -> str | None:
+    """None when ``path`` may be a bag AnyReader can open, else why it is not."""
+    if not path.exists():
+        return "no such file or directory"
+    if path.is_dir():
+        if path.suffix == ".bag":
+            return "a directory named *.bag cannot be read (rosbags takes .bag for ROS 1 files)"
+        if not (path / "metadata.yaml").is_file():
+            has_storage = any(path.glob("*.mcap")) or any(path.glob("*.db3"))
+            return (
+                "directory has no metadata.yaml (not a ROS 2 bag; reindex it with "
+                "`ros2 bag reindex`)" if has_storage else "directory is not a ROS 2 bag "
+                "(no metadata.yaml)"
+            )
+        return None
+    if path.suffix != ".bag":
+        return "not a ROS 1 .bag file or a ROS 2 bag directory"
+    return None
+
+
+class InputBag:
+    """An open input bag (use :func:`open_bag`); a context manager."""
+
+    def __init__(self, path: Path, reader: AnyReader) -> None:
+        self.path = path
+        self._reader = reader
+        counts: dict[tuple[str, str], int] = {}
+        for c in reader.connections:
+            counts[(c.topic, c.msgtype)] = counts.get((c.topic, c.msgtype), 0) + c.msgcount
+        self.topics: list[TopicInfo] = sorted(
+            (TopicInfo(t, m, n) for (t, m), n in counts.items()), key=lambda i: i.topic
+        )
+        self.is_ros2: bool = bool(reader.is2)
+
+    # -- context -------------------------------------------------------------------------------
+    def __enter__(self) -> InputBag:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Close the underlying reader (idempotent)."""
+        with contextlib.suppress(Exception):  # closing a broken bag must not mask the error
+            self._reader.close()
+
+    # -- metadata ------------------------------------------------------------------------------
+    @property
+    def format(self) -> str:
+        """``ros1``, ``ros2-sqlite3`` or ``ros2-mcap``."""
+        if not self.is_ros2:
+            return "ros1"
+        suffixes = {p.suffix for p in self.path.iterdir()} if self.path.is_dir() else set()
+        return "ros2-mcap" if ".mcap" in suffixes else "ros2-sqlite3"
+
+    @property
+    def start_time_ns(self) -> int:
+        return int(self._reader.start_time)
+
+    @property
+    def duration_s(self) -> float:
+        return float(self._reader.duration) * 1e-9 if self.topics else 0.0
+
+    def count(self, topics: Iterable[str]) -> int:
+        """Number of messages on the given topics."""
+        wanted = set(topics)
+        return sum(i.count for i in self.topics if i.topic in wanted)
+
+    def msgtype_of(self, topic: str) -> str | None:
+        for info in self.topics:
+            if info.topic == topic:
+                return info.msgtype
+        return None
+
+    def _listing(self) -> str:
+        if not self.topics:
+            return "the bag has no topics"
+        return "topics: " + ", ".join(f"{i.topic} [{i.msgtype}]" for i in self.topics)
+
+    def select_topic(
+        self, role: str, explicit: str | None, msgtypes: Sequence[str], *, required: bool,
+        option: str,
+    ) -> str | None:
+        """The topic to use for ``role`` (e.g. "IMU").
+
+        With ``explicit``: it must exist and have one of ``msgtypes``. Without: auto-detect by
+        message type; exactly one candidate is taken, several are an error listing them, none
+        is an error when ``required`` (else None). Errors are :class:`BagError`.
+        """
+        types = " or ".join(msgtypes)
+        if explicit is not None:
+            found = self.msgtype_of(explicit)
+            if found is None and not explicit.startswith("/"):
+                found = self.msgtype_of("/" + explicit)
+                explicit = "/" + explicit if found is not None else explicit
+            if found is None:
+                raise BagError(
+                    f"{self.path}: no topic {explicit!r} ({option}); {self._listing()}", 2
+                )
+            if found not in msgtypes:
+                raise BagError(
+                    f"{self.path}: topic {explicit!r} is {found}, but {option} needs {types}", 2
+                )
+            if self.count([explicit]) == 0:
+                raise BagError(f"{self.path}: topic {explicit!r} has no messages")
+            return explicit
+        candidates = [i for i in self.topics if i.msgtype in msgtypes and i.count > 0]
+        if len(candidates) == 1:
+            return candidates[0].topic
+        if len(candidates) > 1:
+            names = ", ".join(f"{i.topic} ({i.count} msgs)" for i in candidates)
+            raise BagError(
+                f"{self.path}: several {role} topics ({names}); choose one with {option}", 2
+            )
+        if required:
+            raise BagError(f"{self.path}: no {role} messages ({types}); {self._listing()}")
+        return None
+
+    # -- messages ------------------------------------------------------------------------------
+    def messages(self, topics: Iterable[str]) -> Iterator[BagMessage]:
+        """Deserialized messages of ``topics`` in log-time order (as recorded, interleaved).
+
+        Any failure of the reader (truncated chunk, corrupt record, undecodable message) is
+        raised as :class:`BagError` naming the file.
+        """
+        wanted = set(topics)
+        conns = [c for c in self._reader.connections if c.topic in wanted]
+        if not conns:
+            return
+        reader = self._reader
+        it = reader.messages(connections=conns)
+        while True:
+            try:
+                item = next(it)
+            except StopIteration:
+                return
+            except Exception as exc:  # noqa: BLE001 - any reader failure is a bad bag
+                raise BagError(f"{self.path}: cannot read messages: {_short(exc)}") from exc
+            conn, log_ns, raw = item
+            try:
+                msg = reader.deserialize(raw, conn.msgtype)
+            except Exception as exc:  # noqa: BLE001
+                raise BagError(
+                    f"{self.path}: cannot decode a {conn.msgtype} message on {conn.topic} at "
+                    f"log time {log_ns} ns: {_short(exc)}"
+                ) from exc
+            yield BagMessage(conn.topic, conn.msgtype, int(log_ns), msg)
+
+    def to_jazzy(self, msg: Any, msgtype: str) -> Any:
+        """``msg`` (from this bag's typestore) as a Jazzy message object (ROS 1 ``seq`` dropped)."""
+        return migrate_to_jazzy(self._reader.typestore, msgtype, msg, self._cache)
+
+    @functools.cached_property
+    def _cache(self) -> dict[str, object]:
+        return {}
+
+
+def migrate_to_jazzy(src_store: Any, msgtype: str, msg: Any, cache: dict[str, object]) -> Any:
+    """Field-by-field conversion into the Jazzy class of ``msgtype`` (rosbags' own migration)."""
+    from rosbags.convert.converter import migrate_message
+
+    store = typestore()
+    if msgtype not in store.fielddefs:
+        raise BagError(f"message type {msgtype} is not defined in ROS 2 Jazzy")
+    return migrate_message(src_store, store, msgtype, msgtype, cache, msg)
+
+
+def open_bag(path: str | os.PathLike[str]) -> InputBag:
+    """Open a ROS 1 ``.bag`` or a ROS 2 bag directory (:class:`BagError` names the file)."""
+    p = Path(path)
+    why = _looks_like_bag(p)
+    if why is not None:
+        raise BagError(f"{p}: {why}", 2 if not p.exists() else 1)
+    try:
+        reader = AnyReader([p], default_typestore=typestore())
+        reader.open()
+    except Exception as exc:  # noqa: BLE001 - AnyReaderError, ReaderError, sqlite, yaml, OSError...
+        kind = "ROS 1 bag" if p.suffix == ".bag" else "ROS 2 bag"
+        raise BagError(f"{p}: not a readable {kind}: {_short(exc)}") from exc
+    return InputBag(p, reader)
+
+
+# ---------------------------------------------------------------------------------------------
+# message construction (Jazzy)
+
+
+def _types() -> dict[str, Any]:
+    return typestore().types
+
+
+def stamp(sec: int, nanosec: int) -> Any:
+    """builtin_interfaces/Time."""
+    return _types()["builtin_interfaces/msg/Time"](sec=int(sec), nanosec=int(nanosec))
+
+
+def stamp_from_ns(t_ns: int) -> Any:
+    sec, nanosec = divmod(int(t_ns), 1_000_000_000)
+    return stamp(sec, nanosec)
+
+
+def header(sec: int, nanosec: int, frame_id: str) -> Any:
+    """std_msgs/Header (ROS 2: no seq)."""
+    return _types()["std_msgs/msg/Header"](stamp=stamp(sec, nanosec), frame_id=str(frame_id))
+
+
+def vector3(v: Sequence[float]) -> Any:
+    return _types()["geometry_msgs/msg/Vector3"](x=float(v[0]), y=float(v[1]), z=float(v[2]))
+
+
+def quaternion_xyzw(q: Sequence[float]) -> Any:
+    """geometry_msgs/Quaternion from ROS-order (x, y, z, w)."""
+    return _types()["geometry_msgs/msg/Quaternion"](
+        x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])
+    )
+
+
+def covariance9(c: Sequence[float] | None) -> np.ndarray:
+    arr = np.zeros(9) if c is None else np.asarray(c, dtype=np.float64).reshape(9)
+    return np.ascontiguousarray(arr, dtype=np.float64)
+
+
+def imu_message(
+    sec: int, nanosec: int, frame_id: str, orientation_xyzw: Sequence[float],
+    orientation_covariance: Sequence[float] | None, angular_velocity: Sequence[float],
+    angular_velocity_covariance: Sequence[float] | None, linear_acceleration: Sequence[float],
+    linear_acceleration_covariance: Sequence[float] | None,
+) -> Any:
+    """sensor_msgs/Imu (Jazzy)."""
+    return _types()[IMU_TYPE](
+        header=header(sec, nanosec, frame_id),
+        orientation=quaternion_xyzw(orientation_xyzw),
+        orientation_covariance=covariance9(orientation_covariance),
+        angular_velocity=vector3(angular_velocity),
+        angular_velocity_covariance=covariance9(angular_velocity_covariance),
+        linear_acceleration=vector3(linear_acceleration),
+        linear_acceleration_covariance=covariance9(linear_acceleration_covariance),
+    )
+
+
+def imu_from_output(out: Any) -> Any:
+    """sensor_msgs/Imu for ``imu/data`` from a pipeline output (every field as it computed)."""
+    return imu_message(
+        out.stamp_sec, out.stamp_nanosec, out.frame_id, out.orientation_xyzw,
+        out.orientation_covariance, out.angular_velocity, out.angular_velocity_covariance,
+        out.linear_acceleration, out.linear_acceleration_covariance,
+    )
+
+
+def rpy_from_output(out: Any) -> Any | None:
+    """geometry_msgs/Vector3Stamped (x roll, y pitch, z yaw [rad]) or None without an attitude."""
+    if out.rpy_rad is None:
+        return None
+    return _types()[VECTOR3_STAMPED_TYPE](
+        header=header(out.stamp_sec, out.stamp_nanosec, out.frame_id), vector=vector3(out.rpy_rad)
+    )
+
+
+def magnetic_field_message(
+    sec: int, nanosec: int, frame_id: str, field_T: Sequence[float],
+    covariance: Sequence[float] | None = None,
+) -> Any:
+    """sensor_msgs/MagneticField [T]."""
+    return _types()[MAG_TYPE](
+        header=header(sec, nanosec, frame_id), magnetic_field=vector3(field_T),
+        magnetic_field_covariance=covariance9(covariance),
+    )
+
+
+def quaternion_stamped_message(
+    sec: int, nanosec: int, frame_id: str, q_wxyz: Sequence[float]
+) -> Any:
+    """geometry_msgs/QuaternionStamped from NumPy-order (w, x, y, z)."""
+    return _types()[QUATERNION_STAMPED_TYPE](
+        header=header(sec, nanosec, frame_id),
+        quaternion=quaternion_xyzw((q_wxyz[1], q_wxyz[2], q_wxyz[3], q_wxyz[0])),
+    )
+
+
+def diagnostics_message(stamp_ns: int, reports: Sequence[Any]) -> Any:
+    """diagnostic_msgs/DiagnosticArray from pipeline DiagnosticsReport objects."""
+    t = _types()
+    kv = t["diagnostic_msgs/msg/KeyValue"]
+    status = [
+        t["diagnostic_msgs/msg/DiagnosticStatus"](
+            level=int(r.level), name=str(r.name), message=str(r.message),
+            hardware_id=str(r.hardware_id),
+            values=[kv(key=str(k), value=str(v)) for k, v in r.values],
+        )
+        for r in reports
+    ]
+    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    return t[DIAGNOSTIC_ARRAY_TYPE](header=header(sec, nanosec, ""), status=status)
+
+
+# ---------------------------------------------------------------------------------------------
+# writing
+
+
+def check_output_path(path: Path, *, overwrite: bool, inputs: Sequence[Path] = ()) -> None:
+    """Refuse an output that exists (without ``overwrite``), is an input, or is not a bag."""
+    if path.suffix == ".bag":
+        raise BagError(
+            f"{path}: a ROS 2 bag is a directory; '.bag' names ROS 1 files: choose a name "
+            "without the .bag suffix", 2,
+        )
+    resolved = path.resolve()
+    for src in inputs:
+        if resolved == Path(src).resolve():
+            raise BagError(f"{path}: the output would overwrite the input bag", 2)
+    if not (path.exists() or path.is_symlink()):
+        if not path.parent.is_dir():
+            raise BagError(f"{path}: parent directory {path.parent} does not exist", 2)
+        return
+    if not overwrite:
+        raise BagError(f"{path}: output exists (use --overwrite to replace it)", 2)
+    if path.is_dir() and not (path / "metadata.yaml").is_file() and any(path.iterdir()):
+        raise BagError(
+            f"{path}: exists and is not a ROS 2 bag; refusing to replace it even with --overwrite",
+            2,
+        )
+
+
+class OutputBag:
+    """A ROS 2 bag being written: temporary sibling directory, renamed into place on commit.
+
+    Use as a context manager: leaving the block normally commits; an exception aborts and
+    removes everything written. Message objects are serialized with the Jazzy typestore.
+    """
+
+    def __init__(
+        self, path: str | os.PathLike[str], *, storage: str = "mcap", overwrite: bool = False
+    ) -> None:
+        self.path = Path(path)
+        if storage not in STORAGES:
+            raise BagError(f"unknown storage {storage!r}; choose one of {', '.join(STORAGES)}")
+        check_output_path(self.path, overwrite=overwrite)
+        self.storage = storage
+        self.overwrite = overwrite
+        parent = self.path.parent
+        self._tmpdir = Path(tempfile.mkdtemp(prefix=f".{self.path.name}.partial-", dir=parent))
+        self._bag_dir = self._tmpdir / self.path.name
+        self._writer = Writer(self._bag_dir, version=ROSBAG2_VERSION,
+                              storage_plugin=STORAGES[storage])
+        self._connections: dict[tuple[str, str], Any] = {}
+        self._store = typestore()
+        self.counts: dict[str, int] = {}
+        try:
+            self._writer.open()
+        except Exception as exc:
+            shutil.rmtree(self._tmpdir, ignore_errors=True)
+            raise BagError(f"{self.path}: cannot create the bag: {_short(exc)}") from exc
+        self._open = True
+
+    def add_topic(self, topic: str, msgtype: str) -> None:
+        """Declare a topic (Jazzy definition of ``msgtype``); idempotent."""
+        key = (topic, msgtype)
+        if key not in self._connections:
+            self._connections[key] = self._writer.add_connection(
+                topic, msgtype, typestore=self._store
+            )
+            self.counts.setdefault(topic, 0)
+
+    def write(self, topic: str, msgtype: str, log_time_ns: int, msg: Any) -> None:
+        """Serialize (CDR, Jazzy) and write one message at ``log_time_ns``."""
+        key = (topic, msgtype)
+        conn = self._connections.get(key)
+        if conn is None:
+            self.add_topic(topic, msgtype)
+            conn = self._connections[key]
+        data = self._store.serialize_cdr(msg, msgtype)
+        self._writer.write(conn, int(log_time_ns), data)
+        self.counts[topic] += 1
+
+    def commit(self) -> Path:
+        """Finish the bag and move it to its final path (replacing an old one with overwrite)."""
+        if not self._open:
+            raise BagError(f"{self.path}: bag already closed")
+        self._open = False
+        try:
+            self._writer.close()
+            if self.path.exists() or self.path.is_symlink():
+                if not self.overwrite:  # appeared while we were writing
+                    raise BagError(f"{self.path}: output appeared meanwhile; not replacing it")
+                old = self._tmpdir / (self.path.name + ".old")
+                os.replace(self.path, old)
+            os.replace(self._bag_dir, self.path)
+        except BaseException:
+            shutil.rmtree(self._tmpdir, ignore_errors=True)
+            raise
+        shutil.rmtree(self._tmpdir, ignore_errors=True)
+        return self.path
+
+    def abort(self) -> None:
+        """Drop everything written (idempotent)."""
+        if self._open:
+            self._open = False
+            with contextlib.suppress(Exception):
+                self._writer.abort()
+        shutil.rmtree(self._tmpdir, ignore_errors=True)
+
+    def __enter__(self) -> OutputBag:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        if exc_type is None:
+            self.commit()
+        else:
+            self.abort()
+
+
+def write_atomic_text(path: Path, text: str) -> None:
+    """Write a text file through a temporary sibling and rename (never half-written)."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.partial-", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise

@@ -1,0 +1,151 @@
+"""PNG plots of a replay (matplotlib, Agg backend: no display needed).
+
+* ``attitude.png`` — roll, pitch, yaw [deg] of the estimate, and of the reference when there is one;
+* ``error.png`` — total / inclination / heading error [deg] against the reference (with one);
+* ``clipping.png`` — saturation (clip) activity: the accelerometer error |e| and the fraction of
+  samples clipped per second;
+* ``bias.png`` — the gyro-bias estimate [deg/s] per sensor axis.
+
+Time axes are seconds since the first output's header stamp. Files are written through a
+temporary sibling and renamed, so a failure never leaves a half-written PNG.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cf_estimator.core import quaternion as quat
+
+
+def _pyplot() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig: Any, path: Path) -> Path:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.partial-", suffix=".png", dir=path.parent)
+    os.close(fd)
+    try:
+        fig.savefig(tmp, dpi=110, format="png")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    finally:
+        _pyplot().close(fig)
+    return path
+
+
+def _shade(ax: Any, windows: Sequence[tuple[float, float, str]], t0: float) -> None:
+    for start, end, label in windows:
+        ax.axvspan(start - t0, end - t0, color="0.85", zorder=0)
+        ax.text((start + end) / 2 - t0, 1.0, label, transform=ax.get_xaxis_transform(),
+                ha="center", va="bottom", fontsize=7, color="0.4")
+
+
+def plot_replay(
+    result: Any, directory: str | Path, *, title: str = "",
+    windows: Sequence[tuple[float, float, str]] = (),
+) -> list[Path]:
+    """Write the replay plots into ``directory`` (created if missing); returns the paths.
+
+    ``windows``: (start_s, end_s, label) in header-stamp seconds to shade (disturbances).
+    """
+    plt = _pyplot()
+    out_dir = Path(directory)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    s = result.series
+    if s.t_s.size == 0:
+        return []
+    t0 = float(s.t_s[0])
+    t = s.t_s - t0
+    written: list[Path] = []
+    names = ("roll", "pitch", "yaw")
+    scored = result.scored or {}
+    suffix = f" — {title}" if title else ""
+
+    fig, axes = plt.subplots(3, 1, figsize=(10, 7), sharex=True)
+    ref_rpy = None
+    if scored:
+        ref_rpy = np.degrees(quat.to_euler(scored["q_ref"]))
+        est_rpy = np.degrees(quat.to_euler(scored["q_est_aligned"]))
+    for i, ax in enumerate(axes):
+        if ref_rpy is not None:
+            tr = scored["t_s"] - t0
+            ax.plot(tr, ref_rpy[:, i], color="k", lw=1.0, label="reference")
+            ax.plot(tr, est_rpy[:, i], color="C0", lw=0.8, label="estimate (heading-aligned)")
+        else:
+            ax.plot(t, np.degrees(s.rpy_rad[:, i]), color="C0", lw=0.8, label="estimate")
+        ax.set_ylabel(f"{names[i]} [deg]")
+        ax.grid(alpha=0.3)
+        _shade(ax, windows, t0)
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("time [s]")
+    fig.suptitle("Attitude" + suffix)
+    fig.tight_layout()
+    written.append(_save(fig, out_dir / "attitude.png"))
+
+    if scored:
+        fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
+        tr = scored["t_s"] - t0
+        for key, color in (("total", "k"), ("inclination", "C0"), ("heading", "C1")):
+            axes[0].plot(tr, np.degrees(scored[key]), lw=0.8, color=color, label=key)
+        axes[0].set_ylabel("error [deg]")
+        axes[0].legend(loc="upper right", fontsize=8)
+        for i, name in enumerate(names):
+            axes[1].plot(tr, np.degrees(scored[name]) * 60.0, lw=0.8, color=f"C{i}", label=name)
+        axes[1].set_ylabel("Euler error [arcmin]")
+        axes[1].legend(loc="upper right", fontsize=8)
+        for ax in axes:
+            ax.grid(alpha=0.3)
+            _shade(ax, windows, t0)
+        axes[-1].set_xlabel("time [s]")
+        fig.suptitle("Error vs reference" + suffix)
+        fig.tight_layout()
+        written.append(_save(fig, out_dir / "error.png"))
+
+    if s.clipped.size == t.size and s.error_norm_rad.size == t.size:
+        fig, axes = plt.subplots(2, 1, figsize=(10, 5), sharex=True)
+        axes[0].plot(t, np.degrees(s.error_norm_rad), lw=0.6, color="C0")
+        axes[0].set_ylabel("|e| [deg]")
+        axes[0].set_yscale("symlog", linthresh=0.1)
+        edges = np.arange(0.0, max(t[-1], 1.0) + 1.0, 1.0)
+        idx = np.clip(np.digitize(t, edges) - 1, 0, edges.size - 2)
+        counts = np.bincount(idx, minlength=edges.size - 1)
+        clipped = np.bincount(idx, weights=s.clipped.astype(float), minlength=edges.size - 1)
+        frac = np.divide(clipped, counts, out=np.zeros_like(clipped), where=counts > 0)
+        axes[1].step(edges[:-1], frac * 100.0, where="post", color="C3")
+        axes[1].set_ylabel("clipped [% per s]")
+        axes[1].set_ylim(-2, 102)
+        for ax in axes:
+            ax.grid(alpha=0.3)
+            _shade(ax, windows, t0)
+        axes[-1].set_xlabel("time [s]")
+        fig.suptitle("Saturation (clip) activity" + suffix)
+        fig.tight_layout()
+        written.append(_save(fig, out_dir / "clipping.png"))
+
+    if s.gyro_bias_rad_s.shape[0] > 0:
+        fig, ax = plt.subplots(figsize=(10, 3.5))
+        for i, axis in enumerate("xyz"):
+            ax.plot(s.bias_t_s - t0, np.degrees(s.gyro_bias_rad_s[:, i]), lw=0.9,
+                    label=f"b_{axis}")
+        ax.set_ylabel("gyro bias [deg/s]")
+        ax.set_xlabel("time [s]")
+        ax.grid(alpha=0.3)
+        ax.legend(loc="upper right", fontsize=8)
+        _shade(ax, windows, t0)
+        fig.suptitle("Gyro-bias estimate" + suffix)
+        fig.tight_layout()
+        written.append(_save(fig, out_dir / "bias.png"))
+    return written

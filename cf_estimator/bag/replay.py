@@ -1,0 +1,540 @@
+"""Replay a recorded bag through :class:`cf_estimator.pipeline.ImuPipeline` — the node's code path.
+
+Nothing here processes IMU data: every input message goes to ``ImuPipeline.on_imu``/``on_mag``
+in log-time order (IMU and magnetometer interleaved exactly as recorded) and every
+``PipelineOutput`` is written as the live node would publish it:
+
+* ``/imu/data`` (sensor_msgs/Imu) and ``/imu/rpy`` (geometry_msgs/Vector3Stamped, when the
+  pipeline's ``publish_rpy`` is set and an attitude exists) with the output's header — the input
+  IMU message's stamp and frame_id — at the input message's log time;
+* ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) every ``diagnostics_period_s`` (1 s) of bag
+  time, as the node's timer would fire under ``use_sim_time`` during ``ros2 bag play --clock``:
+  stamped with the tick time, reporting the state before the first message at or after the tick.
+  One report per tick that falls inside the recording; a recording gap gives one report, not a
+  burst.
+
+With a reference topic the estimate is scored against it (see :func:`error_statistics`).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cf_estimator.bag import io
+from cf_estimator.core import quaternion as quat
+from cf_estimator.core.params import FilterParams
+from cf_estimator.pipeline import ImuPipeline, PipelineParams
+
+OUT_IMU_TOPIC = "/imu/data"
+OUT_RPY_TOPIC = "/imu/rpy"
+OUT_DIAGNOSTICS_TOPIC = "/diagnostics"
+HEADING_ALIGNMENTS = ("auto", "none", "first", "mean")
+#: Largest gap [s] between two estimates across which the estimate is interpolated to a
+#: reference stamp; reference samples inside longer gaps are not scored.
+MAX_INTERPOLATION_GAP_S = 0.5
+
+
+@dataclass
+class ReplayOptions:
+    """How to replay (topic names None = auto-detect by message type)."""
+
+    imu_topic: str | None = None
+    mag_topic: str | None = None  #: "none" = replay without magnetometer
+    reference_topic: str | None = None
+    storage: str = "mcap"
+    copy_inputs: bool = False
+    overwrite: bool = False
+    heading_alignment: str = "auto"
+    progress: bool | None = None  #: None: a tqdm bar on stderr only when stderr is a terminal
+
+
+@dataclass
+class ReplaySeries:
+    """Per-output time series of the replay (header stamps) for statistics and plots."""
+
+    t_s: np.ndarray  #: header stamp of each output [s, bag clock]
+    q_wxyz: np.ndarray  #: (N, 4) estimate, NaN rows before initialisation
+    rpy_rad: np.ndarray  #: (N, 3), NaN before initialisation
+    clipped: np.ndarray  #: (N,) saturation unit active at that sample
+    error_norm_rad: np.ndarray  #: (N,) |e| of the accelerometer channel
+    bias_t_s: np.ndarray  #: stamps of the bias samples (decimated to <= 50 Hz) [s]
+    gyro_bias_rad_s: np.ndarray  #: (M, 3) gyro-bias estimate at bias_t_s [rad/s, sensor frame]
+    ref_t_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    ref_q_wxyz: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+
+
+@dataclass
+class ReplayResult:
+    summary: dict[str, Any]
+    series: ReplaySeries
+    output: Path | None
+    scored: dict[str, np.ndarray] | None = None  #: per reference sample: t_s, errors [rad]
+
+
+class ReplayError(Exception):
+    """A user-facing replay failure (bad bag, bad topic, bad output path)."""
+
+
+# ---------------------------------------------------------------------------------------------
+# error statistics
+
+
+def _reference_quaternion(msgtype: str, msg: Any) -> tuple[float, float, float, float]:
+    if msgtype == io.QUATERNION_STAMPED_TYPE:
+        q = msg.quaternion
+    elif msgtype == io.POSE_STAMPED_TYPE:
+        q = msg.pose.orientation
+    else:  # nav_msgs/Odometry
+        q = msg.pose.pose.orientation
+    return float(q.w), float(q.x), float(q.y), float(q.z)
+
+
+def interpolate_quaternions(
+    t: np.ndarray, q: np.ndarray, t_query: np.ndarray, max_gap_s: float = MAX_INTERPOLATION_GAP_S
+) -> tuple[np.ndarray, np.ndarray]:
+    """q(t_query) by normalised linear interpolation between the bracketing samples.
+
+    Exact where ``t_query`` coincides with a sample. Returns ``(q_query, valid)``; a query is
+    invalid outside ``[t[0], t[-1]]`` or inside a gap longer than ``max_gap_s``.
+    """
+    n = t.shape[0]
+    out = np.full((t_query.shape[0], 4), np.nan)
+    if n == 0:
+        return out, np.zeros(t_query.shape[0], dtype=bool)
+    i = np.searchsorted(t, t_query, side="right") - 1
+    exact = (i >= 0) & (t[np.clip(i, 0, n - 1)] == t_query)
+    inside = (i >= 0) & (i < n - 1)
+    i0 = np.clip(i, 0, n - 1)
+    i1 = np.clip(i + 1, 0, n - 1)
+    span = t[i1] - t[i0]
+    valid = exact | (inside & (span <= max_gap_s) & (span > 0))
+    frac = np.where(span > 0, (t_query - t[i0]) / np.where(span > 0, span, 1.0), 0.0)
+    frac = np.where(exact, 0.0, frac)
+    q0, q1 = q[i0], q[i1]
+    sign = np.where(np.sum(q0 * q1, axis=1) < 0, -1.0, 1.0)[:, None]
+    qi = (1 - frac)[:, None] * q0 + frac[:, None] * sign * q1
+    qi /= np.linalg.norm(qi, axis=1, keepdims=True)
+    out[valid] = qi[valid]
+    return out, valid
+
+
+def _yaw_quaternion(angle: np.ndarray | float) -> np.ndarray:
+    a = np.asarray(angle, dtype=float) / 2.0
+    return np.stack([np.cos(a), np.zeros_like(a), np.zeros_like(a), np.sin(a)], axis=-1)
+
+
+def error_angles(q_est: np.ndarray, q_ref: np.ndarray) -> dict[str, np.ndarray]:
+    """Errors [rad] from the earth-frame error quaternion q_err = q_est ⊗ q_ref⁻¹ (BROAD).
+
+    total 2·acos|w|, heading 2·atan|z/w|, inclination 2·acos(√(w²+z²)).
+    """
+    e = quat.multiply(q_est, quat.conjugate(q_ref))
+    w, z = np.abs(e[:, 0]), np.abs(e[:, 3])
+    return {
+        "total": 2.0 * np.arccos(np.clip(w, 0.0, 1.0)),
+        "heading": 2.0 * np.arctan2(z, w),
+        "inclination": 2.0 * np.arccos(np.clip(np.sqrt(w * w + z * z), 0.0, 1.0)),
+    }
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def error_statistics(
+    t_est: np.ndarray, q_est: np.ndarray, t_ref: np.ndarray, q_ref: np.ndarray,
+    heading_alignment: str,
+) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """Score the estimate against a reference, at the reference's stamps.
+
+    The estimate is interpolated to each reference stamp (exact when stamps coincide); samples
+    before initialisation, outside the estimate's span or in gaps are not scored.
+    ``heading_alignment`` handles an unknown constant heading offset between the estimate's
+    world frame and the reference's: ``none`` (same world frame, e.g. ENU with magnetic north),
+    ``first`` (rotate the estimate about the world vertical so its heading matches the first
+    scored reference sample; for 6-D, where the filter starts at yaw 0), ``mean`` (the circular
+    mean of the heading offset over all scored samples, a least-squares fit).
+    """
+    ok = np.all(np.isfinite(q_est), axis=1)
+    t_e, q_e = t_est[ok], q_est[ok]
+    q_i, valid = interpolate_quaternions(t_e, q_e, t_ref)
+    t_s, qe, qr = t_ref[valid], q_i[valid], q_ref[valid]
+    n = int(t_s.shape[0])
+    stats: dict[str, Any] = {"samples_scored": n, "heading_alignment": heading_alignment}
+    if n == 0:
+        stats["rmse_deg"] = None
+        return stats, {}
+    e = quat.multiply(qe, quat.conjugate(qr))
+    offset = 2.0 * np.arctan2(e[:, 3], e[:, 0])  # heading of the error, per sample
+    if heading_alignment == "first":
+        delta = float(offset[0])
+    elif heading_alignment == "mean":
+        delta = float(np.arctan2(np.mean(np.sin(offset)), np.mean(np.cos(offset))))
+    else:
+        delta = 0.0
+    delta = float(_wrap(np.array(delta)))
+    if delta != 0.0:
+        qe = quat.multiply(_yaw_quaternion(-delta), qe)
+    stats["heading_offset_deg"] = math.degrees(delta)
+    errs = error_angles(qe, qr)
+    rpy_e, rpy_r = quat.to_euler(qe), quat.to_euler(qr)
+    d_rpy = _wrap(rpy_e - rpy_r)
+    for i, name in enumerate(("roll", "pitch", "yaw")):
+        errs[name] = d_rpy[:, i]
+    stats["rmse_deg"] = {k: _deg_rms(errs[k]) for k in ("total", "inclination", "heading")}
+    stats["max_deg"] = {k: _deg_max(errs[k]) for k in ("total", "inclination", "heading")}
+    stats["rpy_rmse_deg"] = {k: _deg_rms(errs[k]) for k in ("roll", "pitch", "yaw")}
+    stats["rpy_max_deg"] = {k: _deg_max(errs[k]) for k in ("roll", "pitch", "yaw")}
+    scored = {"t_s": t_s, "q_ref": qr, "q_est_aligned": qe, **errs}
+    return stats, scored
+
+
+def _deg_rms(x: np.ndarray) -> float:
+    return float(np.degrees(np.sqrt(np.mean(np.square(x)))))
+
+
+def _deg_max(x: np.ndarray) -> float:
+    return float(np.degrees(np.max(np.abs(x))))
+
+
+# ---------------------------------------------------------------------------------------------
+# replay
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+class _Progress:
+    def __init__(self, total: int, enabled: bool | None, desc: str) -> None:
+        if enabled is None:
+            enabled = sys.stderr.isatty()
+        self._bar = None
+        if enabled:
+            from tqdm import tqdm
+
+            self._bar = tqdm(total=total, unit="msg", unit_scale=True, desc=desc,
+                             file=sys.stderr, leave=False, dynamic_ncols=True)
+        self._pending = 0
+
+    def tick(self) -> None:
+        if self._bar is not None:
+            self._pending += 1
+            if self._pending >= 2000:
+                self._bar.update(self._pending)
+                self._pending = 0
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.update(self._pending)
+            self._bar.close()
+
+
+def resolve_heading_alignment(choice: str, mag_in_use: bool) -> str:
+    """``auto`` → ``none`` when the magnetometer references heading (9-D), else ``first``."""
+    if choice not in HEADING_ALIGNMENTS:
+        raise ReplayError(
+            f"unknown heading alignment {choice!r}; choose one of {', '.join(HEADING_ALIGNMENTS)}"
+        )
+    if choice != "auto":
+        return choice
+    return "none" if mag_in_use else "first"
+
+
+@dataclass
+class ReplayVariant:
+    """One parameter set to replay (several variants share one pass over the input bag)."""
+
+    name: str = "replay"
+    filter_params: FilterParams | None = None
+    pipeline_params: PipelineParams | None = None
+    output_path: str | os.PathLike[str] | None = None
+
+
+#: Bias samples kept for plots at most this often [s of stamp time] (status() costs ~20 us).
+_BIAS_SAMPLE_PERIOD_S = 0.02
+
+
+class _Run:
+    """The per-variant state of a replay pass: pipeline, output bag, collected series."""
+
+    def __init__(self, variant: ReplayVariant, opts: ReplayOptions, topics: list[str],
+                 types: dict[str, str | None], factory: Callable[[], Any] | None) -> None:
+        self.variant = variant
+        self.fparams = variant.filter_params or FilterParams()
+        self.pparams = variant.pipeline_params or PipelineParams()
+        self.pipe = factory() if factory else ImuPipeline(self.fparams, self.pparams)
+        self.period_ns = int(round(self.pparams.diagnostics_period_s * 1e9))
+        self.publish_rpy = bool(self.pparams.publish_rpy)
+        self.out_path = Path(variant.output_path) if variant.output_path is not None else None
+        self.bag: io.OutputBag | None = None
+        self.t: list[float] = []
+        self.q: list[tuple[float, float, float, float] | None] = []
+        self.rpy: list[Any] = []
+        self.clipped: list[bool] = []
+        self.enorm: list[float] = []
+        self.bias_t: list[float] = []
+        self.bias: list[tuple[float, float, float]] = []
+        self.next_bias_t = -math.inf
+        self.warnings: list[str] = []
+        self._seen: set[str] = set()
+        self.n_diag = 0
+        self.next_diag_ns: int | None = None
+        self.copy_inputs = opts.copy_inputs
+        if self.out_path is not None:
+            self.bag = io.OutputBag(self.out_path, storage=opts.storage, overwrite=opts.overwrite)
+            self.bag.add_topic(OUT_IMU_TOPIC, io.IMU_TYPE)
+            if self.publish_rpy:
+                self.bag.add_topic(OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE)
+            self.bag.add_topic(OUT_DIAGNOSTICS_TOPIC, io.DIAGNOSTIC_ARRAY_TYPE)
+            if opts.copy_inputs:
+                for t in topics:
+                    self.bag.add_topic(t, types[t] or "")
+
+    def tick(self, log_ns: int) -> None:
+        """The node's diagnostics timer (bag clock): one report per elapsed period."""
+        if self.next_diag_ns is None:
+            self.next_diag_ns = log_ns + self.period_ns
+            return
+        if log_ns >= self.next_diag_ns:
+            if self.bag is not None:
+                report = self.pipe.diagnostics(self.next_diag_ns * 1e-9)
+                self.bag.write(OUT_DIAGNOSTICS_TOPIC, io.DIAGNOSTIC_ARRAY_TYPE, self.next_diag_ns,
+                               io.diagnostics_message(self.next_diag_ns, [report]))
+            self.n_diag += 1
+            missed = (log_ns - self.next_diag_ns) // self.period_ns
+            self.next_diag_ns += self.period_ns * (missed + 1)
+
+    def imu(self, log_ns: int, msg: Any) -> None:
+        out = self.pipe.on_imu(msg)
+        if out is None:
+            return
+        bag = self.bag
+        if bag is not None:
+            bag.write(OUT_IMU_TOPIC, io.IMU_TYPE, log_ns, io.imu_from_output(out))
+            if self.publish_rpy and out.rpy_rad is not None:
+                bag.write(OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE, log_ns, io.rpy_from_output(out))
+        t = out.stamp_sec + out.stamp_nanosec * 1e-9
+        self.t.append(t)
+        if out.initialized:
+            x, y, z, w = out.orientation_xyzw
+            self.q.append((w, x, y, z))
+        else:
+            self.q.append(None)
+        self.rpy.append(out.rpy_rad)
+        flt = self.pipe.filter
+        # Per-sample flags read without building a FilterStatus (as the pipeline does itself).
+        s = flt._state  # noqa: SLF001 - read-only
+        self.clipped.append(bool(s.clipped) and out.initialized)
+        self.enorm.append(float(s.error_norm))
+        if t >= self.next_bias_t and out.initialized:
+            self.bias_t.append(t)
+            self.bias.append(tuple(float(c) for c in flt.gyro_bias_rad_s))
+            self.next_bias_t = t + _BIAS_SAMPLE_PERIOD_S
+        if out.warnings:
+            for text in out.warnings:
+                if text not in self._seen:
+                    self._seen.add(text)
+                    self.warnings.append(text)
+
+    def abort(self) -> None:
+        if self.bag is not None:
+            self.bag.abort()
+
+
+def replay_bag(
+    input_path: str | os.PathLike[str],
+    output_path: str | os.PathLike[str] | None,
+    filter_params: FilterParams | None = None,
+    pipeline_params: PipelineParams | None = None,
+    options: ReplayOptions | None = None,
+    *,
+    pipeline_factory: Callable[[], Any] | None = None,
+) -> ReplayResult:
+    """Replay ``input_path`` through a fresh ``ImuPipeline``; write ``output_path`` (if given).
+
+    Raises :class:`cf_estimator.bag.io.BagError` / :class:`ReplayError` with one-line messages
+    naming the file. The output bag appears only when everything was written.
+    """
+    variant = ReplayVariant("replay", filter_params, pipeline_params, output_path)
+    return replay_variants(input_path, [variant], options, pipeline_factory=pipeline_factory)[0]
+
+
+def replay_variants(
+    input_path: str | os.PathLike[str],
+    variants: Sequence[ReplayVariant],
+    options: ReplayOptions | None = None,
+    *,
+    pipeline_factory: Callable[[], Any] | None = None,
+) -> list[ReplayResult]:
+    """Replay one input bag through one fresh pipeline per variant, reading the bag once."""
+    opts = options or ReplayOptions()
+    t_wall = time.perf_counter()
+    in_path = Path(input_path)
+    if opts.storage not in io.STORAGES:
+        raise ReplayError(f"unknown storage {opts.storage!r}; choose mcap or sqlite3")
+    resolve_heading_alignment(opts.heading_alignment, True)  # validate early
+    for v in variants:
+        if v.output_path is not None:
+            io.check_output_path(Path(v.output_path), overwrite=opts.overwrite, inputs=[in_path])
+
+    with io.open_bag(in_path) as bag:
+        imu_topic = bag.select_topic("IMU", opts.imu_topic, [io.IMU_TYPE], required=True,
+                                     option="--imu-topic")
+        assert imu_topic is not None
+        if opts.mag_topic is not None and opts.mag_topic.lower() == "none":
+            mag_topic = None
+        else:
+            mag_topic = bag.select_topic("magnetometer", opts.mag_topic, [io.MAG_TYPE],
+                                         required=False, option="--mag-topic")
+        ref_topic = None
+        if opts.reference_topic is not None:
+            ref_topic = bag.select_topic("reference", opts.reference_topic, io.REFERENCE_TYPES,
+                                         required=True, option="--reference-topic")
+        ref_type = bag.msgtype_of(ref_topic) if ref_topic else None
+        topics = [t for t in (imu_topic, mag_topic, ref_topic) if t is not None]
+        types = {t: bag.msgtype_of(t) for t in topics}
+        total = bag.count(topics)
+        in_format = bag.format
+
+        runs: list[_Run] = []
+        progress: _Progress | None = None
+        ref_t: list[float] = []
+        ref_q: list[tuple[float, float, float, float]] = []
+        n_imu = n_mag = n_ref = 0
+        first_log = last_log = None
+        try:
+            for v in variants:
+                runs.append(_Run(v, opts, topics, types, pipeline_factory))
+            progress = _Progress(total, opts.progress, in_path.name)
+            copy = opts.copy_inputs and any(r.bag is not None for r in runs)
+            for m in bag.messages(topics):
+                log_ns = m.log_time_ns
+                if first_log is None:
+                    first_log = log_ns
+                last_log = log_ns
+                for r in runs:
+                    r.tick(log_ns)
+                if copy:
+                    jazzy = bag.to_jazzy(m.msg, m.msgtype)
+                    for r in runs:
+                        if r.bag is not None:
+                            r.bag.write(m.topic, m.msgtype, log_ns, jazzy)
+                if m.topic == imu_topic:
+                    n_imu += 1
+                    for r in runs:
+                        r.imu(log_ns, m.msg)
+                elif m.topic == mag_topic:
+                    n_mag += 1
+                    for r in runs:
+                        r.pipe.on_mag(m.msg)
+                else:
+                    n_ref += 1
+                    h = m.msg.header.stamp
+                    q = _reference_quaternion(ref_type or "", m.msg)
+                    nq = math.sqrt(sum(c * c for c in q))
+                    if math.isfinite(nq) and nq > 0.5:
+                        ref_t.append(h.sec + h.nanosec * 1e-9)
+                        ref_q.append((q[0] / nq, q[1] / nq, q[2] / nq, q[3] / nq))
+                progress.tick()
+            if n_imu == 0:
+                raise io.BagError(f"{in_path}: topic {imu_topic!r} yielded no messages")
+        except BaseException:
+            if progress is not None:
+                progress.close()
+            for r in runs:
+                r.abort()
+            raise
+        progress.close()
+        for r in runs:
+            if r.bag is not None:
+                r.bag.commit()
+
+    wall = time.perf_counter() - t_wall
+    results = []
+    for r in runs:
+        series = _series(r, ref_t, ref_q)
+        counters = _jsonable(dict(r.pipe.counters))
+        stamps = series.t_s
+        duration = float(stamps[-1] - stamps[0]) if stamps.size > 1 else 0.0
+        init = np.all(np.isfinite(series.q_wxyz), axis=1)
+        clip_frac = float(np.mean(series.clipped[init])) if init.any() else None
+        final_bias = (
+            [float(c) for c in r.pipe.filter.gyro_bias_rad_s] if r.pipe.initialized else None
+        )
+        mag_in_use = mag_topic is not None and r.fparams.use_mag
+        summary: dict[str, Any] = {
+            "variant": r.variant.name,
+            "input": str(in_path),
+            "input_format": in_format,
+            "output": str(r.out_path) if r.out_path is not None else None,
+            "storage": opts.storage if r.out_path is not None else None,
+            "topics": {"imu": imu_topic, "mag": mag_topic, "reference": ref_topic},
+            "messages_in": n_imu,
+            "mag_messages_in": n_mag,
+            "reference_messages_in": n_ref,
+            "messages_processed": int(counters.get("processed", len(r.t))),
+            "messages_rejected": counters.get("rejected", {}),
+            "gaps": counters.get("gaps"),
+            "resets": counters.get("resets"),
+            "outputs_written": dict(r.bag.counts) if r.bag is not None else {},
+            "diagnostics_reports": r.n_diag,
+            "duration_s": duration,
+            "bag_duration_s": (last_log - first_log) * 1e-9 if first_log is not None else 0.0,
+            "imu_rate_hz": (stamps.size - 1) / duration if duration > 0 else None,
+            "clipped_fraction": clip_frac,
+            "final_gyro_bias_rad_s": final_bias,
+            "counters": counters,
+            "warnings": r.warnings,
+            "wall_time_s": wall,
+            "messages_per_s": (n_imu + n_mag + n_ref) / wall if wall > 0 else None,
+        }
+        scored = None
+        if ref_topic is not None:
+            align = resolve_heading_alignment(opts.heading_alignment, mag_in_use)
+            stats, scored = error_statistics(series.t_s, series.q_wxyz, series.ref_t_s,
+                                             series.ref_q_wxyz, align)
+            stats["topic"] = ref_topic
+            summary["reference"] = stats
+            summary["rmse_deg"] = stats.get("rmse_deg")
+        results.append(ReplayResult(_jsonable(summary), series, r.out_path, scored))
+    return results
+
+
+def _series(r: _Run, ref_t: Sequence[float], ref_q: Sequence[Any]) -> ReplaySeries:
+    n = len(r.t)
+    q = np.full((n, 4), np.nan)
+    rpy = np.full((n, 3), np.nan)
+    for i, (qi, ri) in enumerate(zip(r.q, r.rpy, strict=True)):
+        if qi is not None:
+            q[i] = qi
+        if ri is not None:
+            rpy[i] = ri
+    return ReplaySeries(
+        t_s=np.asarray(r.t, dtype=float),
+        q_wxyz=q,
+        rpy_rad=rpy,
+        clipped=np.asarray(r.clipped, dtype=bool),
+        error_norm_rad=np.asarray(r.enorm, dtype=float),
+        bias_t_s=np.asarray(r.bias_t, dtype=float),
+        gyro_bias_rad_s=np.asarray(r.bias, dtype=float).reshape(-1, 3),
+        ref_t_s=np.asarray(ref_t, dtype=float),
+        ref_q_wxyz=np.asarray(ref_q, dtype=float).reshape(-1, 4),
+    )

@@ -1,0 +1,186 @@
+"""``cf-estimator replay``: run a recorded bag through the node's pipeline, without ROS.
+
+Input: a ROS 1 ``.bag`` or a ROS 2 bag directory (sqlite3 or mcap). Output: a ROS 2 bag
+(Jazzy definitions) with ``/imu/data``, ``/imu/rpy`` and ``/diagnostics`` as the live node
+publishes them, optionally the input topics (``--copy-inputs``); a JSON summary; PNG plots.
+See docs/replay.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from cf_estimator.bag import io
+from cf_estimator.bag.replay import HEADING_ALIGNMENTS, ReplayError, ReplayOptions, replay_bag
+from cf_estimator.cli.main import CliError
+from cf_estimator.core.params import FilterParams
+from cf_estimator.pipeline import PipelineParams
+from cf_estimator.schema import ParameterError
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``replay`` sub-command to ``subparsers``."""
+    p = subparsers.add_parser(
+        "replay",
+        help="replay a ROS 1/ROS 2 bag through the estimator (no ROS needed)",
+        description=(
+            "Replay a recorded bag (ROS 1 .bag, or ROS 2 bag directory with sqlite3 or mcap "
+            "storage) through exactly the node's processing and write a ROS 2 bag with its "
+            "output topics /imu/data, /imu/rpy and /diagnostics (same types and stamps as the "
+            "live node), a JSON summary and plots. IMU and magnetometer topics are detected by "
+            "message type when there is exactly one of each."
+        ),
+    )
+    p.add_argument("bag", metavar="BAG", help="input bag: ROS 1 .bag file or ROS 2 bag directory")
+    p.add_argument("-o", "--output", metavar="OUT",
+                   help="output ROS 2 bag directory (written atomically; see --overwrite)")
+    p.add_argument("--params", metavar="YAML",
+                   help="ROS 2 parameter file, the same the node reads (--params-file)")
+    p.add_argument("--imu-topic", metavar="TOPIC", help="sensor_msgs/Imu input (default: detect)")
+    p.add_argument("--mag-topic", metavar="TOPIC",
+                   help="sensor_msgs/MagneticField input (default: detect; 'none' = without)")
+    p.add_argument("--reference-topic", metavar="TOPIC",
+                   help="orientation reference (geometry_msgs/PoseStamped, QuaternionStamped or "
+                        "nav_msgs/Odometry): adds error statistics")
+    p.add_argument("--heading-alignment", choices=HEADING_ALIGNMENTS, default="auto",
+                   help="unknown constant heading offset of the reference: none, first (match the "
+                        "first scored sample), mean (circular mean); auto = none with a "
+                        "magnetometer, first without (default)")
+    p.add_argument("--storage", choices=sorted(io.STORAGES), default="mcap",
+                   help="output storage plugin (default mcap)")
+    p.add_argument("--copy-inputs", action="store_true",
+                   help="also write the input topics used (IMU, magnetometer, reference)")
+    p.add_argument("--plot", metavar="DIR", help="write PNG plots into DIR")
+    p.add_argument("--json", metavar="FILE", help="write the JSON summary to FILE ('-' = stdout)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output bag")
+    prog = p.add_mutually_exclusive_group()
+    prog.add_argument("--progress", dest="progress", action="store_true", default=None,
+                      help="always show a progress bar on stderr")
+    prog.add_argument("--no-progress", dest="progress", action="store_false",
+                      help="never show a progress bar (default: only when stderr is a terminal)")
+    p.set_defaults(run=run)
+
+
+def load_params(path: str | None) -> tuple[FilterParams, PipelineParams, list[str]]:
+    """Parameters from a ROS 2 parameter file (defaults without one); CliError(2) when bad."""
+    if path is None:
+        return FilterParams(), PipelineParams(), []
+    if not Path(path).is_file():
+        raise CliError(f"{path}: parameter file not found", 2)
+    from cf_estimator.params_file import load_params_file
+
+    try:
+        return load_params_file(path)
+    except ParameterError as exc:
+        text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise CliError(text if text.startswith(str(path)) else f"{path}: {text}", 2) from None
+
+
+def warn(text: str) -> None:
+    """One warning line on stderr."""
+    print(f"cf-estimator: warning: {text}", file=sys.stderr)
+
+
+def check_json_target(target: str | None, overwrite: bool) -> None:
+    """A --json FILE must not exist without --overwrite and must be in an existing directory."""
+    if target is None or target == "-":
+        return
+    path = Path(target)
+    if path.exists() and not overwrite:
+        raise CliError(f"{path}: exists (use --overwrite to replace it)", 2)
+    if path.is_dir():
+        raise CliError(f"{path}: is a directory", 2)
+    if not path.parent.is_dir():
+        raise CliError(f"{path}: directory {path.parent} does not exist", 2)
+
+
+def write_json(target: str, data: dict[str, Any]) -> None:
+    text = json.dumps(data, indent=2, allow_nan=False) + "\n"
+    if target == "-":
+        sys.stdout.write(text)
+    else:
+        io.write_atomic_text(Path(target), text)
+
+
+def _format_counts(d: dict[str, int]) -> str:
+    return ", ".join(f"{k} {v}" for k, v in d.items()) if d else "none"
+
+
+def print_summary(s: dict[str, Any], out: Any = None) -> None:
+    """The human summary of one replay (to ``out``, default stdout)."""
+    out = sys.stdout if out is None else out
+    rate = s.get("imu_rate_hz")
+    rate_text = f"{rate:.1f} Hz" if rate else "n/a"
+    topics = s["topics"]
+    print(f"input   {s['input']} ({s['input_format']}): {s['messages_in']} IMU on "
+          f"{topics['imu']}, {s['mag_messages_in']} mag on {topics['mag'] or '-'}, "
+          f"{s['duration_s']:.1f} s of stamps, {rate_text}", file=out)
+    rej = s["messages_rejected"]
+    print(f"pipeline processed {s['messages_processed']}, rejected "
+          f"{sum(rej.values())} ({_format_counts(rej)}), gaps {s.get('gaps')}, resets "
+          f"{_format_counts(s.get('resets') or {})}, clipped "
+          f"{100.0 * (s['clipped_fraction'] or 0.0):.1f}% of samples", file=out)
+    bias = s.get("final_gyro_bias_rad_s")
+    if bias:
+        print("bias    final gyro-bias estimate [rad/s]: "
+              + " ".join(f"{b:+.5f}" for b in bias), file=out)
+    if s.get("output"):
+        print(f"output  {s['output']} ({s['storage']}): {_format_counts(s['outputs_written'])}",
+              file=out)
+    ref = s.get("reference")
+    if ref:
+        rmse = ref.get("rmse_deg")
+        if rmse:
+            print(f"error   vs {ref['topic']} ({ref['samples_scored']} samples, heading "
+                  f"alignment {ref['heading_alignment']}, offset {ref['heading_offset_deg']:.2f}"
+                  f" deg): RMSE total {rmse['total']:.3f}, inclination {rmse['inclination']:.3f},"
+                  f" heading {rmse['heading']:.3f} deg", file=out)
+        else:
+            print(f"error   vs {ref['topic']}: no reference sample overlaps the estimate",
+                  file=out)
+    print(f"speed   {s['messages_per_s']:.0f} messages/s ({s['wall_time_s']:.2f} s)", file=out)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.output is None and args.json is None and args.plot is None:
+        raise CliError("nothing to write: give -o OUT, --json FILE or --plot DIR", 2)
+    if not Path(args.bag).exists():
+        raise CliError(f"{args.bag}: no such file or directory", 2)
+    check_json_target(args.json, args.overwrite)
+    if args.plot is not None and Path(args.plot).exists() and not Path(args.plot).is_dir():
+        raise CliError(f"{args.plot}: exists and is not a directory", 2)
+    fparams, pparams, param_warnings = load_params(args.params)
+    for text in param_warnings:
+        warn(text)
+    opts = ReplayOptions(
+        imu_topic=args.imu_topic, mag_topic=args.mag_topic, reference_topic=args.reference_topic,
+        storage=args.storage, copy_inputs=args.copy_inputs, overwrite=args.overwrite,
+        heading_alignment=args.heading_alignment, progress=args.progress,
+    )
+    try:
+        result = replay_bag(args.bag, args.output, fparams, pparams, opts)
+    except io.BagError as exc:
+        raise CliError(str(exc), exc.code) from None
+    except ReplayError as exc:
+        raise CliError(str(exc), 2) from None
+    summary = result.summary
+    for text in summary["warnings"]:
+        warn(text)
+    if args.plot is not None:
+        from cf_estimator.bag.plots import plot_replay
+
+        paths = plot_replay(result, args.plot, title=Path(args.bag).name)
+        summary["plots"] = [str(p) for p in paths]
+    if args.json is not None:
+        write_json(args.json, summary)
+    if args.json != "-":
+        print_summary(summary)
+        if summary.get("plots"):
+            print(f"plots   {', '.join(summary['plots'])}")
+        if args.json is not None:
+            print(f"json    {args.json}")
+    return 0
