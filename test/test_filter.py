@@ -186,6 +186,7 @@ def test_long_clipped_error_triggers_recovery_and_the_filter_recovers():
         recovery_trigger_s=5.0,
         saturation_limit_rad=0.01,
         k1=0.5,
+        rest_bias_learning=False,  # a static sensor would otherwise be handled by the rest path
     )
     q_true = quat.from_euler(0.0, 0.0, 0.0)
     acc, _ = exact_sensors(q_true)
@@ -199,6 +200,33 @@ def test_long_clipped_error_triggers_recovery_and_the_filter_recovers():
     assert 4.9 <= first * DT <= 5.5  # at the trigger time, not before
     assert f.status().recovery_count == 1
     assert math.degrees(quat.angle_between(np.array(q), q_true)) < 0.6  # back inside the clip
+
+
+def test_at_rest_an_error_left_by_motion_is_removed_within_seconds():
+    # the clip alone would correct at k1·L = 0.005 rad/s: two minutes for 0.6 rad
+    params = FilterParams(use_mag=False, startup_duration_s=0.0)
+    q_true = quat.from_euler(0.0, 0.0, 0.0)
+    acc, _ = exact_sensors(q_true)
+    rng = np.random.default_rng(4)
+    f = ComplementaryFilter(params, initial_orientation=quat.from_euler(0.6, 0.0, 0.0))
+    for _ in range(400):
+        q = f.update(rng.normal(0, 0.002, 3), acc + rng.normal(0, 0.02, 3), DT)
+    assert f.status().at_rest and f.status().phase == "running"
+    assert math.degrees(quat.angle_between(np.array(q), q_true)) < 0.5
+
+
+def test_a_disturbance_is_never_processed_as_rest():
+    params = FilterParams(use_mag=False)
+    q_true = quat.from_euler(0.1, -0.1, 0.0)
+    acc, _ = exact_sensors(q_true)
+    f = ComplementaryFilter(params, initial_orientation=q_true)
+    for _ in range(500):
+        f.update((0, 0, 0), acc, DT)
+    assert f.status().at_rest
+    f.update((0, 0, 0), acc + [15 * G, 0, 0], DT)  # the first sample of a 15 g impact
+    status = f.status()
+    assert not status.at_rest and status.clipped
+    assert math.degrees(quat.angle_between(f.orientation, q_true)) < 0.01
 
 
 def test_invalid_accelerometer_samples_are_skipped_not_propagated():

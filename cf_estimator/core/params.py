@@ -75,7 +75,7 @@ class FilterParams:
         2.0,
         "s",
         "Start-up phase after initialisation: gain startup_k1, no clip, no aperiodic "
-        "unit, no bias learning (0 = none).",
+        "unit, no bias learning (0 = none). The error path also runs so while at rest.",
         minimum=0.0,
         maximum=60.0,
         group="phases",
@@ -164,7 +164,8 @@ class FilterParams:
     rest_bias_learning: bool = param(
         True,
         "",
-        "Learn the gyro bias directly while the sensor is at rest.",
+        "Detect rest: then learn the gyro bias directly from the gyro, and run the error "
+        "path as in start-up (no clip, no lag, gain startup_k1).",
         group="bias",
     )
     rest_gyro_threshold_rad_s: float = param(
@@ -204,7 +205,7 @@ class FilterParams:
         group="bias",
     )
     bias_limit_rad_s: float = param(
-        0.1,
+        0.5,
         "rad/s",
         "Bound on each component of the gyro-bias estimate (anti-windup).",
         minimum=0.0,

@@ -19,7 +19,8 @@ One sample, in the order the code runs (world frame ENU inside; q = q_world_from
 Phases: STARTUP (after initialisation, for startup_duration_s: gain startup_k1, no clip, no lag,
 no bias learning) → RUNNING → RECOVERING (error clipped without a break for recovery_trigger_s:
 a real attitude error, e.g. after gyro over-range; same as STARTUP until |e| < L/2) → RUNNING.
-While at rest (gyro and accelerometer steady for rest_time_s) the bias also follows the gyro.
+While at rest (gyro and accelerometer steady for rest_time_s) the bias also follows the gyro, and
+the error path runs as in STARTUP (nothing to reject: an error left by motion is removed fast).
 """
 
 from __future__ import annotations
@@ -198,7 +199,7 @@ def step(
     gx, gy, gz = gyro
     s.time_s = s.time_s + dt
     startup = s.time_s <= p.startup_duration_s
-    fast = startup | s.recovering
+    fast = startup | s.recovering  # trust the accelerometer fully, learn no bias
     learn = o.not_(fast)
 
     # 1. predict with the bias-corrected gyro, then the magnetometer's yaw-rate correction
@@ -211,48 +212,7 @@ def step(
     s.accel_used = accel is not None
     if accel is not None:
         ax, ay, az = accel
-        an = o.sqrt(ax * ax + ay * ay + az * az)
-        ux, uy, uz = ax / an, ay / an, az / an
-        # 2. predicted gravity (up) direction in the sensor frame: third row of R
-        vx = 2.0 * (s.qx * s.qz - s.qw * s.qy)
-        vy = 2.0 * (s.qy * s.qz + s.qw * s.qx)
-        vz = 1.0 - 2.0 * (s.qx * s.qx + s.qy * s.qy)
-        ex, ey, ez = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-        en = o.sqrt(ex * ex + ey * ey + ez * ez)
-        s.ex, s.ey, s.ez, s.error_norm = ex, ey, ez, en
-        # 3. saturation by norm
-        limit = p.saturation_limit_rad
-        clipped = p.use_saturation & learn & (en > limit)
-        scale = o.where(clipped, limit / o.maximum(en, 1e-300), 1.0)
-        # 4. aperiodic unit in the world frame (weight 1 = unit bypassed)
-        wx, wy, wz = _rotate(s.qw, s.qx, s.qy, s.qz, ex * scale, ey * scale, ez * scale)
-        weight = o.where(fast, 1.0, dt / (p.aperiodic_time_constant_s + dt))
-        s.lx = s.lx + weight * (wx - s.lx)
-        s.ly = s.ly + weight * (wy - s.ly)
-        s.lz = s.lz + weight * (wz - s.lz)
-        fx, fy, fz = _rotate(s.qw, -s.qx, -s.qy, -s.qz, s.lx, s.ly, s.lz)
-        s.fx, s.fy, s.fz = fx, fy, fz
-        # 5. PI(+k3) regulator: integral states are the bias estimate
-        k3dt = o.where(learn, p.k3 * dt, 0.0)
-        s.cx, s.cy, s.cz = s.cx + k3dt * fx, s.cy + k3dt * fy, s.cz + k3dt * fz
-        ldt = o.where(learn, dt, 0.0)
-        s.bx = s.bx - ldt * (p.k2 * fx + s.cx)
-        s.by = s.by - ldt * (p.k2 * fy + s.cy)
-        s.bz = s.bz - ldt * (p.k2 * fz + s.cz)
-        k1 = o.where(fast, o.maximum(p.k1, p.startup_k1), p.k1)
-        gain = k1 * dt / (1.0 + k1 * dt)
-        dw, dx, dy, dz = _exp(gain * fx, gain * fy, gain * fz, o)
-        s.qw, s.qx, s.qy, s.qz = _mul(s.qw, s.qx, s.qy, s.qz, dw, dx, dy, dz)
-        # recovery: a long unbroken clip is a real attitude error, not a disturbance
-        s.clip_timer_s = o.where(clipped, s.clip_timer_s + dt, 0.0)
-        enter = (p.recovery_trigger_s > 0.0) & (s.clip_timer_s >= p.recovery_trigger_s) & learn
-        leave = s.recovering & (en < 0.5 * limit)
-        s.recovery_count = s.recovery_count + o.where(enter, 1, 0)
-        s.recovering = o.where(s.recovering, o.not_(leave), enter)
-        s.clip_timer_s = o.where(enter, 0.0, s.clip_timer_s)
-        s.clipped = clipped
-
-        # rest detection and direct bias learning at rest
+        # rest detection on this very sample (a disturbance is never taken for rest)
         lw = dt / (REST_LOWPASS_TIME_CONSTANT_S + dt)
         s.glx, s.gly, s.glz = (
             s.glx + lw * (gx - s.glx),
@@ -273,6 +233,49 @@ def step(
         )
         s.rest_timer_s = o.where(still, s.rest_timer_s + dt, 0.0)
         s.at_rest = p.rest_bias_learning & learn & (s.rest_timer_s >= p.rest_time_s)
+        quick = fast | s.at_rest  # at rest: no linear acceleration to reject (bias still learned)
+        an = o.sqrt(ax * ax + ay * ay + az * az)
+        ux, uy, uz = ax / an, ay / an, az / an
+        # 2. predicted gravity (up) direction in the sensor frame: third row of R
+        vx = 2.0 * (s.qx * s.qz - s.qw * s.qy)
+        vy = 2.0 * (s.qy * s.qz + s.qw * s.qx)
+        vz = 1.0 - 2.0 * (s.qx * s.qx + s.qy * s.qy)
+        ex, ey, ez = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+        en = o.sqrt(ex * ex + ey * ey + ez * ez)
+        s.ex, s.ey, s.ez, s.error_norm = ex, ey, ez, en
+        # 3. saturation by norm
+        limit = p.saturation_limit_rad
+        clipped = p.use_saturation & o.not_(quick) & (en > limit)
+        scale = o.where(clipped, limit / o.maximum(en, 1e-300), 1.0)
+        # 4. aperiodic unit in the world frame (weight 1 = unit bypassed)
+        wx, wy, wz = _rotate(s.qw, s.qx, s.qy, s.qz, ex * scale, ey * scale, ez * scale)
+        weight = o.where(quick, 1.0, dt / (p.aperiodic_time_constant_s + dt))
+        s.lx = s.lx + weight * (wx - s.lx)
+        s.ly = s.ly + weight * (wy - s.ly)
+        s.lz = s.lz + weight * (wz - s.lz)
+        fx, fy, fz = _rotate(s.qw, -s.qx, -s.qy, -s.qz, s.lx, s.ly, s.lz)
+        s.fx, s.fy, s.fz = fx, fy, fz
+        # 5. PI(+k3) regulator: integral states are the bias estimate
+        k3dt = o.where(learn, p.k3 * dt, 0.0)
+        s.cx, s.cy, s.cz = s.cx + k3dt * fx, s.cy + k3dt * fy, s.cz + k3dt * fz
+        ldt = o.where(learn, dt, 0.0)
+        s.bx = s.bx - ldt * (p.k2 * fx + s.cx)
+        s.by = s.by - ldt * (p.k2 * fy + s.cy)
+        s.bz = s.bz - ldt * (p.k2 * fz + s.cz)
+        k1 = o.where(quick, o.maximum(p.k1, p.startup_k1), p.k1)
+        gain = k1 * dt / (1.0 + k1 * dt)
+        dw, dx, dy, dz = _exp(gain * fx, gain * fy, gain * fz, o)
+        s.qw, s.qx, s.qy, s.qz = _mul(s.qw, s.qx, s.qy, s.qz, dw, dx, dy, dz)
+        # recovery: a long unbroken clip is a real attitude error, not a disturbance
+        s.clip_timer_s = o.where(clipped, s.clip_timer_s + dt, 0.0)
+        enter = (p.recovery_trigger_s > 0.0) & (s.clip_timer_s >= p.recovery_trigger_s) & learn
+        leave = s.recovering & (en < 0.5 * limit)
+        s.recovery_count = s.recovery_count + o.where(enter, 1, 0)
+        s.recovering = o.where(s.recovering, o.not_(leave), enter)
+        s.clip_timer_s = o.where(enter, 0.0, s.clip_timer_s)
+        s.clipped = clipped
+
+        # direct bias learning at rest
         bw = o.where(s.at_rest, dt / (p.rest_bias_time_constant_s + dt), 0.0)
         s.bx, s.by, s.bz = (
             s.bx + bw * (s.glx - s.bx),
