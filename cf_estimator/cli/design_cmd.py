@@ -14,23 +14,12 @@ import json
 import math
 from typing import Any
 
-from cf_estimator.cli.main import CliError
+from cf_estimator.cli.main import CliError, finite_float
 from cf_estimator.core import design
 
 SEED_K1 = 0.03
 SEED_K2 = 0.001
 SEED_INITIAL_ERROR_RAD = 0.1
-
-
-def _finite_float(text: str) -> float:
-    """argparse type: a finite float (rejects nan, inf and non-numbers)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"must be a finite number: {text!r}")
-    return value
 
 
 def register(subparsers: Any) -> None:
@@ -45,7 +34,7 @@ def register(subparsers: Any) -> None:
             "the thesis requirement check (seed 003)."
         ),
     )
-    f = _finite_float
+    f = finite_float
     gains = p.add_argument_group("gains (either k1/k2, or n or period with xi)")
     gains.add_argument("--k1", type=f, metavar="K1", help="proportional gain [1/s] (default 0.03)")
     gains.add_argument("--k2", type=f, metavar="K2", help="integral gain [1/s^2] (default 0.001)")

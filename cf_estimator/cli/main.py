@@ -9,11 +9,24 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import math
+import os
 import sys
 from collections.abc import Sequence
 
 #: Sub-command modules, in the order ``--help`` lists them.
 COMMANDS: tuple[str, ...] = ("design", "bench", "tune", "demo", "simulate", "replay")
+
+
+def finite_float(text: str) -> float:
+    """argparse type: a finite number (rejects nan, inf and non-numbers with a usage error)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number: {text!r}")
+    return value
 
 
 class CliError(Exception):
@@ -48,6 +61,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("cf-estimator: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # e.g. `cf-estimator replay … --json - | head`: not an error
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # Python would complain again at exit otherwise
+        return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -7,25 +7,14 @@ documented in :mod:`cf_estimator.bag.simulate` and docs/replay.md.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 from typing import Any
 
 from cf_estimator.bag import io
 from cf_estimator.bag.simulate import IMU_TOPIC, MAG_TOPIC, TRUTH_TOPIC, write_scenario_bag
-from cf_estimator.cli.main import CliError
+from cf_estimator.cli.main import CliError, finite_float
 from cf_estimator.scenarios import DEFAULT_DURATION_S, DEFAULT_RATE_HZ, SCENARIOS, make_scenario
-
-
-def _number(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"must be finite: {text!r}")
-    return value
 
 
 def register(subparsers: Any) -> None:
@@ -41,13 +30,14 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument("--scenario", metavar="NAME", help=f"one of: {', '.join(SCENARIOS)}")
     p.add_argument("-o", "--output", metavar="OUT", help="output ROS 2 bag directory")
-    p.add_argument("--rate", type=_number, metavar="HZ", help="IMU rate (default: the scenario's)")
-    p.add_argument("--duration", type=_number, metavar="S",
+    p.add_argument("--rate", type=finite_float, metavar="HZ",
+                   help="IMU rate (default: the scenario's)")
+    p.add_argument("--duration", type=finite_float, metavar="S",
                    help="duration (default: the scenario's)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--mag-rate", type=_number, default=100.0, metavar="HZ",
+    p.add_argument("--mag-rate", type=finite_float, default=100.0, metavar="HZ",
                    help="magnetometer rate (default 100; 0 = IMU rate)")
-    p.add_argument("--truth-rate", type=_number, default=100.0, metavar="HZ",
+    p.add_argument("--truth-rate", type=finite_float, default=100.0, metavar="HZ",
                    help="ground-truth rate (default 100; 0 = IMU rate)")
     p.add_argument("--storage", choices=sorted(io.STORAGES), default="mcap",
                    help="storage plugin (default mcap)")

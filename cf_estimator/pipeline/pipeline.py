@@ -5,8 +5,9 @@ test the node's behaviour. Rules, in the order :meth:`ImuPipeline.on_imu` applie
 
 1. Every IMU message is counted as received and ends either *processed* (an output is returned)
    or *rejected* with a counted reason (None is returned): ``received = processed + rejected``.
-2. Malformed fields, a zero stamp, NaN/Inf gyro or accelerometer, a zero accelerometer vector:
-   rejected. Nothing invalid ever reaches the filter.
+2. Malformed fields, a zero stamp, NaN/Inf gyro or accelerometer, a zero accelerometer vector,
+   a gyro or accelerometer norm beyond any sensor's range (``checks.GYRO_MAX_RAD_S``,
+   ``checks.ACCEL_MAX_M_S2``): rejected. Nothing invalid ever reaches the filter.
 3. ``dt`` comes from header stamps (integer nanoseconds). ``dt = 0``: rejected
    (``duplicate_stamp``). Slightly negative (< ``time_jump_back_threshold_s``): rejected
    (``out_of_order``). Further back: the filter is reset and the message starts it again
@@ -38,10 +39,12 @@ from cf_estimator.pipeline import checks
 from cf_estimator.pipeline.diagnostics import DiagnosticsReport, WindowStats, compose_report
 from cf_estimator.pipeline.messages import UNKNOWN_COVARIANCE, covariance9
 from cf_estimator.pipeline.params import PipelineParams
-from cf_estimator.schema import ParameterError, specs_of
+from cf_estimator.schema import ParameterError, as_dict, specs_of, split_by_owner
 
 Vec3 = tuple[float, float, float]
 _TWO_PI = 2.0 * math.pi
+_GYRO_MAX2 = checks.GYRO_MAX_RAD_S**2
+_ACCEL_MAX2 = checks.ACCEL_MAX_M_S2**2
 
 
 @dataclass(slots=True)
@@ -68,21 +71,6 @@ class PipelineOutput:
     rpy_rad: Vec3 | None
     initialized: bool
     warnings: list[str] = field(default_factory=list)
-
-
-def _split_changes(changes: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
-    fnames = {s.name for s in specs_of(FilterParams)}
-    pnames = {s.name for s in specs_of(PipelineParams)}
-    f: dict[str, Any] = {}
-    p: dict[str, Any] = {}
-    for key, value in changes.items():
-        if key in fnames:
-            f[key] = value
-        elif key in pnames:
-            p[key] = value
-        else:
-            raise ParameterError(f"unknown parameter: {key}")
-    return f, p
 
 
 def _covariance(var_tilt: float, var_yaw: float) -> tuple[float, ...]:
@@ -159,7 +147,7 @@ class ImuPipeline:
         return self._filter
 
     def _prepare(self, changes: Mapping[str, Any]) -> tuple[FilterParams, PipelineParams]:
-        fchanges, pchanges = _split_changes(changes)
+        fchanges, pchanges = split_by_owner(changes, (FilterParams, PipelineParams))
         pairs = ((FilterParams, self._fp, fchanges), (PipelineParams, self._pp, pchanges))
         for cls, current, ch in pairs:
             for spec in specs_of(cls):
@@ -169,8 +157,8 @@ class ImuPipeline:
                         raise ParameterError(
                             f"{spec.name} is read-only at run time (restart the node to change it)"
                         )
-        fp = FilterParams(**{**_as_kwargs(self._fp), **fchanges}) if fchanges else self._fp
-        pp = PipelineParams(**{**_as_kwargs(self._pp), **pchanges}) if pchanges else self._pp
+        fp = FilterParams(**{**as_dict(self._fp), **fchanges}) if fchanges else self._fp
+        pp = PipelineParams(**{**as_dict(self._pp), **pchanges}) if pchanges else self._pp
         return fp, pp
 
     def validate_changes(self, changes: Mapping[str, Any]) -> tuple[bool, str]:
@@ -334,15 +322,23 @@ class ImuPipeline:
         if sec == 0 and nsec == 0:
             self._reject(checks.ZERO_STAMP)
             return None
-        if not math.isfinite(gx + gy + gz):
+        isfinite = math.isfinite
+        if not (isfinite(gx) and isfinite(gy) and isfinite(gz)):
             self._reject(checks.NONFINITE_GYRO)
             return None
-        a2 = ax * ax + ay * ay + az * az
-        if not math.isfinite(a2):
+        if not (isfinite(ax) and isfinite(ay) and isfinite(az)):
             self._reject(checks.NONFINITE_ACCEL)
             return None
+        a2 = ax * ax + ay * ay + az * az  # inf when the components are huge: implausible
         if a2 == 0.0:
             self._reject(checks.ZERO_ACCEL)
+            return None
+        g2 = gx * gx + gy * gy + gz * gz
+        if g2 > _GYRO_MAX2:
+            self._reject(checks.IMPLAUSIBLE_GYRO)
+            return None
+        if a2 > _ACCEL_MAX2:
+            self._reject(checks.IMPLAUSIBLE_ACCEL)
             return None
 
         # -- time ---------------------------------------------------------------------------------
@@ -392,7 +388,6 @@ class ImuPipeline:
             if self._acc_n == checks.ACCEL_CHECK_SAMPLES:
                 self._warn(checks.accel_units_warning(self._acc_sum / self._acc_n,
                                                       self._fp.gravity_m_s2))
-        g2 = gx * gx + gy * gy + gz * gz
         if g2 > checks.GYRO_IMPLAUSIBLE_RAD_S**2:
             self._warn(checks.gyro_units_warning(math.sqrt(g2)))
 
@@ -544,7 +539,3 @@ class _CovarianceCache:
             self.value = covariance9(cov)
             self.raw = raw
         return self.value
-
-
-def _as_kwargs(params: Any) -> dict[str, Any]:
-    return {s.name: getattr(params, s.name) for s in specs_of(params)}
