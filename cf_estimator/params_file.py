@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import fnmatch
 import math
+import sys
 import textwrap
 from collections.abc import Mapping
 from pathlib import Path
@@ -200,9 +201,36 @@ def render_params_yaml(
     return "\n".join(lines) + "\n"
 
 
-def main() -> None:
-    """Print the default parameter file (``python3 -m cf_estimator.params_file``)."""
-    print(render_params_yaml(), end="")
+def render_params_markdown() -> str:
+    """The parameter reference as a Markdown table (name, owner, default, unit, range, meaning)."""
+    owners = {s.name: "filter" for s in specs_of(FilterParams)}
+    defaults = {**as_dict(FilterParams()), **as_dict(PipelineParams())}
+    lines = [
+        "| name | owner | default | unit | range | read-only | meaning |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for spec in all_specs():
+        cells = [
+            f"`{spec.name}`",
+            owners.get(spec.name, "pipeline"),
+            f"`{format_value(spec, defaults[spec.name])}`",
+            spec.unit or "–",
+            spec.range_text() or "–",
+            "yes" if spec.read_only else "",
+            spec.description.replace("|", "\\|"),
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Print the default parameter file, or with ``--markdown`` the parameter table.
+
+    ``python3 -m cf_estimator.params_file > config/cf_estimator.yaml`` regenerates the shipped
+    file; ``--markdown`` prints the table kept in docs/ros_interface.md.
+    """
+    args = sys.argv[1:] if argv is None else argv
+    print(render_params_markdown() if "--markdown" in args else render_params_yaml(), end="")
 
 
 if __name__ == "__main__":

@@ -155,3 +155,12 @@ def test_ros_interface_doc_lists_every_parameter():
     doc = (REPO / "docs" / "ros_interface.md").read_text(encoding="utf-8")
     missing = [s.name for s in all_specs() if f"| `{s.name}` |" not in doc]
     assert not missing, f"docs/ros_interface.md lacks parameters: {missing}"
+
+
+def test_docs_parameter_table_is_generated_from_the_schema():
+    from cf_estimator.params_file import render_params_markdown
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "ros_interface.md").read_text()
+    start = doc.index("<!-- parameter table:")
+    body = doc[doc.index("\n", start) + 1 : doc.index("<!-- end of parameter table -->")]
+    assert body == render_params_markdown(), "run: python3 -m cf_estimator.params_file --markdown"

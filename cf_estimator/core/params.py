@@ -83,7 +83,7 @@ class FilterParams:
     startup_k1: float = param(
         5.0,
         "1/s",
-        "Proportional gain of both channels during the start-up phase and recovery.",
+        "Proportional gain of both channels during start-up, recovery and rest.",
         minimum=0.0,
         maximum=100.0,
         group="phases",
@@ -91,8 +91,8 @@ class FilterParams:
     recovery_trigger_s: float = param(
         10.0,
         "s",
-        "If the filtered error stays at the saturation level this long, it is a real "
-        "attitude error, not a disturbance: recover with startup_k1 and no clip (0 = never).",
+        "If the error stays clipped without a break this long, it is a real attitude error, "
+        "not a disturbance: recover with startup_k1, no clip, no lag until |e| < L/2 (0 = never).",
         minimum=0.0,
         maximum=3600.0,
         group="phases",
