@@ -1,0 +1,92 @@
+"""Run our filter and the peers over BROAD trials and collect the metrics (one process per trial).
+
+Algorithm names: ``cf_estimator_9d``/``cf_estimator_6d`` (our filter with the given parameters;
+9-D forces ``use_mag`` on, 6-D off) and ``<peer>_9d``/``<peer>_6d`` for the peers of
+:mod:`cf_estimator.bench.peers` at their defaults.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import multiprocessing
+import os
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from cf_estimator.bench import broad
+from cf_estimator.core.batch import estimate
+from cf_estimator.core.params import FilterParams
+
+OURS = "cf_estimator"
+DIMS = ("9d", "6d")
+
+
+def run_ours(trial: broad.Trial, params: FilterParams, dims: Sequence[str] = DIMS
+             ) -> dict[str, np.ndarray]:
+    """Our filter over a trial: ``{"9d": q, "6d": q}`` (q_ENU_from_sensor, NaN before init)."""
+    out = {}
+    for d in dims:
+        p = dataclasses.replace(params, use_mag=(d == "9d"))
+        mag = trial.mag_ut if d == "9d" else None
+        out[d] = estimate(trial.gyro_rad_s, trial.accel_m_s2, mag, rate_hz=trial.rate_hz,
+                          params=p).quaternion
+    return out
+
+
+def evaluate_trial(path: str | os.PathLike, info: Mapping, params: FilterParams,
+                   peers: Sequence[str] = (), dims: Sequence[str] = DIMS
+                   ) -> tuple[str, tuple[str, ...], dict[str, dict[str, float]]]:
+    """(trial name, groups, {algorithm: metrics}) for one trial file."""
+    from cf_estimator.bench import peers as peer_mod
+
+    trial = broad.load_trial(path, info)
+    results: dict[str, dict[str, float]] = {}
+
+    def score(name: str, dim: str, q: np.ndarray) -> None:
+        m = broad.rmse_deg(q, trial.quat_ref, trial.movement)
+        if dim == "6d":  # heading is unobservable without a magnetometer
+            m = {"inclination_rmse_deg": m["inclination_rmse_deg"]}
+        results[f"{name}_{dim}"] = m
+
+    for d, q in run_ours(trial, params, dims).items():
+        score(OURS, d, q)
+    runners = peer_mod.runners()
+    for p in peers:
+        for d, q in runners[p](trial.gyro_rad_s, trial.accel_m_s2, trial.mag_ut, trial.rate_hz,
+                               tuple(dims)).items():
+            score(p, d, q)
+    return trial.name, trial.groups, results
+
+
+def _worker(args: tuple) -> tuple:
+    return evaluate_trial(*args)
+
+
+def run_broad(paths: Sequence[Path], info: Mapping, params: FilterParams,
+              peers: Sequence[str] = (), jobs: int = 1,
+              progress: Callable[[str, int, int], None] | None = None) -> broad.BenchResult:
+    """Evaluate every trial (in ``jobs`` processes); results keep the order of ``paths``."""
+    tasks = [(str(p), dict(info), params, tuple(peers)) for p in paths]
+    done: dict[str, tuple] = {}
+    if jobs <= 1 or len(tasks) <= 1:
+        for i, t in enumerate(tasks, 1):
+            name, groups, res = _worker(t)
+            done[name] = (groups, res)
+            if progress:
+                progress(name, i, len(tasks))
+    else:
+        ctx = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
+        with ctx.Pool(min(jobs, len(tasks))) as pool:
+            for i, (name, groups, res) in enumerate(pool.imap_unordered(_worker, tasks), 1):
+                done[name] = (groups, res)
+                if progress:
+                    progress(name, i, len(tasks))
+    result = broad.BenchResult()
+    result.group_order = [g.get("name") for g in info.get("groups", []) if isinstance(g, Mapping)]
+    for p in paths:
+        groups, res = done[Path(p).stem]
+        result.trials[Path(p).stem] = res
+        result.groups[Path(p).stem] = groups
+    return result

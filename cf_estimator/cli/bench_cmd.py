@@ -1,0 +1,218 @@
+"""``cf-estimator bench broad|scenarios|speed``: accuracy and speed versus the peers.
+
+``bench broad --data DIR`` scores our filter (and ``--peers``) on BROAD trial files: per-group
+tables of total/heading/inclination RMSE [deg] over the movement samples, 9-D and 6-D, and
+``--json OUT`` with every trial. Metrics and frames: :mod:`cf_estimator.bench.broad`; peers:
+:mod:`cf_estimator.bench.peers` (``pip install '.[bench]'``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from typing import Any
+
+from cf_estimator.cli.main import CliError
+
+
+def _csv(text: str) -> list[str]:
+    return [t.strip() for t in text.split(",") if t.strip()]
+
+
+def register(subparsers: Any) -> None:
+    """Add ``bench`` and its sub-commands."""
+    p = subparsers.add_parser(
+        "bench", help="accuracy and speed benchmarks (BROAD, thesis scenarios, speed) vs peers",
+        description="Benchmarks of the filter against VQF, x-io Fusion and Madgwick.",
+    )
+    sub = p.add_subparsers(dest="bench_command", required=True, metavar="BENCHMARK")
+
+    b = sub.add_parser(
+        "broad", help="RMSE on BROAD trial files (HDF5 layout of the BROAD benchmark)",
+        description=(
+            "Runs the filter (and --peers) on every BROAD trial file in --data and prints, per "
+            "group (all, undisturbed, disturbed and the groups of DIR/trials.json), the mean "
+            "over trials of the total/heading/inclination RMSE [deg] over the movement samples "
+            "(BROAD's metrics), 9-D (with magnetometer) and 6-D (inclination only). Only files "
+            "directly inside --data are read."
+        ),
+    )
+    b.add_argument("--data", required=True, metavar="DIR", help="directory of BROAD *.hdf5 files")
+    b.add_argument("--peers", default="", metavar="LIST",
+                   help="comma-separated peers at their defaults: vqf,fusion,madgwick (or 'all')")
+    b.add_argument("--params", metavar="YAML", help="ROS 2 parameter file for our filter "
+                   "(default: the shipped defaults, FilterParams())")
+    b.add_argument("--trials", metavar="LIST", help="comma-separated trial names, prefixes "
+                   "(e.g. 07) or patterns (e.g. '*magnet*'); default: all files")
+    b.add_argument("--json", metavar="OUT", help="write per-trial and per-group results as JSON")
+    b.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
+                   help="worker processes, one trial each (default %(default)s)")
+    b.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    b.set_defaults(run=run_broad)
+
+    s = sub.add_parser(
+        "scenarios", help="peak/RMS tilt error under the thesis disturbances (simulated)",
+        description=(
+            "Thesis disturbances in 3-D (impacts, vibration, 25 m/s in 5 s) with realistic gyro "
+            "noise and bias: peak and RMS tilt error inside each disturbance window for our "
+            "filter (shipped defaults; clip off; clip and aperiodic unit off) and the peers."
+        ),
+    )
+    s.add_argument("--peers", default="all", metavar="LIST", help="peers (default all)")
+    s.add_argument("--params", metavar="YAML", help="parameter file for our filter")
+    s.add_argument("--scenarios", default="impacts,vibration,acceleration", metavar="LIST")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--duration", type=float, metavar="S",
+                   help="scenario duration [s] (default: each scenario's own)")
+    s.add_argument("--json", metavar="OUT")
+    s.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N")
+    s.set_defaults(run=run_scenarios)
+
+    sp = sub.add_parser(
+        "speed", help="per-sample update rate (ours vs peers), pipeline time, batched rate",
+        description=(
+            "In one run: samples/s of one 9-D update called from Python for our filter and each "
+            "peer; ImuPipeline.on_imu median and p99 per message; the batched filter's "
+            "parameter-samples per second. Shared machines are noisy: compare ratios."
+        ),
+    )
+    sp.add_argument("--peers", default="all", metavar="LIST", help="peers (default all)")
+    sp.add_argument("--samples", type=int, default=20000, metavar="N")
+    sp.add_argument("--batch-sizes", default="64,256", metavar="LIST")
+    sp.add_argument("--json", metavar="OUT")
+    sp.set_defaults(run=run_speed)
+
+
+def _peers(text: str) -> list[str]:
+    from cf_estimator.bench.peers import PEERS
+
+    items = list(PEERS) if text.strip() == "all" else _csv(text)
+    bad = [p for p in items if p not in PEERS]
+    if bad:
+        raise CliError(f"unknown peer {bad[0]!r}; valid: {', '.join(PEERS)}, all", 2)
+    return items
+
+
+def _load_params(path: str | None):
+    from cf_estimator.bench.paramio import load_filter_params
+    from cf_estimator.core.params import FilterParams
+
+    if not path:
+        return FilterParams()
+    try:
+        params, warnings = load_filter_params(path)
+    except OSError as exc:
+        raise CliError(f"cannot read parameter file {path}: {exc.strerror or exc}") from None
+    except ValueError as exc:
+        raise CliError(f"parameter file {path}: {exc}") from None
+    for w in warnings:
+        print(f"cf-estimator: warning: {w}", file=sys.stderr)
+    return params
+
+
+def _write_json(path: str, doc: dict) -> None:
+    try:
+        with open(path, "w", encoding="utf-8") as fh:
+            json.dump(doc, fh, indent=2, allow_nan=False)
+            fh.write("\n")
+    except OSError as exc:
+        raise CliError(f"cannot write {path}: {exc.strerror or exc}") from None
+
+
+def run_broad(args: Any) -> int:
+    """``bench broad``."""
+    from cf_estimator.bench import broad
+    from cf_estimator.bench.evaluate import run_broad as evaluate_all
+    from cf_estimator.bench.peers import PeerUnavailable, check_available
+    from cf_estimator.schema import as_dict
+
+    peers = _peers(args.peers) if args.peers else []
+    try:
+        check_available(peers)
+    except PeerUnavailable as exc:
+        raise CliError(str(exc)) from None
+    params = _load_params(args.params)
+    try:
+        paths = broad.list_trials(args.data, _csv(args.trials) if args.trials else None)
+        info = broad.read_trial_info(args.data)
+    except broad.BroadDataError as exc:
+        raise CliError(str(exc)) from None
+    if args.jobs < 1:
+        raise CliError("--jobs must be >= 1", 2)
+    start = time.monotonic()
+
+    def progress(name: str, i: int, n: int) -> None:
+        if not args.quiet:
+            print(f"[{i}/{n}] {name} ({time.monotonic() - start:.0f} s)", file=sys.stderr)
+
+    try:
+        result = evaluate_all(paths, info, params, peers, jobs=args.jobs, progress=progress)
+    except broad.BroadDataError as exc:
+        raise CliError(str(exc)) from None
+    algos = ", ".join(["cf_estimator"] + peers)
+    print(f"BROAD: {len(paths)} trial(s) from {args.data}; RMSE [deg] over movement samples, "
+          f"mean over trials; {algos}")
+    print(f"cf_estimator parameters: {args.params or 'shipped defaults'}")
+    print()
+    print(broad.format_tables(result), end="")
+    if args.json:
+        doc = result.to_json()
+        doc["meta"] = {
+            "data": str(args.data), "peers": peers, "params_file": args.params,
+            "cf_estimator_params": as_dict(params),
+            "metrics": "BROAD: q_err = q_est * inv(q_ref); RMSE over movement samples [deg]",
+        }
+        _write_json(args.json, doc)
+    return 0
+
+
+def run_scenarios(args: Any) -> int:
+    """``bench scenarios``."""
+    from cf_estimator.bench import scenarios as sc
+    from cf_estimator.bench.peers import PeerUnavailable, check_available
+
+    peers = _peers(args.peers) if args.peers else []
+    try:
+        check_available(peers)
+    except PeerUnavailable as exc:
+        raise CliError(str(exc)) from None
+    params = _load_params(args.params)
+    names = _csv(args.scenarios)
+    try:
+        rows = sc.run_scenarios(names, params, peers, seed=args.seed, duration_s=args.duration,
+                                jobs=args.jobs)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    print(sc.format_table(rows), end="")
+    if args.json:
+        _write_json(args.json, {"scenarios": rows, "limit_arcmin": sc.THESIS_LIMIT_ARCMIN})
+    return 0
+
+
+def run_speed(args: Any) -> int:
+    """``bench speed``."""
+    from cf_estimator.bench import speed
+    from cf_estimator.bench.peers import PeerUnavailable, check_available
+
+    peers = _peers(args.peers) if args.peers else []
+    try:
+        check_available(peers)
+    except PeerUnavailable as exc:
+        raise CliError(str(exc)) from None
+    if args.samples < 100:
+        raise CliError("--samples must be >= 100", 2)
+    try:
+        sizes = [int(x) for x in _csv(args.batch_sizes)]
+    except ValueError:
+        raise CliError(f"--batch-sizes: not integers: {args.batch_sizes!r}", 2) from None
+    rates = speed.per_sample_rates(args.samples, tuple(peers))
+    pipe = speed.pipeline_times_us(args.samples)
+    batched = {p: speed.batched_rate(p, max(200, args.samples // 20)) for p in sizes}
+    print(speed.format_speed(rates, pipe, batched), end="")
+    if args.json:
+        batched_json = {str(k): v for k, v in batched.items()}
+        _write_json(args.json, {"per_sample_hz": rates, "pipeline": pipe,
+                                "batched_param_samples_per_s": batched_json})
+    return 0
