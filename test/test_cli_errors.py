@@ -3,12 +3,15 @@
 
 from __future__ import annotations
 
+import copy
 import os
+import shutil
 import sqlite3
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from cf_estimator.bag import io
@@ -249,3 +252,144 @@ def test_console_entry_point_prints_one_line_and_exits_2(tmp_path):
     assert proc.returncode == 2
     assert_one_error_line(proc.stderr, "missing")
     assert proc.stdout == ""
+
+
+# -- more bad bags (issue 6): empty, corrupted, unknown message types, wrong types --------------
+def _replay_fails(capsys, src: Path, out_dir: Path, code: int, *fragments: str) -> str:
+    rc, out, err = run_cli(capsys, "replay", src, "-o", out_dir / "out", "--json",
+                           out_dir / "s.json")
+    assert rc == code, err
+    assert_one_error_line(err, *fragments)
+    assert out == ""
+    assert not (out_dir / "out").exists() and not (out_dir / "s.json").exists()
+    assert not [p for p in out_dir.iterdir() if ".partial-" in p.name]
+    return err
+
+
+def test_empty_ros1_file(tmp_path, capsys):
+    (tmp_path / "empty.bag").write_bytes(b"")
+    _replay_fails(capsys, tmp_path / "empty.bag", tmp_path, 1, "empty.bag")
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_empty_ros2_bag_without_messages(tmp_path, capsys, storage):
+    src = tmp_path / "nothing"
+    with io.OutputBag(src, storage=storage) as bag:
+        bag.add_topic("/imu/data_raw", io.IMU_TYPE)  # declared, never written
+    _replay_fails(capsys, src, tmp_path, 1, "nothing", "no IMU messages")
+
+
+def test_empty_storage_file(good_bag, tmp_path, capsys):
+    src = tmp_path / "zero"
+    src.mkdir()
+    (src / "metadata.yaml").write_bytes((good_bag / "metadata.yaml").read_bytes())
+    (src / f"{good_bag.name}.mcap").write_bytes(b"")
+    _replay_fails(capsys, src, tmp_path, 1, "zero")
+
+
+def test_corrupted_metadata(good_bag, tmp_path, capsys):
+    src = tmp_path / "badmeta"
+    shutil.copytree(good_bag, src)
+    (src / "metadata.yaml").write_text("rosbag2_bagfile_information: [unclosed\n  : :\n")
+    _replay_fails(capsys, src, tmp_path, 1, "badmeta")
+
+
+def test_corrupted_bytes_in_the_middle_of_an_mcap(good_bag, tmp_path, capsys):
+    """Not truncated: a stretch of garbage in the middle (a bad disk sector). rosbags writes
+    mcap chunks without CRC and its reader then skips the garbled records silently: the replay
+    compares the messages read with the bag's index and fails instead of writing an output
+    that looks complete with messages missing."""
+    src = tmp_path / "flipped"
+    shutil.copytree(good_bag, src)
+    data = bytearray((src / f"{good_bag.name}.mcap").read_bytes())
+    mid = len(data) // 2
+    data[mid:mid + 4096] = bytes((b * 37 + 11) % 256 for b in range(4096))
+    (src / f"{good_bag.name}.mcap").write_bytes(bytes(data))
+    rc, out, err = run_cli(capsys, "replay", src, "-o", tmp_path / "out", "--json",
+                           tmp_path / "s.json")
+    assert_one_error_line(err, "flipped", "the bag is corrupt")
+    assert rc == 1 and out == ""
+    assert_nothing_left(tmp_path, "flipped")
+
+
+def test_corrupted_bytes_in_a_ros1_bag(good_bag, tmp_path, capsys):
+    from rosbags.convert import convert
+
+    full = tmp_path / "full.bag"
+    convert([good_bag], full, dst_storage="sqlite3", dst_version=None, compress=None,
+            compress_mode="file", default_typestore=None, typestore=None, exclude_topics=[],
+            include_topics=[], exclude_msgtypes=[], include_msgtypes=[])
+    data = bytearray(full.read_bytes())
+    mid = len(data) // 2
+    data[mid:mid + 2048] = b"\xff" * 2048
+    full.write_bytes(bytes(data))
+    rc, out, err = run_cli(capsys, "replay", full, "-o", tmp_path / "out")
+    assert rc == 1 and out == ""
+    assert_one_error_line(err, "full.bag")
+    assert_nothing_left(tmp_path, "full.bag")
+
+
+CUSTOM_IMU_MSGDEF = """
+std_msgs/Header header
+float64[3] gyro
+float64[3] accel
+"""
+
+
+def _bag_with_custom_type(path: Path, topic: str) -> None:
+    """A ROS 2 bag whose only topic has a message type ROS 2 Jazzy does not define."""
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import get_types_from_msg
+
+    store = io.typestore()
+    store = copy.deepcopy(store)
+    store.register(get_types_from_msg(CUSTOM_IMU_MSGDEF, "acme_msgs/msg/RawImu"))
+    msg = store.types["acme_msgs/msg/RawImu"](
+        header=io.header(1, 0, "imu"), gyro=np.zeros(3), accel=np.array([0.0, 0.0, 9.8]))
+    with Writer(path, version=9) as w:
+        conn = w.add_connection(topic, "acme_msgs/msg/RawImu", typestore=store)
+        for k in range(5):
+            w.write(conn, 10**18 + k, store.serialize_cdr(msg, "acme_msgs/msg/RawImu"))
+
+
+def test_unknown_message_type_only(tmp_path, capsys):
+    src = tmp_path / "acme"
+    _bag_with_custom_type(src, "/imu/data_raw")
+    _replay_fails(capsys, src, tmp_path, 1, "no IMU messages", "acme_msgs/msg/RawImu")
+
+
+def test_unknown_message_type_given_as_imu_topic(tmp_path, capsys):
+    src = tmp_path / "acme"
+    _bag_with_custom_type(src, "/imu/data_raw")
+    rc, out, err = run_cli(capsys, "replay", src, "-o", tmp_path / "out", "--imu-topic",
+                           "/imu/data_raw")
+    assert rc == 2 and out == ""
+    assert_one_error_line(err, "acme_msgs/msg/RawImu", "--imu-topic needs sensor_msgs/msg/Imu")
+    assert_nothing_left(tmp_path, "acme")
+
+
+def test_usual_topic_names_with_the_wrong_types(tmp_path, capsys):
+    """/imu/data_raw carries Vector3Stamped: detection goes by type, never by name."""
+    src = tmp_path / "swapped"
+    with io.OutputBag(src) as bag:
+        for k in range(50):
+            t = 10**9 + k * 10**7
+            bag.write("/imu/data_raw", io.VECTOR3_STAMPED_TYPE, t,
+                      io._types()[io.VECTOR3_STAMPED_TYPE](  # noqa: SLF001
+                          header=io.header(1, k * 10**7, "imu"), vector=io.vector3((0, 0, 9.8))))
+    _replay_fails(capsys, src, tmp_path, 1, "no IMU messages",
+                  "/imu/data_raw [geometry_msgs/msg/Vector3Stamped]")
+
+
+def test_console_entry_point_on_a_corrupt_bag_prints_no_traceback(good_bag, tmp_path):
+    src = tmp_path / "badmeta"
+    shutil.copytree(good_bag, src)
+    (src / "metadata.yaml").write_text("\x00\x01 not yaml: [")
+    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    proc = subprocess.run(
+        [sys.executable, "-m", "cf_estimator.cli.main", "replay", str(src), "-o",
+         str(tmp_path / "out")], capture_output=True, text=True, env=env, timeout=120)
+    assert proc.returncode == 1
+    assert_one_error_line(proc.stderr, "badmeta")
+    assert proc.stdout == ""
+    assert_nothing_left(tmp_path, "badmeta")

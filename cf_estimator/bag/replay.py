@@ -456,6 +456,13 @@ def replay_variants(
                 progress.tick()
             if n_imu == 0:
                 raise io.BagError(f"{in_path}: topic {imu_topic!r} yielded no messages")
+            if n_imu + n_mag + n_ref < total:
+                # e.g. garbage inside an mcap chunk written without CRC: the reader skips
+                # records silently; an output would look complete with data missing
+                raise io.BagError(
+                    f"{in_path}: read {n_imu + n_mag + n_ref} of the {total} messages its "
+                    "index lists on the replayed topics: the bag is corrupt"
+                )
         except BaseException:
             if progress is not None:
                 progress.close()

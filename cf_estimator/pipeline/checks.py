@@ -16,14 +16,16 @@ ZERO_STAMP = "zero_stamp"  #: header.stamp is 0 (driver did not stamp): dt is un
 NONFINITE_GYRO = "nonfinite_gyro"  #: NaN/Inf in angular_velocity
 NONFINITE_ACCEL = "nonfinite_accel"  #: NaN/Inf in linear_acceleration
 ZERO_ACCEL = "zero_accel"  #: |linear_acceleration| == 0 (no direction; driver not filling it)
+IMPLAUSIBLE_GYRO = "implausible_gyro"  #: finite |angular_velocity| > GYRO_MAX_RAD_S (garbage)
+IMPLAUSIBLE_ACCEL = "implausible_accel"  #: finite |linear_acceleration| > ACCEL_MAX_M_S2
 DUPLICATE_STAMP = "duplicate_stamp"  #: same stamp as the last processed message (dt = 0)
 OUT_OF_ORDER = "out_of_order"  #: stamp slightly before the last processed one
 TIME_BACKWARDS = "time_backwards"  #: time jumped back and reset_on_time_jump_back is false
 INTERNAL_ERROR = "internal_error"  #: the filter raised (a bug): message dropped, node lives on
 
 REJECT_REASONS = (
-    MALFORMED, ZERO_STAMP, NONFINITE_GYRO, NONFINITE_ACCEL, ZERO_ACCEL, DUPLICATE_STAMP,
-    OUT_OF_ORDER, TIME_BACKWARDS, INTERNAL_ERROR,
+    MALFORMED, ZERO_STAMP, NONFINITE_GYRO, NONFINITE_ACCEL, ZERO_ACCEL, IMPLAUSIBLE_GYRO,
+    IMPLAUSIBLE_ACCEL, DUPLICATE_STAMP, OUT_OF_ORDER, TIME_BACKWARDS, INTERNAL_ERROR,
 )
 
 # -- reset reasons -----------------------------------------------------------------------------
@@ -36,6 +38,12 @@ RESET_CLOCK_JUMP = "clock_jump_back"  #: the node clock jumped back (use_sim_tim
 ACCEL_CHECK_SAMPLES = 200
 #: |gyro| above this [rad/s] (~2000 deg/s, beyond most MEMS ranges) suggests deg/s.
 GYRO_IMPLAUSIBLE_RAD_S = 35.0
+#: |gyro| above this [rad/s] is not a measurement (~57 000 deg/s, 14x the widest MEMS range):
+#: rejected. A single such sample would otherwise poison the filter's rest detector for many
+#: seconds (its low-pass decays from the spike), or overflow the arithmetic (|w| > ~1e154).
+GYRO_MAX_RAD_S = 1000.0
+#: |accel| above this [m/s^2] (~1000 g) is not a measurement: rejected (same reason).
+ACCEL_MAX_M_S2 = 10000.0
 #: Magnetometer samples averaged before judging its units.
 MAG_CHECK_SAMPLES = 20
 #: Plausible Earth-field norm [T] (25-65 uT, with margin for local fields).

@@ -193,7 +193,9 @@ class ImuPipeline:
             pp.orientation_covariance_rad2, pp.unreferenced_yaw_covariance_rad2
         )
         self._max_dt_ns = int(round(pp.max_dt_s * 1e9))
-        self._reset_gap_ns = int(round(pp.reset_after_gap_s * 1e9))  # 0 = never
+        # 0 = never; a positive value below 0.5 ns must not round to "never"
+        self._reset_gap_on = pp.reset_after_gap_s > 0.0
+        self._reset_gap_ns = int(round(pp.reset_after_gap_s * 1e9))
         self._jump_back_ns = int(round(pp.time_jump_back_threshold_s * 1e9))
         self._mag_timeout_ns = int(round(pp.mag_timeout_s * 1e9))
         self._use_mag = self._fp.use_mag
@@ -358,7 +360,7 @@ class ImuPipeline:
                     self._reject(checks.TIME_BACKWARDS)
                     return None
                 self.reset(checks.RESET_TIME_JUMP_BACK)
-            elif self._reset_gap_ns and d_ns > self._reset_gap_ns:
+            elif self._reset_gap_on and d_ns > self._reset_gap_ns:
                 self.reset(checks.RESET_LONG_GAP)
             else:
                 dt = d_ns * 1e-9
