@@ -67,6 +67,7 @@ def test_exact_sensors_give_the_truth_for_every_error_path_setting(
         aperiodic_time_constant_s=aperiodic,
         mag_mode=mag_mode,
         saturation_limit_rad=0.005,
+        wide_saturation_limit_rad=0.005,  # the clip level whatever the motion
     )
     res = estimate(gyro, acc, mag, rate_hz=1 / DT, params=params)
     err = quat.angle_between(res.quaternion, q)
@@ -185,6 +186,7 @@ def test_long_clipped_error_triggers_recovery_and_the_filter_recovers():
         startup_duration_s=0.0,
         recovery_trigger_s=5.0,
         saturation_limit_rad=0.01,
+        wide_saturation_limit_rad=0.01,  # one level: else no acceleration → wide clip, no need
         k1=0.5,
         rest_bias_learning=False,  # a static sensor would otherwise be handled by the rest path
     )
@@ -227,6 +229,27 @@ def test_a_disturbance_is_never_processed_as_rest():
     status = f.status()
     assert not status.at_rest and status.clipped
     assert math.degrees(quat.angle_between(f.orientation, q_true)) < 0.01
+
+
+def test_clip_is_tight_only_for_linear_acceleration_on_a_still_gyro():
+    q_true = quat.from_euler(0.0, 0.0, 0.0)
+    acc, _ = exact_sensors(q_true)
+    start = quat.from_euler(0.05, 0.0, 0.0)  # 0.05 rad wrong: above the 0.01 rad tight clip
+    params = FilterParams(use_mag=False, startup_duration_s=0.0, rest_bias_learning=False)
+
+    def first_step(gyro, accel):
+        f = ComplementaryFilter(params, initial_orientation=start)
+        f.update((0, 0, 0), acc, DT)  # learns ‖g‖
+        f.update(gyro, accel, DT)
+        return f.status().clipped
+
+    assert not first_step((0, 0, 0), acc)  # |a| = g: nothing to reject, wide clip
+    assert first_step((0, 0, 0), acc * 1.2)  # linear acceleration on a still gyro: tight
+    f = ComplementaryFilter(params, initial_orientation=start)
+    f.update((0, 0, 0), acc, DT)
+    for _ in range(100):  # rotating at 1 rad/s about the vertical: wide again
+        f.update((0, 0, 1.0), acc * 1.2, DT)
+    assert not f.status().clipped
 
 
 def test_invalid_accelerometer_samples_are_skipped_not_propagated():
@@ -282,7 +305,12 @@ def test_batched_filter_equals_single_filters_to_1e_12():
         FilterParams(),
         FilterParams(k1=1.5, k2=0.02, use_saturation=False, aperiodic_time_constant_s=0.0),
         FilterParams(mag_mode="full", r1=0.3, r2=0.01, k3=0.0005),
-        FilterParams(saturation_limit_rad=0.005, recovery_trigger_s=1.0, rest_bias_learning=False),
+        FilterParams(
+            saturation_limit_rad=0.005,
+            wide_saturation_limit_rad=0.005,
+            recovery_trigger_s=1.0,
+            rest_bias_learning=False,
+        ),
         FilterParams(use_mag=False, startup_duration_s=0.0),
     ]
     many = estimate_many(sets, gyro, acc, mag, rate_hz=1 / DT)

@@ -27,7 +27,7 @@ class EstimateResult:
 
     t_s: np.ndarray  #: (N,) sample times [s]
     quaternion: np.ndarray  #: (N, 4) q_world_from_sensor (w, x, y, z); NaN before init
-    error_rad: np.ndarray  #: (N, 3) raw accelerometer error e = â × ĝ, sensor frame
+    error_rad: np.ndarray  #: (N, 3) raw error e = (a/‖g‖) × ĝ, sensor frame
     clipped: np.ndarray  #: (N,) bool: saturation active
     gyro_bias_rad_s: np.ndarray  #: (N, 3) bias estimate, sensor frame
     phase: np.ndarray  #: (N,) int: 0 uninitialized, 1 startup, 2 running, 3 recovering

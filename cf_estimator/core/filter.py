@@ -78,8 +78,8 @@ class FilterStatus:
 
     phase: str  #: uninitialized | startup | running | recovering
     time_since_init_s: float
-    error_rad: tuple[float, float, float]  #: raw accelerometer error e = â × ĝ, sensor frame
-    error_norm_rad: float  #: |e| ≈ tilt error (including linear-acceleration effects)
+    error_rad: tuple[float, float, float]  #: raw error e = (a/‖g‖) × ĝ, sensor frame
+    error_norm_rad: float  #: |e| ≈ tilt error plus linear acceleration / g
     clipped: bool  #: the saturation unit was active
     processed_error_rad: tuple[float, float, float]  #: after saturation and aperiodic unit
     gyro_bias_rad_s: tuple[float, float, float]  #: bias estimate, sensor frame

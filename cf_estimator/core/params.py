@@ -21,7 +21,7 @@ class FilterParams:
     """Parameters of the complementary filter (units in every field's description)."""
 
     k1: float = param(
-        0.5,
+        0.35,
         "1/s",
         "Proportional gain of the accelerometer channel (seed W1 = k1 + k2/s + k3/s^2).",
         minimum=0.0,
@@ -62,8 +62,48 @@ class FilterParams:
         minimum_exclusive=True,
         group="error path",
     )
+    wide_saturation_limit_rad: float = param(
+        10.0,
+        "rad",
+        "Saturation level when no linear acceleration is detected or the sensor rotates faster "
+        "than rotation_threshold_rad_s (hand-held, agile motion: real attitude errors from gyro "
+        "scale errors must be tracked, and a clip would rectify large zero-mean accelerations). "
+        "10 = effectively no clip; equal to saturation_limit_rad = one level always.",
+        minimum=0.0,
+        maximum=100.0,
+        minimum_exclusive=True,
+        group="error path",
+    )
+    rotation_threshold_rad_s: float = param(
+        0.2,
+        "rad/s",
+        "Above this low-passed rotation rate the wide saturation level applies.",
+        minimum=0.0,
+        maximum=100.0,
+        group="error path",
+    )
+    acceleration_threshold_m_s2: float = param(
+        0.5,
+        "m/s^2",
+        "Linear acceleration is present while | |a| - g_ref | exceeds this (g_ref: |a| learned "
+        "during start-up and rest); then the clip is saturation_limit_rad.",
+        minimum=0.0,
+        maximum=100.0,
+        minimum_exclusive=True,
+        group="error path",
+    )
+    acceleration_hold_s: float = param(
+        1.0,
+        "s",
+        "Decay time of the acceleration detector's peak hold: vibration, repeated impacts and "
+        "their quiet phases all count as acceleration present.",
+        minimum=0.0,
+        maximum=60.0,
+        minimum_exclusive=True,
+        group="error path",
+    )
     aperiodic_time_constant_s: float = param(
-        3.0,
+        2.0,
         "s",
         "Time constant T of the aperiodic unit 1/(T*s+1) on the clipped error, applied "
         "in the world frame (0 = off). Must satisfy T < k1/k2 for stability.",
@@ -225,7 +265,8 @@ class FilterParams:
     gravity_m_s2: float = param(
         9.80665,
         "m/s^2",
-        "Local gravity magnitude (unit checks and rest detection).",
+        "Local gravity magnitude, for the input unit checks (the filter learns ‖g‖ from |a| "
+        "during start-up and rest, so a mis-scaled accelerometer does not bias it).",
         minimum=1.0,
         maximum=30.0,
         group="frames",

@@ -4,9 +4,11 @@ One sample, in the order the code runs (world frame ENU inside; q = q_world_from
 
     1. predict    q⁻ = Exp_z(z_m·dt) ⊗ q ⊗ Exp((ω − b)·dt)
                   (gyro ω, bias estimate b; z_m: heading channel's world-vertical rate)
-    2. error      e = â × ĝ,  â = a/|a|,  ĝ = R⁻ᵀ·ẑ
-                  (≈ small-angle tilt error; no component about â)
+    2. error      e = (a/‖g‖) × ĝ,  ĝ = R⁻ᵀ·ẑ   (seed 000: scaled by gravity, not by |a|)
+                  (≈ small-angle tilt error; linear in the linear acceleration)
     3. saturate   e_s = e·min(1, L/|e|)                     (by norm, keeps the direction)
+                  L = saturation_limit_rad while a linear acceleration is present and the gyro
+                  is still (impacts, vibration, manoeuvres), else wide_saturation_limit_rad
     4. aperiodic  l ← l + dt/(T+dt)·(R⁻·e_s − l);  f = R⁻ᵀ·l  (1/(T s+1) in the world frame)
     5. regulator  c ← c + k3·dt·f;  b ← b − dt·(k2·f + c);  q ← q⁻ ⊗ Exp(g(k1)·f)
                   (W1 = k1 + k2/s + k3/s²; g(k) = k·dt/(1+k·dt), the backward-Euler gain;
@@ -90,6 +92,9 @@ class StepState:
         "mag_reject_timer_s",
         "mag_last_time_s",
         "heading_initialized",
+        "g_ref",
+        "accel_hold",
+        "rate_lp",
         "ex",
         "ey",
         "ez",
@@ -235,7 +240,18 @@ def step(
         s.at_rest = p.rest_bias_learning & learn & (s.rest_timer_s >= p.rest_time_s)
         quick = fast | s.at_rest  # at rest: no linear acceleration to reject (bias still learned)
         an = o.sqrt(ax * ax + ay * ay + az * az)
-        ux, uy, uz = ax / an, ay / an, az / an
+        # linear-acceleration detector: peak hold of | |a| - g_ref |; g_ref learned when quick
+        s.g_ref = o.where(s.g_ref > 0.0, s.g_ref, an)
+        s.g_ref = o.where(quick, s.g_ref + lw * (an - s.g_ref), s.g_ref)
+        deviation = o.maximum(an - s.g_ref, s.g_ref - an)
+        decayed = s.accel_hold * (p.acceleration_hold_s / (p.acceleration_hold_s + dt))
+        s.accel_hold = o.maximum(deviation, decayed)
+        accelerating = s.accel_hold > p.acceleration_threshold_m_s2
+        rate = o.sqrt((gx - s.bx) ** 2 + (gy - s.by) ** 2 + (gz - s.bz) ** 2)
+        s.rate_lp = s.rate_lp + lw * (rate - s.rate_lp)
+        # seed 000: e = (a/‖g‖) × ĝ — scaled by gravity, not by |a|, so the error stays linear in
+        # the linear acceleration and the aperiodic unit averages zero-mean accelerations out
+        ux, uy, uz = ax / s.g_ref, ay / s.g_ref, az / s.g_ref
         # 2. predicted gravity (up) direction in the sensor frame: third row of R
         vx = 2.0 * (s.qx * s.qz - s.qw * s.qy)
         vy = 2.0 * (s.qy * s.qz + s.qw * s.qx)
@@ -244,7 +260,9 @@ def step(
         en = o.sqrt(ex * ex + ey * ey + ez * ez)
         s.ex, s.ey, s.ez, s.error_norm = ex, ey, ez, en
         # 3. saturation by norm
-        limit = p.saturation_limit_rad
+        # tight clip only for linear acceleration on a still gyro (impacts, vibration, manoeuvres)
+        tight = accelerating & (s.rate_lp < p.rotation_threshold_rad_s)
+        limit = o.where(tight, p.saturation_limit_rad, p.wide_saturation_limit_rad)
         clipped = p.use_saturation & o.not_(quick) & (en > limit)
         scale = o.where(clipped, limit / o.maximum(en, 1e-300), 1.0)
         # 4. aperiodic unit in the world frame (weight 1 = unit bypassed)
