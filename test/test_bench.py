@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from cf_estimator import metrics
 from cf_estimator.bench import broad, tuning
 from cf_estimator.bench.paramio import load_filter_params, render_filter_params
 from cf_estimator.cli.main import main
@@ -26,14 +27,14 @@ def _axis_angle(axis, deg):
 # -- metrics -----------------------------------------------------------------------------------
 def test_identity_is_zero():
     q = np.tile(quat.from_euler(0.3, -0.2, 1.0), (5, 1))
-    m = broad.rmse_deg(q, q)
+    m = metrics.rmse_deg(q, q)
     assert all(abs(v) < 1e-6 for v in m.values())
 
 
 def test_pure_heading_offset_30deg():
     q_ref = np.tile(quat.from_euler(0.4, 0.1, -0.7), (4, 1))
     q_est = quat.multiply(_axis_angle([0, 0, 1], 30.0), q_ref)  # earth-frame yaw offset
-    m = broad.rmse_deg(q_est, q_ref)
+    m = metrics.rmse_deg(q_est, q_ref)
     assert m["heading_rmse_deg"] == pytest.approx(30.0, abs=1e-9)
     assert m["total_rmse_deg"] == pytest.approx(30.0, abs=1e-9)
     assert m["inclination_rmse_deg"] == pytest.approx(0.0, abs=1e-5)
@@ -42,7 +43,7 @@ def test_pure_heading_offset_30deg():
 def test_pure_tilt_10deg():
     q_ref = np.tile(quat.from_euler(0.0, 0.0, 0.9), (3, 1))
     q_est = quat.multiply(_axis_angle([1, 1, 0], 10.0), q_ref)  # earth-frame tilt
-    m = broad.rmse_deg(q_est, q_ref)
+    m = metrics.rmse_deg(q_est, q_ref)
     assert m["inclination_rmse_deg"] == pytest.approx(10.0, abs=1e-9)
     assert m["heading_rmse_deg"] == pytest.approx(0.0, abs=1e-9)
     assert m["total_rmse_deg"] == pytest.approx(10.0, abs=1e-9)
@@ -52,7 +53,7 @@ def test_rmse_uses_movement_and_ignores_nan_and_sign():
     q_ref = np.tile([1.0, 0, 0, 0], (4, 1))
     q_est = np.array([_axis_angle([0, 0, 1], 20.0), -_axis_angle([0, 0, 1], 20.0),
                       [np.nan] * 4, _axis_angle([0, 0, 1], 90.0)])
-    m = broad.rmse_deg(q_est, q_ref, np.array([True, True, True, False]))
+    m = metrics.rmse_deg(q_est, q_ref, np.array([True, True, True, False]))
     assert m["heading_rmse_deg"] == pytest.approx(20.0)
 
 
@@ -161,7 +162,7 @@ def test_score_candidates_ranks_on_real_filter(broad_dir):
     scores = tuning.score_candidates([good, bad], trials[:1])
     total, incl = scores[trials[0].name]
     assert np.all(np.isfinite(total)) and total[0] < 1.0
-    q = broad.rmse_deg  # same metric as the bench: compare with a stored run
+    q = metrics.rmse_deg  # same metric as the bench: compare with a stored run
     from cf_estimator.bench.evaluate import run_ours
     ref = q(run_ours(trials[0], good, ("9d",))["9d"], trials[0].quat_ref, trials[0].movement)
     assert total[0] == pytest.approx(ref["total_rmse_deg"], rel=1e-6)

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from cf_estimator import metrics
 from cf_estimator.bag import io
 from cf_estimator.core import quaternion as quat
 from cf_estimator.core.params import FilterParams
@@ -137,13 +138,8 @@ def error_angles(q_est: np.ndarray, q_ref: np.ndarray) -> dict[str, np.ndarray]:
 
     total 2·acos|w|, heading 2·atan|z/w|, inclination 2·acos(√(w²+z²)).
     """
-    e = quat.multiply(q_est, quat.conjugate(q_ref))
-    w, z = np.abs(e[:, 0]), np.abs(e[:, 3])
-    return {
-        "total": 2.0 * np.arccos(np.clip(w, 0.0, 1.0)),
-        "heading": 2.0 * np.arctan2(z, w),
-        "inclination": 2.0 * np.arccos(np.clip(np.sqrt(w * w + z * z), 0.0, 1.0)),
-    }
+    total, heading, inclination = metrics.error_angles(metrics.error_quaternion(q_est, q_ref))
+    return {"total": total, "heading": heading, "inclination": inclination}
 
 
 def _wrap(a: np.ndarray) -> np.ndarray:

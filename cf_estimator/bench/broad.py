@@ -35,7 +35,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 METRICS = ("total_rmse_deg", "heading_rmse_deg", "inclination_rmse_deg")
 HDF5_SUFFIXES = (".hdf5", ".h5")
@@ -44,69 +43,6 @@ TRIALS_JSON = "trials.json"
 
 class BroadDataError(ValueError):
     """A data directory or trial file that does not follow the BROAD layout (one-line message)."""
-
-
-# -- metrics -----------------------------------------------------------------------------------
-def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    aw, ax, ay, az = np.moveaxis(a, -1, 0)
-    bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack(
-        [
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ],
-        axis=-1,
-    )
-
-
-def error_quaternion(q_est: ArrayLike, q_ref: ArrayLike) -> np.ndarray:
-    """q_err = q_est ⊗ q_ref⁻¹ (earth frame), normalised; inputs normalised first (N, 4)."""
-    qe = np.asarray(q_est, dtype=float)
-    qr = np.asarray(q_ref, dtype=float)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        qe = qe / np.linalg.norm(qe, axis=-1, keepdims=True)
-        qr = qr / np.linalg.norm(qr, axis=-1, keepdims=True)
-        out = _qmul(qe, qr * np.array([1.0, -1.0, -1.0, -1.0]))
-        return out / np.linalg.norm(out, axis=-1, keepdims=True)
-
-
-def error_angles(q_err: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(total, heading, inclination) error angles [rad] of earth-frame error quaternions."""
-    q = np.asarray(q_err, dtype=float)
-    w, z = q[..., 0], q[..., 3]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        total = 2.0 * np.arccos(np.clip(np.abs(w), 0.0, 1.0))
-        heading = 2.0 * np.arctan(np.abs(z / w))
-        incl = 2.0 * np.arccos(np.clip(np.sqrt(w * w + z * z), 0.0, 1.0))
-    return total, heading, incl
-
-
-def _rmse_deg(x: np.ndarray) -> float:
-    if x.size == 0 or np.all(np.isnan(x)):
-        return float("nan")
-    return float(np.degrees(np.sqrt(np.nanmean(x * x))))
-
-
-def rmse_deg(
-    q_est: ArrayLike, q_ref: ArrayLike, movement: ArrayLike | None = None
-) -> dict[str, float]:
-    """Total/heading/inclination RMSE [deg] over the ``movement`` samples (NaN rows ignored)."""
-    total, heading, incl = error_angles(error_quaternion(q_est, q_ref))
-    if movement is not None:
-        mv = np.asarray(movement, dtype=bool)
-        total, heading, incl = total[mv], heading[mv], incl[mv]
-    return {
-        "total_rmse_deg": _rmse_deg(total),
-        "heading_rmse_deg": _rmse_deg(heading),
-        "inclination_rmse_deg": _rmse_deg(incl),
-    }
-
-
-def tilt_error_rad(q_est: ArrayLike, q_ref: ArrayLike) -> np.ndarray:
-    """Inclination (tilt) error [rad] per sample (the BROAD inclination metric, unsquared)."""
-    return error_angles(error_quaternion(q_est, q_ref))[2]
 
 
 # -- loading -----------------------------------------------------------------------------------

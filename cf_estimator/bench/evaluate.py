@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cf_estimator import metrics
 from cf_estimator.bench import broad
 from cf_estimator.core.batch import estimate
 from cf_estimator.core.params import FilterParams
@@ -45,7 +46,7 @@ def evaluate_trial(path: str | os.PathLike, info: Mapping, params: FilterParams,
     results: dict[str, dict[str, float]] = {}
 
     def score(name: str, dim: str, q: np.ndarray) -> None:
-        m = broad.rmse_deg(q, trial.quat_ref, trial.movement)
+        m = metrics.rmse_deg(q, trial.quat_ref, trial.movement)
         if dim == "6d":  # heading is unobservable without a magnetometer
             m = {"inclination_rmse_deg": m["inclination_rmse_deg"]}
         results[f"{name}_{dim}"] = m

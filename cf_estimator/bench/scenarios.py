@@ -17,9 +17,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from cf_estimator.bench.broad import tilt_error_rad
 from cf_estimator.core.batch import estimate
 from cf_estimator.core.params import FilterParams
+from cf_estimator.metrics import tilt_error_rad
 
 THESIS_LIMIT_ARCMIN = 90.0
 SETTLE_S = 15.0

@@ -31,9 +31,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cf_estimator.bench.broad import Trial, error_angles
+from cf_estimator.bench.broad import Trial
 from cf_estimator.core.batch import estimate_many
 from cf_estimator.core.params import FilterParams
+from cf_estimator.metrics import error_angles
 from cf_estimator.schema import ParameterError
 
 OBJECTIVES = ("total", "inclination", "combined")
@@ -281,8 +282,8 @@ def scenario_peaks(candidates: Sequence[FilterParams], names: Sequence[str] = (
 
 
 def _scenario_worker(args: tuple) -> np.ndarray:
-    from cf_estimator.bench.broad import tilt_error_rad
     from cf_estimator.bench.scenarios import ARCMIN_PER_RAD, scenario_masks
+    from cf_estimator.metrics import tilt_error_rad
     from cf_estimator.scenarios import make_scenario
 
     candidates, name, seed = args

@@ -1,0 +1,61 @@
+"""Attitude error metrics of the BROAD benchmark (Laidig et al., Data 6(7), 2021).
+
+Error quaternion in the earth frame q_err = q_est ⊗ q_ref⁻¹; total error 2·acos|w|, heading
+error 2·atan|z/w|, inclination error 2·acos√(w² + z²) [rad]; RMSE in degrees. Used by the
+benchmarks, the bag replay's reference statistics and the demo.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from cf_estimator.core import quaternion as quat
+
+
+def error_quaternion(q_est: ArrayLike, q_ref: ArrayLike) -> np.ndarray:
+    """q_err = q_est ⊗ q_ref⁻¹ (earth frame), normalised; inputs normalised first (N, 4)."""
+    qe = np.asarray(q_est, dtype=float)
+    qr = np.asarray(q_ref, dtype=float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        qe = qe / np.linalg.norm(qe, axis=-1, keepdims=True)
+        qr = qr / np.linalg.norm(qr, axis=-1, keepdims=True)
+        out = quat.multiply(qe, quat.conjugate(qr))
+        return out / np.linalg.norm(out, axis=-1, keepdims=True)
+
+
+def error_angles(q_err: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(total, heading, inclination) error angles [rad] of earth-frame error quaternions."""
+    q = np.asarray(q_err, dtype=float)
+    w, z = q[..., 0], q[..., 3]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        total = 2.0 * np.arccos(np.clip(np.abs(w), 0.0, 1.0))
+        heading = 2.0 * np.arctan(np.abs(z / w))
+        incl = 2.0 * np.arccos(np.clip(np.sqrt(w * w + z * z), 0.0, 1.0))
+    return total, heading, incl
+
+
+def _rmse_deg(x: np.ndarray) -> float:
+    if x.size == 0 or np.all(np.isnan(x)):
+        return float("nan")
+    return float(np.degrees(np.sqrt(np.nanmean(x * x))))
+
+
+def rmse_deg(
+    q_est: ArrayLike, q_ref: ArrayLike, movement: ArrayLike | None = None
+) -> dict[str, float]:
+    """Total/heading/inclination RMSE [deg] over the ``movement`` samples (NaN rows ignored)."""
+    total, heading, incl = error_angles(error_quaternion(q_est, q_ref))
+    if movement is not None:
+        mv = np.asarray(movement, dtype=bool)
+        total, heading, incl = total[mv], heading[mv], incl[mv]
+    return {
+        "total_rmse_deg": _rmse_deg(total),
+        "heading_rmse_deg": _rmse_deg(heading),
+        "inclination_rmse_deg": _rmse_deg(incl),
+    }
+
+
+def tilt_error_rad(q_est: ArrayLike, q_ref: ArrayLike) -> np.ndarray:
+    """Inclination (tilt) error [rad] per sample (the BROAD inclination metric, unsquared)."""
+    return error_angles(error_quaternion(q_est, q_ref))[2]
