@@ -265,8 +265,9 @@ class FilterParams:
     gravity_m_s2: float = param(
         9.80665,
         "m/s^2",
-        "Local gravity magnitude, for the input unit checks (the filter learns ‖g‖ from |a| "
-        "during start-up and rest, so a mis-scaled accelerometer does not bias it).",
+        "Local gravity magnitude: the prior of the filter's ‖g‖ (which then follows |a| slowly "
+        "while the sensor is steady, so a mis-scaled accelerometer is learned) and the input "
+        "unit checks.",
         minimum=1.0,
         maximum=30.0,
         group="frames",

@@ -43,6 +43,9 @@ MAG_STATUS_NAMES = {0: "none", 1: "used", 2: "rejected", 3: "disabled"}
 
 #: Low-pass time constant of the rest detector's gyro/accelerometer means [s].
 REST_LOWPASS_TIME_CONSTANT_S = 0.5
+#: Time constant [s] with which ‖g‖ follows |a| while the sensor is steady: slow enough that a
+#: steady linear acceleration of a few seconds (the thesis's 25 m/s in 5 s) is not absorbed.
+GRAVITY_TIME_CONSTANT_S = 10.0
 #: Magnetometer samples averaged for the field reference (norm, dip) after start-up.
 MAG_REFERENCE_SAMPLES = 20
 #: A magnetic field rejected this long [s] is taken as the new normal and re-learned.
@@ -217,6 +220,9 @@ def step(
     s.accel_used = accel is not None
     if accel is not None:
         ax, ay, az = accel
+        an = o.sqrt(ax * ax + ay * ay + az * az)
+        s.g_ref = o.where(s.g_ref > 0.0, s.g_ref, p.gravity_m_s2)  # ‖g‖: prior, learned below
+        deviation = o.maximum(an - s.g_ref, s.g_ref - an)  # | |a| - ‖g‖ |
         # rest detection on this very sample (a disturbance is never taken for rest)
         lw = dt / (REST_LOWPASS_TIME_CONSTANT_S + dt)
         s.glx, s.gly, s.glz = (
@@ -231,19 +237,22 @@ def step(
         )
         gdev = o.sqrt((gx - s.glx) ** 2 + (gy - s.gly) ** 2 + (gz - s.glz) ** 2)
         adev = o.sqrt((ax - s.alx) ** 2 + (ay - s.aly) ** 2 + (az - s.alz) ** 2)
-        still = (
+        steady = (
             (gdev < p.rest_gyro_threshold_rad_s)
             & (adev < p.rest_accel_threshold_m_s2)
             & (o.sqrt(s.glx**2 + s.gly**2 + s.glz**2) < p.bias_limit_rad_s * 1.7320508075688772)
         )
-        s.rest_timer_s = o.where(still, s.rest_timer_s + dt, 0.0)
+        # ‖g‖ follows |a| slowly whenever the sensor is steady (not only at rest: a recording that
+        # starts in motion would otherwise seed a wrong ‖g‖ that keeps rest out for ever)
+        gw = o.where(steady, dt / (GRAVITY_TIME_CONSTANT_S + dt), 0.0)
+        s.g_ref = s.g_ref + gw * (an - s.g_ref)
+        s.rest_timer_s = o.where(steady, s.rest_timer_s + dt, 0.0)
         s.at_rest = p.rest_bias_learning & learn & (s.rest_timer_s >= p.rest_time_s)
-        quick = fast | s.at_rest  # at rest: no linear acceleration to reject (bias still learned)
-        an = o.sqrt(ax * ax + ay * ay + az * az)
-        # linear-acceleration detector: peak hold of | |a| - g_ref |; g_ref learned when quick
-        s.g_ref = o.where(s.g_ref > 0.0, s.g_ref, an)
-        s.g_ref = o.where(quick, s.g_ref + lw * (an - s.g_ref), s.g_ref)
-        deviation = o.maximum(an - s.g_ref, s.g_ref - an)
+        # at rest the gyro mean is the bias, whatever the accelerometer says; but the error path
+        # trusts the accelerometer only if |a| = ‖g‖: a steady linear acceleration (constant
+        # accelerometer, still gyro: the 25 m/s manoeuvre) is not gravity
+        quick = fast | (s.at_rest & (deviation < p.rest_accel_threshold_m_s2))
+        # linear-acceleration detector: peak hold of | |a| - ‖g‖ |
         decayed = s.accel_hold * (p.acceleration_hold_s / (p.acceleration_hold_s + dt))
         s.accel_hold = o.maximum(deviation, decayed)
         accelerating = s.accel_hold > p.acceleration_threshold_m_s2
