@@ -121,18 +121,25 @@ def _write_json(path: str, doc: dict) -> None:
         raise CliError(f"cannot write {path}: {exc.strerror or exc}") from None
 
 
-def run_broad(args: Any) -> int:
-    """``bench broad``."""
-    from cf_estimator.bench import broad
-    from cf_estimator.bench.evaluate import run_broad as evaluate_all
+def _available_peers(args: Any) -> list[str]:
+    """The peers named by ``--peers`` (none if absent); CliError if one is not installed."""
     from cf_estimator.bench.peers import PeerUnavailable, check_available
-    from cf_estimator.schema import as_dict
 
     peers = _peers(args.peers) if args.peers else []
     try:
         check_available(peers)
     except PeerUnavailable as exc:
         raise CliError(str(exc)) from None
+    return peers
+
+
+def run_broad(args: Any) -> int:
+    """``bench broad``."""
+    from cf_estimator.bench import broad
+    from cf_estimator.bench.evaluate import run_broad as evaluate_all
+    from cf_estimator.schema import as_dict
+
+    peers = _available_peers(args)
     params = _load_params(args.params)
     try:
         paths = broad.list_trials(args.data, _csv(args.trials) if args.trials else None)
@@ -171,13 +178,7 @@ def run_broad(args: Any) -> int:
 def run_scenarios(args: Any) -> int:
     """``bench scenarios``."""
     from cf_estimator.bench import scenarios as sc
-    from cf_estimator.bench.peers import PeerUnavailable, check_available
-
-    peers = _peers(args.peers) if args.peers else []
-    try:
-        check_available(peers)
-    except PeerUnavailable as exc:
-        raise CliError(str(exc)) from None
+    peers = _available_peers(args)
     params = _load_params(args.params)
     names = _csv(args.scenarios)
     try:
@@ -194,13 +195,7 @@ def run_scenarios(args: Any) -> int:
 def run_speed(args: Any) -> int:
     """``bench speed``."""
     from cf_estimator.bench import speed
-    from cf_estimator.bench.peers import PeerUnavailable, check_available
-
-    peers = _peers(args.peers) if args.peers else []
-    try:
-        check_available(peers)
-    except PeerUnavailable as exc:
-        raise CliError(str(exc)) from None
+    peers = _available_peers(args)
     if args.samples < 100:
         raise CliError("--samples must be >= 100", 2)
     try:
