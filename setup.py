@@ -2,13 +2,14 @@
 
 ``colcon build`` installs the console scripts into ``lib/cf_estimator`` (see setup.cfg) so
 ``ros2 run cf_estimator cf_estimator_node`` finds them; ``pip install .`` puts them on PATH.
+``ext_modules``: the optional compiled filter step (cf_estimator/core/_kernel.c).
 The ``data_files`` below are what colcon (and pip) install under ``share/cf_estimator``:
 the ament index marker, package.xml, the launch files and the parameter YAML.
 """
 
 from glob import glob
 
-from setuptools import find_namespace_packages, setup
+from setuptools import Extension, find_namespace_packages, setup
 
 PACKAGE = "cf_estimator"
 
@@ -22,6 +23,16 @@ setup(
     packages=find_namespace_packages(
         include=[PACKAGE, f"{PACKAGE}.*"], exclude=["*.__pycache__", "*.__pycache__.*"]
     ),
+    # The compiled twin of core/step.py (see core/kernel.py). optional=True: without a C compiler
+    # the build goes on and the Python reference runs everything, only slower.
+    ext_modules=[
+        Extension(
+            f"{PACKAGE}.core._kernel",
+            [f"{PACKAGE}/core/_kernel.c"],
+            extra_compile_args=["-O2", "-ffp-contract=off"],  # no FMA: same bits as Python
+            optional=True,
+        )
+    ],
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

@@ -1,17 +1,20 @@
 """Parameter search with the batched filter: many candidates per pass over the data.
 
-Coarse-to-fine random search in a box (log scale for gains and time constants):
+Coarse-to-fine random search in a box (log scale for gains, time constants and thresholds):
 
 1. pass 1: ``candidates`` points drawn uniformly (in log space) in the box, plus the start point;
 2. pass k > 1: the same number of points drawn around the best ``elite`` so far, with a spread
    that halves every pass (in box-normalised coordinates), plus the elite themselves.
 
-Each pass runs all candidates together through :func:`cf_estimator.core.batch.estimate_many`
-(one :class:`~cf_estimator.core.batched.BatchedFilter` per trial; the cost per step hardly grows
-with the number of candidates) and accumulates the BROAD errors on the fly (nothing stored).
-Trials may be decimated for screening (:meth:`Trial.decimated`): confirm the result at full
-rate. The 9-D run gives both scores: in ``mag_mode: yaw`` the magnetometer rotates about the
-world vertical only, so the inclination of the 9-D run is the 6-D inclination.
+Each pass runs all candidates through :func:`cf_estimator.core.batch.estimate_many` once per
+trial; every candidate's (N, 4) estimate is scored at once, vectorised over the samples, with
+:mod:`cf_estimator.metrics` (``on_candidate``: nothing per sample in Python). Trials may be
+decimated for screening (:meth:`Trial.decimated`): confirm the result at full rate. The 9-D run
+gives both scores: in ``mag_mode: yaw`` the magnetometer rotates about the world vertical only,
+so the inclination of the 9-D run is the 6-D inclination. A trial is a BROAD
+:class:`~cf_estimator.bench.broad.Trial` (fixed rate) or a
+:class:`~cf_estimator.bench.bagtrial.BagTrial` (a recorded bag with a reference orientation,
+header stamps).
 
 Objectives (lower is better; means over trials): ``total`` (9-D total RMSE), ``inclination``
 (inclination RMSE), ``combined`` (their mean). The thesis scenarios enter as a constraint: the
@@ -31,10 +34,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cf_estimator.bench.bagtrial import BagTrial
 from cf_estimator.bench.broad import Trial
 from cf_estimator.core.batch import estimate_many
 from cf_estimator.core.params import FilterParams
-from cf_estimator.metrics import error_angles
+from cf_estimator.metrics import rmse_deg
 from cf_estimator.schema import ParameterError
 
 OBJECTIVES = ("total", "inclination", "combined")
@@ -62,11 +66,14 @@ class Dim:
         """[0, 1] box coordinate → value (clipped to the box)."""
         u = min(max(u, 0.0), 1.0)
         if self.log:
-            return float(math.exp(math.log(self.lo) + u * (math.log(self.hi) - math.log(self.lo))))
-        return float(self.lo + u * (self.hi - self.lo))
+            v = math.exp(math.log(self.lo) + u * (math.log(self.hi) - math.log(self.lo)))
+        else:
+            v = self.lo + u * (self.hi - self.lo)
+        return float(min(max(v, self.lo), self.hi))  # exp(log(lo)) may round below lo
 
 
-DEFAULT_SPACE: tuple[Dim, ...] = (
+#: Every searchable parameter with its box (units as in :class:`FilterParams`).
+SEARCHABLE: tuple[Dim, ...] = (
     Dim("k1", 0.05, 5.0),
     Dim("k2", 1e-4, 0.1),
     Dim("saturation_limit_rad", 0.005, 1.0),
@@ -74,16 +81,38 @@ DEFAULT_SPACE: tuple[Dim, ...] = (
     Dim("r1", 0.005, 2.0),
     Dim("r2", 1e-5, 0.05, zero_prob=0.3),
     Dim("recovery_trigger_s", 10.0, 600.0, zero_prob=0.3),
+    # clip selection: the tight clip (saturation_limit_rad) applies only while a linear
+    # acceleration is detected and the low-passed rotation rate is below the threshold
+    Dim("wide_saturation_limit_rad", 0.03, 10.0),  # 10 rad = effectively no clip
+    Dim("rotation_threshold_rad_s", 0.03, 3.0),
+    Dim("acceleration_threshold_m_s2", 0.05, 5.0),
+    Dim("acceleration_hold_s", 0.1, 10.0),
+    # rest detection and the direct bias update at rest (matter only with rest phases)
+    Dim("rest_gyro_threshold_rad_s", 0.005, 0.2),
+    Dim("rest_time_s", 0.3, 10.0),
+    Dim("rest_bias_time_constant_s", 0.3, 60.0),
+)
+
+#: Searched by default: the loop gains, both clip levels and what selects between them, the
+#: aperiodic unit, the magnetometer gains and the recovery trigger. The acceleration hold and
+#: the rest parameters can be chosen with ``space_from_names``.
+DEFAULT_SEARCH: tuple[str, ...] = (
+    "k1", "k2", "saturation_limit_rad", "aperiodic_time_constant_s", "r1", "r2",
+    "recovery_trigger_s", "wide_saturation_limit_rad", "rotation_threshold_rad_s",
+    "acceleration_threshold_m_s2",
 )
 
 
 def space_from_names(names: Sequence[str]) -> tuple[Dim, ...]:
-    """The default box restricted to ``names`` (unknown names raise ValueError)."""
-    by_name = {d.name: d for d in DEFAULT_SPACE}
+    """The searchable boxes of ``names``, in that order (unknown names raise ValueError)."""
+    by_name = {d.name: d for d in SEARCHABLE}
     bad = [n for n in names if n not in by_name]
     if bad:
         raise ValueError(f"cannot search {bad[0]!r}; searchable: {', '.join(by_name)}")
     return tuple(by_name[n] for n in names)
+
+
+DEFAULT_SPACE: tuple[Dim, ...] = space_from_names(DEFAULT_SEARCH)
 
 
 def with_bounds(space: Sequence[Dim], bounds: Mapping[str, tuple[float, float]]) -> tuple[Dim, ...]:
@@ -104,75 +133,109 @@ def with_bounds(space: Sequence[Dim], bounds: Mapping[str, tuple[float, float]])
 
 
 def make_params(base: FilterParams, values: Mapping[str, float]) -> FilterParams | None:
-    """``base`` with ``values``; None when the combination is invalid (e.g. unstable T·k2 ≥ k1)."""
+    """``base`` with ``values``; None when the combination is invalid for the filter (e.g.
+    unstable T·k2 ≥ k1) or pointless for the search: a wide clip level below the tight one
+    (``wide_saturation_limit_rad`` < ``saturation_limit_rad`` inverts the clip selection)."""
     try:
-        return dataclasses.replace(base, **dict(values))
+        p = dataclasses.replace(base, **dict(values))
     except (ParameterError, ValueError):
         return None
+    if p.wide_saturation_limit_rad < p.saturation_limit_rad and (
+            "wide_saturation_limit_rad" in values or "saturation_limit_rad" in values):
+        return None
+    return p
 
 
 # -- scoring -----------------------------------------------------------------------------------
-class _Accumulator:
-    """Running sums of squared total / inclination error over the scored samples, per candidate."""
+class BroadScorer:
+    """``on_candidate`` callback: total / inclination RMSE [deg] of each candidate's estimate.
 
-    def __init__(self, trial: Trial, size: int):
-        self.qref_inv = trial.quat_ref * np.array([1.0, -1.0, -1.0, -1.0])
-        norms = np.linalg.norm(trial.quat_ref, axis=1)
-        self.score = trial.movement & np.isfinite(norms)
-        safe = np.where(np.isfinite(norms) & (norms > 0), norms, 1.0)
-        self.qref_inv = self.qref_inv / safe[:, None]
-        self.sum_total = np.zeros(size)
-        self.sum_incl = np.zeros(size)
-        self.count = np.zeros(size)
+    BROAD definitions (:func:`cf_estimator.metrics.rmse_deg`): over the trial's ``movement``
+    samples whose reference is finite, estimate rows that are NaN (before initialisation)
+    ignored; NaN when nothing is scored.
+    """
 
-    def __call__(self, i: int, q: np.ndarray) -> None:
-        if not self.score[i]:
-            return
-        r = self.qref_inv[i]
-        w = q[:, 0] * r[0] - q[:, 1] * r[1] - q[:, 2] * r[2] - q[:, 3] * r[3]
-        z = q[:, 0] * r[3] + q[:, 1] * r[2] - q[:, 2] * r[1] + q[:, 3] * r[0]
-        qe = np.zeros_like(q)
-        qe[:, 0], qe[:, 3] = w, z
-        norm = np.sqrt(np.sum(q * q, axis=1))
-        qe[:, 0] /= norm
-        qe[:, 3] /= norm
-        total, _h, incl = error_angles(qe)
-        ok = np.isfinite(total)
-        self.sum_total[ok] += total[ok] ** 2
-        self.sum_incl[ok] += incl[ok] ** 2
-        self.count[ok] += 1
+    def __init__(self, trial: Trial, size: int) -> None:
+        self.mask = trial.movement & np.all(np.isfinite(trial.quat_ref), axis=1)
+        self.q_ref = trial.quat_ref[self.mask]
+        self.total_deg = np.full(size, np.nan)
+        self.inclination_deg = np.full(size, np.nan)
 
-    def rmse_deg(self) -> tuple[np.ndarray, np.ndarray]:
-        with np.errstate(invalid="ignore", divide="ignore"):
-            c = np.maximum(self.count, 1)
-            return (np.degrees(np.sqrt(self.sum_total / c)), np.degrees(np.sqrt(self.sum_incl / c)))
+    def __call__(self, p: int, q: np.ndarray) -> None:
+        m = rmse_deg(q[self.mask], self.q_ref)
+        self.total_deg[p] = m["total_rmse_deg"]
+        self.inclination_deg[p] = m["inclination_rmse_deg"]
+
+
+class PeakScorer:
+    """``on_candidate`` callback: peak tilt error [arcmin] of each candidate over ``mask``
+    against ``q_true`` (world frame), NaN when nothing is scored (see ``peak_rms_arcmin``)."""
+
+    def __init__(self, q_true: np.ndarray, mask: np.ndarray, size: int) -> None:
+        self.q_true = q_true
+        self.mask = mask
+        self.peak_arcmin = np.full(size, np.nan)
+
+    def __call__(self, p: int, q: np.ndarray) -> None:
+        from cf_estimator.bench.scenarios import peak_rms_arcmin
+
+        self.peak_arcmin[p] = peak_rms_arcmin(q, self.q_true, self.mask)[0]
+
+
+def _timing(trial: Trial) -> dict[str, object]:
+    """``estimate_many`` timing arguments: a bag trial's stamps, else the BROAD rate."""
+    if isinstance(trial, BagTrial):
+        return {"timestamps_s": trial.t_s}
+    return {"rate_hz": trial.rate_hz}
 
 
 def score_trial(candidates: Sequence[FilterParams], trial: Trial) -> tuple[np.ndarray, np.ndarray]:
     """(total, inclination) RMSE [deg] of every candidate on one trial (9-D run)."""
-    acc = _Accumulator(trial, len(candidates))
+    scorer = BroadScorer(trial, len(candidates))
     estimate_many([dataclasses.replace(c, use_mag=True) for c in candidates], trial.gyro_rad_s,
-                  trial.accel_m_s2, trial.mag_ut, rate_hz=trial.rate_hz, on_sample=acc, store=False)
-    return acc.rmse_deg()
+                  trial.accel_m_s2, trial.mag_ut, on_candidate=scorer, **_timing(trial))
+    return scorer.total_deg, scorer.inclination_deg
 
 
-def _score_worker(args: tuple) -> tuple[str, np.ndarray, np.ndarray]:
+def _score_worker(args: tuple) -> tuple[np.ndarray, np.ndarray]:
     candidates, trial = args
-    total, incl = score_trial(candidates, trial)
-    return trial.name, total, incl
+    return score_trial(candidates, trial)
+
+
+def _chunks(n: int, parts: int) -> list[slice]:
+    """``parts`` (at most ``n``) contiguous slices covering range(n)."""
+    bounds = np.linspace(0, n, max(1, min(parts, n)) + 1).round().astype(int)
+    return [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+
+
+def _run_tasks(worker: Callable[[tuple], object], tasks: list[tuple], jobs: int) -> list:
+    """``[worker(t) for t in tasks]``, in a process pool when ``jobs`` > 1."""
+    if jobs <= 1 or len(tasks) <= 1:
+        return [worker(t) for t in tasks]
+    ctx = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
+    with ctx.Pool(min(jobs, len(tasks))) as pool:
+        return pool.map(worker, tasks, chunksize=1)
+
+
+def _split(n_candidates: int, n_units: int, jobs: int) -> list[slice]:
+    """Candidate slices so that ``n_units`` × slices fills ``jobs`` (one slice when it does)."""
+    return _chunks(n_candidates, max(1, jobs // max(1, n_units)))
 
 
 def score_candidates(candidates: Sequence[FilterParams], trials: Sequence[Trial], jobs: int = 1
                      ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """trial → (total, inclination) RMSE arrays over the candidates; trials spread over jobs."""
-    tasks = [(list(candidates), t) for t in trials]
-    if jobs <= 1 or len(tasks) <= 1:
-        out = [_score_worker(t) for t in tasks]
-    else:
-        ctx = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
-        with ctx.Pool(min(jobs, len(tasks))) as pool:
-            out = pool.map(_score_worker, tasks, chunksize=1)
-    return {name: (tot, inc) for name, tot, inc in out}
+    """trial → (total, inclination) RMSE arrays [deg] over the candidates. Trials (and, with
+    fewer trials than jobs, slices of the candidates) are spread over ``jobs`` processes."""
+    cands = list(candidates)
+    parts = _split(len(cands), len(trials), jobs)
+    tasks = [(cands[s], t) for t in trials for s in parts]
+    out = _run_tasks(_score_worker, tasks, jobs)
+    scores = {}
+    for i, t in enumerate(trials):
+        mine = out[i * len(parts):(i + 1) * len(parts)]
+        scores[t.name] = (np.concatenate([o[0] for o in mine]),
+                          np.concatenate([o[1] for o in mine]))
+    return scores
 
 
 def objective_values(scores: Mapping[str, tuple[np.ndarray, np.ndarray]], objective: str
@@ -270,34 +333,23 @@ def round_params(params: FilterParams, space: Sequence[Dim], digits: int = 2) ->
 # -- thesis scenarios as a constraint ----------------------------------------------------------
 def scenario_peaks(candidates: Sequence[FilterParams], names: Sequence[str] = (
         "impacts", "vibration", "acceleration"), seed: int = 0, jobs: int = 1) -> np.ndarray:
-    """(P, S) peak tilt error [arcmin] of every candidate (6-D) on each scenario."""
-    tasks = [(list(candidates), n, seed) for n in names]
-    if jobs <= 1 or len(tasks) <= 1:
-        cols = [_scenario_worker(t) for t in tasks]
-    else:
-        ctx = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
-        with ctx.Pool(min(jobs, len(tasks))) as pool:
-            cols = pool.map(_scenario_worker, tasks, chunksize=1)
+    """(P, S) peak tilt error [arcmin] of every candidate (6-D) on each scenario, over the
+    scored windows of :func:`cf_estimator.bench.scenarios.scenario_masks` (NaN: none scored)."""
+    cands = list(candidates)
+    parts = _split(len(cands), len(names), jobs)
+    tasks = [(cands[s], n, seed) for n in names for s in parts]
+    out = _run_tasks(_scenario_worker, tasks, jobs)
+    cols = [np.concatenate(out[i * len(parts):(i + 1) * len(parts)]) for i in range(len(names))]
     return np.stack(cols, axis=1)
 
 
 def _scenario_worker(args: tuple) -> np.ndarray:
-    from cf_estimator.bench.scenarios import ARCMIN_PER_RAD, scenario_masks
-    from cf_estimator.metrics import tilt_error_rad
+    from cf_estimator.bench.scenarios import scenario_masks
     from cf_estimator.scenarios import make_scenario
 
     candidates, name, seed = args
     sc = make_scenario(name, seed=seed)
-    mask = scenario_masks(sc)
-    q_true = sc.truth.q_world_from_body
-    peak = np.zeros(len(candidates))
-
-    def on_sample(i: int, q: np.ndarray) -> None:
-        if mask[i]:
-            e = tilt_error_rad(q, q_true[i]) * ARCMIN_PER_RAD
-            np.fmax(peak, e, out=peak)
-
+    scorer = PeakScorer(sc.truth.q_world_from_body, scenario_masks(sc), len(candidates))
     estimate_many([dataclasses.replace(c, use_mag=False) for c in candidates], sc.imu.gyro_rad_s,
-                  sc.imu.accel_m_s2, None, timestamps_s=sc.imu.t_s, on_sample=on_sample,
-                  store=False)
-    return peak
+                  sc.imu.accel_m_s2, None, timestamps_s=sc.imu.t_s, on_candidate=scorer)
+    return scorer.peak_arcmin

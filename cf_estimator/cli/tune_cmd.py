@@ -1,21 +1,30 @@
-"""``cf-estimator tune``: search filter parameters on BROAD trial files with the batched filter.
+"""``cf-estimator tune``: search filter parameters on BROAD trial files or on a bag with a
+reference orientation, with the batched filter.
 
-Coarse-to-fine random search (:mod:`cf_estimator.bench.tuning`) over k1, k2, the clip, the
-aperiodic time constant and the magnetometer gains (``--search`` to choose), many candidates per
-pass, on (optionally decimated) trials; optional thesis-scenario constraint on the peak tilt
-error; prints before/after and writes a ROS 2 parameter YAML that ``--params-file`` and
-``bench broad --params`` load unchanged.
+Coarse-to-fine random search (:mod:`cf_estimator.bench.tuning`) over k1, k2, both clip levels
+and what selects between them, the aperiodic time constant, the magnetometer gains and the
+recovery trigger (``--search`` to choose; rest detection and the acceleration hold can be added),
+many candidates per pass, on (optionally decimated) data; optional thesis-scenario constraint on
+the peak tilt error; prints before/after and writes a ROS 2 parameter YAML that the node's
+``--params-file``, ``replay --params`` and ``bench broad --params`` load unchanged.
+
+Data: ``--data DIR`` (BROAD ``*.hdf5`` trials) or ``--bag PATH`` (IMU, optional magnetometer and a
+reference topic: :mod:`cf_estimator.bench.bagtrial` says how it is read and scored).
 """
 
 from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from cf_estimator.cli.main import CliError
+from cf_estimator.cli.main import CliError, finite_float
+
+_BAG_ONLY = ("reference_topic", "imu_topic", "mag_topic", "score_after")
 
 
 def _csv(text: str) -> list[str]:
@@ -24,25 +33,46 @@ def _csv(text: str) -> list[str]:
 
 def register(subparsers: Any) -> None:
     """Add the ``tune`` sub-command."""
-    from cf_estimator.bench.tuning import DEFAULT_SPACE, OBJECTIVES
+    from cf_estimator.bench.bagtrial import DEFAULT_REFERENCE_TOPIC, DEFAULT_SCORE_AFTER_S
+    from cf_estimator.bench.tuning import DEFAULT_SEARCH, OBJECTIVES, SEARCHABLE
 
     p = subparsers.add_parser(
-        "tune", help="search filter parameters on BROAD trials (batched filter)",
+        "tune", help="search filter parameters on BROAD trials or a bag with a reference",
         description=(
-            "Searches filter parameters on BROAD trial files (many candidates per pass with the "
-            "batched filter), prints the objective before and after, and writes the best set as "
-            "a ROS 2 parameter YAML. Screening runs on decimated data (--decimate); the result "
-            "is re-scored at full rate with --confirm."
+            "Searches filter parameters on BROAD trial files (--data) or on a bag with a "
+            "reference orientation (--bag): many candidates per pass with the batched filter. "
+            "Prints the objective before and after, and writes the best set as a ROS 2 "
+            "parameter YAML. Screening runs on decimated data (--decimate); the result is "
+            "re-scored at full rate with --confirm."
         ),
     )
-    p.add_argument("--data", required=True, metavar="DIR", help="directory of BROAD *.hdf5 files")
-    p.add_argument("--trials", metavar="LIST", help="trials to tune on (names, prefixes, patterns)")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--data", metavar="DIR", help="directory of BROAD *.hdf5 files")
+    src.add_argument("--bag", metavar="PATH",
+                     help="ROS 1 .bag or ROS 2 bag directory with IMU, optional magnetometer and "
+                     "a reference orientation topic")
+    p.add_argument("--trials", metavar="LIST",
+                   help="with --data: trials to tune on (names, prefixes, patterns)")
+    b = p.add_argument_group("bag input (--bag)")
+    b.add_argument("--reference-topic", metavar="TOPIC",
+                   help="true orientation (sensor to world, the filter's world frame): "
+                   "geometry_msgs/QuaternionStamped, PoseStamped, nav_msgs/Odometry or "
+                   f"sensor_msgs/Imu orientation (default {DEFAULT_REFERENCE_TOPIC}, the truth "
+                   "`cf-estimator simulate` writes)")
+    b.add_argument("--imu-topic", metavar="TOPIC", help="sensor_msgs/Imu input (default: detect)")
+    b.add_argument("--mag-topic", metavar="TOPIC",
+                   help="sensor_msgs/MagneticField input (default: detect; 'none' = without)")
+    b.add_argument("--score-after", type=finite_float, metavar="S",
+                   help="score from S seconds after the first IMU sample "
+                   f"(default {DEFAULT_SCORE_AFTER_S:g}: skips the start-up phase)")
     p.add_argument("--params", metavar="YAML", help="start point (default: shipped defaults)")
-    p.add_argument("--objective", choices=OBJECTIVES, default="combined",
-                   help="total (9-D total RMSE), inclination, or combined = their mean "
-                   "(default %(default)s)")
-    p.add_argument("--search", default=",".join(d.name for d in DEFAULT_SPACE), metavar="LIST",
-                   help="parameters to search (default %(default)s)")
+    p.add_argument("--objective", choices=OBJECTIVES,
+                   help="total (9-D total RMSE, needs a common heading reference), inclination, "
+                   "or combined = their mean (default combined; inclination for a bag without "
+                   "magnetometer)")
+    p.add_argument("--search", default=",".join(DEFAULT_SEARCH), metavar="LIST",
+                   help="parameters to search (default %(default)s; also searchable: "
+                   + ", ".join(d.name for d in SEARCHABLE if d.name not in DEFAULT_SEARCH) + ")")
     p.add_argument("--bounds", metavar="LIST",
                    help="override search boxes, e.g. saturation_limit_rad=0.005:0.03,k1=0.1:2")
     p.add_argument("--candidates", type=int, default=96, metavar="N",
@@ -57,13 +87,14 @@ def register(subparsers: Any) -> None:
                    "this: one number for all, or per scenario, e.g. "
                    "impacts=18,vibration=21,acceleration=90 (checks the best 16)")
     p.add_argument("--confirm", action="store_true",
-                   help="re-score start and best at full rate on the tuning trials")
+                   help="re-score start and best at full rate on the tuning data")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N")
     p.add_argument("--out", metavar="YAML", help="write the best parameters here")
     p.set_defaults(run=run)
 
 
+# -- arguments ---------------------------------------------------------------------------------
 def _scenario_limits(text: str) -> dict[str, float]:
     names = ("impacts", "vibration", "acceleration")
     try:
@@ -78,14 +109,22 @@ def _scenario_limits(text: str) -> dict[str, float]:
     return out
 
 
-def run(args: Any) -> int:
-    """``tune``."""
-    from cf_estimator.bench import broad, tuning
-    from cf_estimator.bench.paramio import render_filter_params
-    from cf_estimator.cli.bench_cmd import _load_params
-
+def _check_args(args: Any) -> None:
     if args.candidates < 1 or args.passes < 1 or args.decimate < 1 or args.jobs < 1:
         raise CliError("--candidates, --passes, --decimate and --jobs must be >= 1", 2)
+    if args.data is not None:
+        given = [n for n in _BAG_ONLY if getattr(args, n) is not None]
+        if given:
+            raise CliError(f"--{given[0].replace('_', '-')} needs --bag (not --data)", 2)
+    elif args.trials is not None:
+        raise CliError("--trials needs --data (a bag is one trial)", 2)
+    if args.score_after is not None and args.score_after < 0:
+        raise CliError("--score-after must be >= 0", 2)
+
+
+def _search_space(args: Any) -> tuple:
+    from cf_estimator.bench import tuning
+
     try:
         space = tuning.space_from_names(_csv(args.search))
         bounds = {}
@@ -96,71 +135,158 @@ def run(args: Any) -> int:
                 bounds[name.strip()] = (float(lo), float(hi))
             except ValueError:
                 raise ValueError(f"--bounds: expected NAME=LO:HI, got {item!r}") from None
-        space = tuning.with_bounds(space, bounds)
+        return tuning.with_bounds(space, bounds)
     except ValueError as exc:
         raise CliError(str(exc), 2) from None
-    base = _load_params(args.params)
+
+
+# -- data --------------------------------------------------------------------------------------
+@dataclass
+class _Source:
+    """The tuning data: full-rate trials, a label for reports, and the --confirm printer."""
+
+    trials: list
+    label: str
+    has_mag: bool
+    confirm: Callable[[Any, Any], None]
+
+
+def _broad_source(args: Any) -> _Source:
+    from cf_estimator.bench import broad
+
     try:
         paths = broad.list_trials(args.data, _csv(args.trials) if args.trials else None)
         info = broad.read_trial_info(args.data)
         full = [broad.load_trial(p, info) for p in paths]
     except broad.BroadDataError as exc:
         raise CliError(str(exc)) from None
-    trials = [t.decimated(args.decimate) for t in full]
-    start = time.monotonic()
 
-    def log(line: str) -> None:
-        print(f"  {line}  ({time.monotonic() - start:.0f} s)", flush=True)
-
-    limits = _scenario_limits(args.scenario_limit) if args.scenario_limit is not None else {}
-
-    def evaluate(cands):
-        scores = tuning.score_candidates(cands, trials, jobs=args.jobs)
-        values = tuning.objective_values(scores, args.objective)
-        if "acceleration" in limits:  # cheap (200 Hz): screen every candidate of every pass
-            peak = tuning.scenario_peaks(cands, ("acceleration",))[:, 0]
-            values = np.where(peak <= limits["acceleration"], values, np.inf)
-        return values
-
-    print(f"tune: {len(trials)} trial(s), objective {args.objective}, decimate {args.decimate}, "
-          f"{args.candidates} candidates x {args.passes} passes; searching "
-          + ", ".join(d.name for d in space), flush=True)
-    result = tuning.search(evaluate, base, space, candidates=args.candidates, passes=args.passes,
-                           seed=args.seed, log=log)
-    best = tuning.round_params(result.best, space)
-    if limits:
-        top = [tuning.round_params(p, space) for _v, p in result.evaluated[:16]]
-        peaks = tuning.scenario_peaks(top, tuple(limits), jobs=args.jobs)
-        ok = [i for i in range(len(top)) if np.all(peaks[i] <= np.array(list(limits.values())))]
-        print(f"  scenario check ({', '.join(f'{k} <= {v:g}' for k, v in limits.items())} "
-              f"arcmin): {len(ok)}/{len(top)} of the best candidates pass")
-        for i in range(len(top)):
-            print(f"    #{i:<2} peaks " + " ".join(f"{v:7.1f}" for v in peaks[i])
-                  + ("  ok" if i in ok else ""))
-        if not ok:
-            raise CliError("no candidate meets --scenario-limit; widen the search or relax it")
-        best = top[ok[0]]
-    final = evaluate([base, best])  # inf = fails the acceleration-scenario screen
-    print(f"objective ({args.objective}, decimated data): before {final[0]:.4f}  after "
-          f"{final[1]:.4f}")
-    print("parameters:")
-    for d in space:
-        print(f"  {d.name:<28} {getattr(base, d.name):>10.5g} -> {getattr(best, d.name):<10.5g}")
-    if args.confirm:
+    def confirm(base: Any, best: Any) -> None:
         from cf_estimator.bench.evaluate import run_broad
 
         for label, p in (("before", base), ("after", best)):
             res = run_broad(paths, info, p, (), jobs=args.jobs)
             print(f"\nfull rate, {label}:")
             print(broad.format_tables(res), end="")
+
+    return _Source(full, f"{len(paths)} BROAD trial(s) from {args.data}", True, confirm)
+
+
+def _bag_source(args: Any) -> _Source:
+    from cf_estimator.bag.io import BagError
+    from cf_estimator.bench import bagtrial, tuning
+
+    reference = args.reference_topic or bagtrial.DEFAULT_REFERENCE_TOPIC
+    score_after = bagtrial.DEFAULT_SCORE_AFTER_S if args.score_after is None else args.score_after
+    try:
+        trial = bagtrial.load_bag_trial(args.bag, reference, imu_topic=args.imu_topic,
+                                        mag_topic=args.mag_topic, score_after_s=score_after)
+    except BagError as exc:
+        raise CliError(str(exc), exc.code) from None
+    topics = ", ".join(f"{k} {v or '(none)'}" for k, v in trial.topics.items())
+    print(f"bag {args.bag}: {trial.describe()}; {topics}", flush=True)
+
+    def confirm(base: Any, best: Any) -> None:
+        total, incl = tuning.score_candidates([base, best], [trial], jobs=args.jobs)[trial.name]
+        print("\nfull rate [deg]:        total RMSE   inclination RMSE")
+        for i, label in enumerate(("before", "after")):
+            print(f"  {label:<20} {total[i]:10.3f}   {incl[i]:16.3f}")
+
+    label = f"bag {args.bag} (reference {trial.topics['reference']})"
+    return _Source([trial], label, trial.has_mag, confirm)
+
+
+def _objective(args: Any, source: _Source) -> str:
+    if source.has_mag:
+        return args.objective or "combined"
+    if args.objective in ("total", "combined"):
+        raise CliError(f"--objective {args.objective}: the bag has no magnetometer samples, so "
+                       "heading is unobservable; use --objective inclination", 2)
+    return "inclination"
+
+
+def _decimated(source: _Source, factor: int) -> list:
+    trials = [t.decimated(factor) for t in source.trials]
+    for t in trials:
+        if t.n_samples < 2 or not t.movement.any():
+            raise CliError(f"--decimate {factor} leaves no scored samples of {t.name}", 2)
+    return trials
+
+
+# -- search and report -------------------------------------------------------------------------
+def _scenario_check(result: Any, space: Sequence, limits: dict[str, float], jobs: int) -> Any:
+    """The best of the 16 best candidates (rounded) that meets every scenario limit."""
+    from cf_estimator.bench import tuning
+
+    top = [tuning.round_params(p, space) for _v, p in result.evaluated[:16]]
+    peaks = tuning.scenario_peaks(top, tuple(limits), jobs=jobs)
+    ok = [i for i in range(len(top)) if np.all(peaks[i] <= np.array(list(limits.values())))]
+    print(f"  scenario check ({', '.join(f'{k} <= {v:g}' for k, v in limits.items())} "
+          f"arcmin): {len(ok)}/{len(top)} of the best candidates pass")
+    for i in range(len(top)):
+        print(f"    #{i:<2} peaks " + " ".join(f"{v:7.1f}" for v in peaks[i])
+              + ("  ok" if i in ok else ""))
+    if not ok:
+        raise CliError("no candidate meets --scenario-limit; widen the search or relax it")
+    return top[ok[0]]
+
+
+def _write(path: str, best: Any, header: str) -> None:
+    from cf_estimator.bench.paramio import render_filter_params
+
+    try:
+        with open(path, "w", encoding="utf-8") as fh:
+            fh.write(render_filter_params(best, header))
+    except OSError as exc:
+        raise CliError(f"cannot write {path}: {exc.strerror or exc}") from None
+    print(f"wrote {path}")
+
+
+def run(args: Any) -> int:
+    """``tune``."""
+    from cf_estimator.bench import tuning
+    from cf_estimator.cli.bench_cmd import _load_params
+
+    _check_args(args)
+    space = _search_space(args)
+    base = _load_params(args.params)
+    source = _bag_source(args) if args.bag is not None else _broad_source(args)
+    objective = _objective(args, source)
+    trials = _decimated(source, args.decimate)
+    limits = _scenario_limits(args.scenario_limit) if args.scenario_limit is not None else {}
+    start = time.monotonic()
+
+    def log(line: str) -> None:
+        print(f"  {line}  ({time.monotonic() - start:.0f} s)", flush=True)
+
+    def evaluate(cands: Sequence[Any]) -> np.ndarray:
+        scores = tuning.score_candidates(cands, trials, jobs=args.jobs)
+        values = tuning.objective_values(scores, objective)
+        if "acceleration" in limits:  # cheap (200 Hz): screen every candidate of every pass
+            peak = tuning.scenario_peaks(cands, ("acceleration",), jobs=args.jobs)[:, 0]
+            values = np.where(peak <= limits["acceleration"], values, np.inf)
+        return values
+
+    print(f"tune: {len(trials)} trial(s), objective {objective}, decimate {args.decimate}, "
+          f"{args.candidates} candidates x {args.passes} passes; searching "
+          + ", ".join(d.name for d in space), flush=True)
+    result = tuning.search(evaluate, base, space, candidates=args.candidates, passes=args.passes,
+                           seed=args.seed, log=log)
+    best = tuning.round_params(result.best, space)
+    if limits:
+        best = _scenario_check(result, space, limits, args.jobs)
+    final = evaluate([base, best])  # inf = fails the acceleration-scenario screen
+    if not limits and final[1] > final[0]:  # rounding cost more than the search gained
+        best = result.best
+        final = evaluate([base, best])
+    print(f"objective ({objective}, decimated data): before {final[0]:.4f}  after "
+          f"{final[1]:.4f}")
+    print("parameters:")
+    for d in space:
+        print(f"  {d.name:<28} {getattr(base, d.name):>10.5g} -> {getattr(best, d.name):<10.5g}")
+    if args.confirm:
+        source.confirm(base, best)
     if args.out:
-        header = (f"# cf-estimator tune: objective {args.objective} on {len(paths)} BROAD trial(s) "
-                  f"from {args.data}; before {final[0]:.4f}, after {final[1]:.4f} (decimate "
-                  f"{args.decimate})\n")
-        try:
-            with open(args.out, "w", encoding="utf-8") as fh:
-                fh.write(render_filter_params(best, header))
-        except OSError as exc:
-            raise CliError(f"cannot write {args.out}: {exc.strerror or exc}") from None
-        print(f"wrote {args.out}")
+        _write(args.out, best, f"# cf-estimator tune: objective {objective} on {source.label}; "
+               f"before {final[0]:.4f}, after {final[1]:.4f} (decimate {args.decimate})\n")
     return 0

@@ -17,8 +17,10 @@ from numpy.typing import ArrayLike
 
 from cf_estimator.core import quaternion as quat
 from cf_estimator.core.batched import BatchedFilter
-from cf_estimator.core.filter import ComplementaryFilter
+from cf_estimator.core.filter import EXTRA_COLUMNS, ComplementaryFilter
+from cf_estimator.core.kernel import resolve_backend
 from cf_estimator.core.params import FilterParams
+from cf_estimator.core.step import PHASE_STARTUP
 
 
 @dataclass
@@ -85,6 +87,34 @@ def iterate_samples(
         yield i, g, a, m, dt
 
 
+def _rows(gyro_rad_s: ArrayLike, accel_m_s2: ArrayLike, mag: ArrayLike | None
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """(N, 3) C-contiguous float64 copies of the inputs (shapes checked)."""
+    gyro = _as_rows("gyro_rad_s", gyro_rad_s, None)
+    assert gyro is not None
+    acc = _as_rows("accel_m_s2", accel_m_s2, gyro.shape[0])
+    mg = _as_rows("mag", mag, gyro.shape[0])
+    return (np.ascontiguousarray(gyro), np.ascontiguousarray(acc),
+            None if mg is None else np.ascontiguousarray(mg))
+
+
+def _run_filter(f: ComplementaryFilter, gyro: np.ndarray, acc: np.ndarray, mg: np.ndarray | None,
+                t: np.ndarray, q_out: np.ndarray, extra_out: np.ndarray | None) -> None:
+    """Initialise ``f`` at the first valid accelerometer row (unless it is initialised: then row
+    0 is its start), then run every later row; q_out rows before initialisation stay NaN."""
+    start = 0
+    while not f.initialized and start < len(t):
+        f.update(gyro[start], acc[start], 1.0, None if mg is None else mg[start])
+        start += 1
+    if f.initialized:
+        if start == 0:  # an initial orientation was given: sample 0 has nothing to integrate
+            start = 1
+        q_out[start - 1] = f.orientation_tuple()
+        if extra_out is not None:
+            extra_out[start - 1, 7] = PHASE_STARTUP
+        f.run_rows(gyro, acc, mg, np.diff(t, prepend=t[0]), start, q_out, extra_out)
+
+
 def estimate(
     gyro_rad_s: ArrayLike,
     accel_m_s2: ArrayLike,
@@ -94,39 +124,26 @@ def estimate(
     timestamps_s: ArrayLike | None = None,
     params: FilterParams | None = None,
     initial_orientation: Sequence[float] | None = None,
+    backend: str | None = None,
 ) -> EstimateResult:
     """Run the filter over a recording.
 
     gyro_rad_s, accel_m_s2, mag: (N, 3) in the sensor frame (mag in any unit; NaN rows =
     no sample). Give ``rate_hz`` or ``timestamps_s`` [s]. ``initial_orientation`` (w, x, y, z),
-    if given, replaces the initialisation from the first samples.
+    if given, replaces the initialisation from the first samples. ``backend``: see
+    :mod:`cf_estimator.core.kernel`.
     """
-    n = np.asarray(gyro_rad_s).shape[0]
+    gyro, acc, mg = _rows(gyro_rad_s, accel_m_s2, mag)
+    n = gyro.shape[0]
     t = sample_times(n, rate_hz, timestamps_s)
-    f = ComplementaryFilter(params, initial_orientation=initial_orientation)
+    f = ComplementaryFilter(params, initial_orientation=initial_orientation, backend=backend)
     out_q = np.full((n, 4), np.nan)
-    out_e = np.zeros((n, 3))
-    out_b = np.zeros((n, 3))
-    out_clip = np.zeros(n, dtype=bool)
-    out_phase = np.zeros(n, dtype=np.int8)
-    out_rest = np.zeros(n, dtype=bool)
-    out_mag = np.zeros(n, dtype=np.int8)
-    for i, g, a, m, dt in iterate_samples(gyro_rad_s, accel_m_s2, mag, t):
-        if not f.initialized or dt > 0.0:
-            q = f.update(g, a, dt if f.initialized else 1.0, m)
-        else:  # sample 0 with a given initial orientation: nothing to integrate yet
-            q = f.orientation_tuple()
-        if q is None:
-            continue
-        state = f._state  # read-only access to the live state, for speed
-        out_q[i] = q
-        out_e[i] = (state.ex, state.ey, state.ez)
-        out_b[i] = (state.bx, state.by, state.bz)
-        out_clip[i] = state.clipped
-        out_phase[i] = state.phase
-        out_rest[i] = state.at_rest
-        out_mag[i] = state.mag_status
-    return EstimateResult(t, out_q, out_e, out_clip, out_b, out_phase, out_rest, out_mag)
+    extra = np.zeros((n, EXTRA_COLUMNS))
+    _run_filter(f, gyro, acc, mg, t, out_q, extra)
+    return EstimateResult(
+        t, out_q, extra[:, 0:3], extra[:, 6] != 0.0, extra[:, 3:6],
+        extra[:, 7].astype(np.int8), extra[:, 8] != 0.0, extra[:, 9].astype(np.int8),
+    )
 
 
 def estimate_many(
@@ -137,24 +154,42 @@ def estimate_many(
     *,
     rate_hz: float | None = None,
     timestamps_s: ArrayLike | None = None,
-    on_sample: Callable[[int, np.ndarray], None] | None = None,
-    store: bool = True,
+    on_candidate: Callable[[int, np.ndarray], None] | None = None,
+    backend: str | None = None,
 ) -> np.ndarray | None:
-    """Run P parameter sets over one recording with :class:`BatchedFilter`.
+    """Run P parameter sets over one recording (same inputs and conventions as :func:`estimate`).
 
-    Returns (P, N, 4) quaternions (NaN before init) when ``store``; ``on_sample(i, q_P4)``
-    is called per sample otherwise (or as well), which keeps memory flat for long runs.
+    Returns (P, N, 4) q_world_from_sensor (NaN before init). With ``on_candidate``, nothing is
+    returned: ``on_candidate(p, q_N4)`` is called once per parameter set, in order, with its
+    (N, 4) quaternions (the array may be reused afterwards: copy what you keep).
+
+    The compiled backend runs one parameter set at a time over the whole recording; the Python
+    backend advances all P together with :class:`BatchedFilter` (NumPy arrays of shape (P,)).
     """
-    n = np.asarray(gyro_rad_s).shape[0]
+    if not params:
+        raise ValueError("estimate_many needs at least one parameter set")
+    gyro, acc, mg = _rows(gyro_rad_s, accel_m_s2, mag)
+    n = gyro.shape[0]
     t = sample_times(n, rate_hz, timestamps_s)
+    if resolve_backend(backend) == "compiled":
+        out = None if on_candidate is not None else np.full((len(params), n, 4), np.nan)
+        q = np.empty((n, 4))
+        for k, p in enumerate(params):
+            q.fill(np.nan)
+            _run_filter(ComplementaryFilter(p, backend="compiled"), gyro, acc, mg, t, q, None)
+            if on_candidate is not None:
+                on_candidate(k, q)
+            else:
+                out[k] = q  # type: ignore[index]
+        return out
     bf = BatchedFilter(params)
-    out = np.full((bf.size, n, 4), np.nan) if store else None
-    for i, g, a, m, dt in iterate_samples(gyro_rad_s, accel_m_s2, mag, t):
-        q = bf.update(g, a, dt if bf.initialized else 1.0, m)
-        if q is None:
-            continue
-        if out is not None:
-            out[:, i] = q
-        if on_sample is not None:
-            on_sample(i, q)
-    return out
+    out = np.full((bf.size, n, 4), np.nan)
+    for i, g, a, m, dt in iterate_samples(gyro, acc, mg, t):
+        qp = bf.update(g, a, dt if bf.initialized else 1.0, m)
+        if qp is not None:
+            out[:, i] = qp
+    if on_candidate is None:
+        return out
+    for k in range(bf.size):
+        on_candidate(k, out[k])
+    return None

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from cf_estimator.core import quaternion as quat
+from cf_estimator.core.kernel import compiled_kernel, resolve_backend
 from cf_estimator.core.ops import FloatOps
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import (
@@ -92,18 +93,48 @@ class FilterStatus:
     mag_yaw_rate_correction_rad_s: float  #: integral of the heading channel, world vertical
 
 
+#: Columns of :meth:`ComplementaryFilter.run_rows`'s ``extra_out``: raw error e (3, rad, sensor),
+#: bias b (3, rad/s, sensor), clipped, phase, at_rest, mag_status.
+EXTRA_COLUMNS = 10
+
+
 class ComplementaryFilter:
-    """Compensation-scheme attitude filter (seeds 000/003/004); see module docstrings."""
+    """Compensation-scheme attitude filter (seeds 000/003/004); see module docstrings.
+
+    ``backend``: 'compiled' (the C twin of the step, default when built) or 'python' (the
+    reference in :mod:`cf_estimator.core.step`); see :mod:`cf_estimator.core.kernel`.
+    """
 
     def __init__(
-        self, params: FilterParams | None = None, *, initial_orientation: Vector | None = None
+        self,
+        params: FilterParams | None = None,
+        *,
+        initial_orientation: Vector | None = None,
+        backend: str | None = None,
     ):
-        self._params = params if params is not None else FilterParams()
-        self._view = step_params(self._params)
-        self._state = StepState(0.0, False)
+        self.backend = resolve_backend(backend)
+        self._kernel_params: Any = None
+        self.set_params(params if params is not None else FilterParams())
+        self._state = self._new_state()
         self._initialized = False
         if initial_orientation is not None:
             self.initialize(initial_orientation)
+
+    # copy / deepcopy / pickle: the state travels as its field values (the compiled state and
+    # parameter objects are rebuilt on arrival)
+    def __getstate__(self) -> dict[str, Any]:
+        d = self.__dict__.copy()
+        d["_kernel_params"] = None
+        d["_state"] = {k: getattr(self._state, k) for k in StepState.FIELDS}
+        return d
+
+    def __setstate__(self, d: dict[str, Any]) -> None:
+        fields = d.pop("_state")
+        self.__dict__.update(d)
+        self.set_params(self._params)
+        self._state = self._new_state()
+        for k, v in fields.items():
+            setattr(self._state, k, v)
 
     # -- parameters --------------------------------------------------------------------------
     @property
@@ -117,6 +148,13 @@ class ComplementaryFilter:
             raise TypeError("params must be a FilterParams")
         self._params = params
         self._view = step_params(params)
+        if self.backend == "compiled":
+            self._kernel_params = compiled_kernel.Params(self._view)  # type: ignore[union-attr]
+
+    def _new_state(self) -> Any:
+        if self.backend == "compiled":
+            return compiled_kernel.State()  # type: ignore[union-attr]
+        return StepState(0.0, False)
 
     # -- state ---------------------------------------------------------------------------------
     @property
@@ -126,7 +164,7 @@ class ComplementaryFilter:
 
     def reset(self) -> None:
         """Forget everything: the next valid accelerometer sample initialises again."""
-        self._state = StepState(0.0, False)
+        self._state = self._new_state()
         self._initialized = False
 
     def initialize(self, q_world_from_sensor: Vector, *, heading_known: bool = True) -> None:
@@ -159,6 +197,8 @@ class ComplementaryFilter:
         missing accelerometer/magnetometer sample is skipped for this step (gyro-only).
         Magnetometer units are free (only the direction and relative norm are used).
         """
+        if self._kernel_params is not None and self._initialized:  # the compiled twin, same checks
+            return self._state.update(self._kernel_params, gyro_rad_s, accel_m_s2, dt_s, mag)
         if not self._initialized:
             self.initialize_from(accel_m_s2, mag) if accel_m_s2 is not None else None
             return self.orientation_tuple() if self._initialized else None
@@ -171,6 +211,38 @@ class ComplementaryFilter:
         mg = tuple(float(c) for c in mag) if valid_vector(mag) else None  # type: ignore[union-attr]
         step(self._state, self._view, (gx, gy, gz), acc, mg, float(dt_s), FloatOps)  # type: ignore[arg-type]
         return self.orientation_tuple()
+
+    def run_rows(
+        self,
+        gyro_rad_s: np.ndarray,
+        accel_m_s2: np.ndarray,
+        mag: np.ndarray | None,
+        dt_s: np.ndarray,
+        start: int,
+        q_out: np.ndarray,
+        extra_out: np.ndarray | None = None,
+    ) -> None:
+        """:meth:`update` for rows ``start``..N−1 of whole recordings (initialised filter only).
+
+        gyro/accel/mag: (N, 3) C-contiguous float64 (invalid accel/mag rows are skipped as in
+        update); dt_s: (N,) [s]; writes q_out (N, 4) and, if given, extra_out (N, EXTRA_COLUMNS)
+        for those rows. ValueError at the first non-finite gyro row or bad dt.
+        """
+        if not self._initialized:
+            raise RuntimeError("run_rows needs an initialised filter")
+        if self._kernel_params is not None:
+            self._state.run(self._kernel_params, gyro_rad_s, accel_m_s2, mag, dt_s, start, q_out,
+                            extra_out)
+            return
+        g_rows, a_rows = gyro_rad_s.tolist(), accel_m_s2.tolist()
+        m_rows = mag.tolist() if mag is not None else None
+        dts = dt_s.tolist()
+        s = self._state
+        for i in range(start, len(dts)):
+            q_out[i] = self.update(g_rows[i], a_rows[i], dts[i], m_rows[i] if m_rows else None)
+            if extra_out is not None:
+                extra_out[i] = (s.ex, s.ey, s.ez, s.bx, s.by, s.bz, s.clipped, s.phase,
+                                s.at_rest, s.mag_status)
 
     # -- outputs -----------------------------------------------------------------------------
     def _to_output(self, q_enu: Any) -> np.ndarray:
@@ -231,6 +303,6 @@ class ComplementaryFilter:
             mag_yaw_rate_correction_rad_s=float(s.z_m),
         )
 
-    def state_snapshot(self) -> StepState:
+    def state_snapshot(self) -> Any:
         """A copy of the full internal state (for tests and debugging)."""
         return self._state.copy()

@@ -1,0 +1,726 @@
+/*
+ * Compiled twin of cf_estimator/core/step.py: the same filter step, operation for operation.
+ *
+ * step.py is the reference (read it for the equations and their meaning); this file repeats its
+ * arithmetic in the same order, so both give the same bits on the same libm (tested to 1e-12 in
+ * test/test_kernel.py). Built with -ffp-contract=off: no fused multiply-adds, as in Python.
+ * Python's `x ** 2` is written pow(x, 2.0) here for the same reason.
+ *
+ * Module cf_estimator.core._kernel:
+ *   Params(view)  the parameter view of step_params() (FilterParams fields + mag_full), frozen;
+ *   State()       the filter state: one attribute per StepState field (same names, units and
+ *                 frames: q* = q_world(ENU)_from_sensor, b* gyro bias [rad/s, sensor], ...), and
+ *     .step(params, gyro, accel|None, mag|None, dt)      = step.step(...) with FloatOps
+ *     .update(params, gyro, accel, dt, mag=None)         = ComplementaryFilter.update once
+ *                                                          initialised (checks, step, output q)
+ *     .run(params, gyro, accel, mag|None, dt, start, q_out, extra_out|None)
+ *                                                        = that update for rows start..N-1 of
+ *                                                          C-contiguous float64 arrays
+ *     .copy()
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <structmember.h>
+#include <math.h>
+#include <string.h>
+
+#define PHASE_STARTUP 1
+#define PHASE_RUNNING 2
+#define PHASE_RECOVERING 3
+#define MAG_NONE 0
+#define MAG_USED 1
+#define MAG_REJECTED 2
+#define MAG_DISABLED 3
+/* constants of step.py (test_kernel.py checks they agree) */
+#define REST_LOWPASS_TIME_CONSTANT_S 0.5
+#define GRAVITY_TIME_CONSTANT_S 10.0
+#define MAG_REFERENCE_SAMPLES 20
+#define MAG_RELEARN_AFTER_S 20.0
+#define MAG_MAX_DT_S 1.0
+#define SMALL_ANGLE_RAD 1e-6
+#define EXTRA_COLUMNS 10 /* e(3), b(3), clipped, phase, at_rest, mag_status */
+
+/* ------------------------------------------------------------------------------------------ */
+typedef struct {
+    double k1, k2, k3, saturation_limit_rad, wide_saturation_limit_rad, rotation_threshold_rad_s,
+        acceleration_threshold_m_s2, acceleration_hold_s, aperiodic_time_constant_s,
+        startup_duration_s, startup_k1, recovery_trigger_s, r1, r2, mag_saturation_limit_rad,
+        mag_norm_tolerance, mag_dip_tolerance_rad, rest_gyro_threshold_rad_s,
+        rest_accel_threshold_m_s2, rest_time_s, rest_bias_time_constant_s, bias_limit_rad_s,
+        gravity_m_s2;
+    int use_saturation, use_mag, mag_full, mag_rejection, rest_bias_learning, ned;
+} cf_params;
+
+typedef struct {
+    double qw, qx, qy, qz, bx, by, bz, cx, cy, cz, lx, ly, lz, z_m, time_s, clip_timer_s,
+        rest_timer_s, glx, gly, glz, alx, aly, alz, mag_ref_norm, mag_ref_dip, mag_ref_count,
+        mag_reject_timer_s, mag_last_time_s, g_ref, accel_hold, rate_lp, ex, ey, ez, error_norm,
+        fx, fy, fz, yaw_error_rad, recovery_count;
+    char recovering, at_rest, mag_disturbed, heading_initialized, clipped, accel_used;
+    int mag_status, phase;
+} cf_state;
+
+static void state_init(cf_state *s)
+{
+    memset(s, 0, sizeof(*s));
+    s->qw = 1.0;
+    s->mag_last_time_s = -1.0;
+}
+
+/* ---- the step (mirrors step.py) ----------------------------------------------------------- */
+static inline double maxd(double a, double b) { return a >= b ? a : b; }
+static inline double mind(double a, double b) { return a <= b ? a : b; }
+
+static void mul(double aw, double ax, double ay, double az, double bw, double bx, double by,
+                double bz, double *o)
+{
+    o[0] = aw * bw - ax * bx - ay * by - az * bz;
+    o[1] = aw * bx + ax * bw + ay * bz - az * by;
+    o[2] = aw * by - ax * bz + ay * bw + az * bx;
+    o[3] = aw * bz + ax * by - ay * bx + az * bw;
+}
+
+static void expmap(double vx, double vy, double vz, double *o)
+{
+    double angle = sqrt(vx * vx + vy * vy + vz * vz);
+    double k = angle < SMALL_ANGLE_RAD ? 0.5 - angle * angle / 48.0 : sin(0.5 * angle) / angle;
+    o[0] = cos(0.5 * angle);
+    o[1] = k * vx;
+    o[2] = k * vy;
+    o[3] = k * vz;
+}
+
+static void rotate(double qw, double qx, double qy, double qz, double vx, double vy, double vz,
+                   double *o)
+{
+    double tx = 2.0 * (qy * vz - qz * vy);
+    double ty = 2.0 * (qz * vx - qx * vz);
+    double tz = 2.0 * (qx * vy - qy * vx);
+    o[0] = vx + qw * tx + (qy * tz - qz * ty);
+    o[1] = vy + qw * ty + (qz * tx - qx * tz);
+    o[2] = vz + qw * tz + (qx * ty - qy * tx);
+}
+
+static void mul_into(cf_state *s, const double *d)
+{
+    double q[4];
+    mul(s->qw, s->qx, s->qy, s->qz, d[0], d[1], d[2], d[3], q);
+    s->qw = q[0];
+    s->qx = q[1];
+    s->qy = q[2];
+    s->qz = q[3];
+}
+
+static void turn_heading(cf_state *s, double angle)
+{
+    double cw = cos(0.5 * angle), cz = sin(0.5 * angle);
+    double qw = cw * s->qw - cz * s->qz, qx = cw * s->qx - cz * s->qy;
+    double qy = cw * s->qy + cz * s->qx, qz = cw * s->qz + cz * s->qw;
+    s->qw = qw;
+    s->qx = qx;
+    s->qy = qy;
+    s->qz = qz;
+    double c = cw * cw - cz * cz, sn = 2.0 * cw * cz;
+    double lx = c * s->lx - sn * s->ly, ly = sn * s->lx + c * s->ly;
+    s->lx = lx;
+    s->ly = ly;
+}
+
+static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int fast, int learn)
+{
+    double mx = mag[0], my = mag[1], mz = mag[2];
+    double mn = sqrt(mx * mx + my * my + mz * mz);
+    double ux = mx / mn, uy = my / mn, uz = mz / mn;
+    double w[3];
+    rotate(s->qw, s->qx, s->qy, s->qz, ux, uy, uz, w);
+    double horizontal = sqrt(w[0] * w[0] + w[1] * w[1]);
+    double dip = atan2(-w[2], horizontal);
+    double dt_m = mind(s->mag_last_time_s < 0.0 ? 0.0 : s->time_s - s->mag_last_time_s,
+                       MAG_MAX_DT_S);
+
+    int learning = p->use_mag && (s->mag_ref_count < MAG_REFERENCE_SAMPLES);
+    int relearn = s->mag_reject_timer_s > MAG_RELEARN_AFTER_S;
+    if (relearn) {
+        s->mag_ref_count = 0.0;
+        s->mag_reject_timer_s = 0.0;
+    }
+    double n = s->mag_ref_count + 1;
+    if (learning) {
+        s->mag_ref_norm = s->mag_ref_norm + (mn - s->mag_ref_norm) / n;
+        s->mag_ref_dip = s->mag_ref_dip + (dip - s->mag_ref_dip) / n;
+        s->mag_ref_count = n;
+    }
+    double off_norm = maxd(mn / maxd(s->mag_ref_norm, 1e-300) - 1.0,
+                           1.0 - mn / maxd(s->mag_ref_norm, 1e-300));
+    double off_dip = maxd(dip - s->mag_ref_dip, s->mag_ref_dip - dip);
+    int disturbed = p->mag_rejection && !learning &&
+                    ((off_norm > p->mag_norm_tolerance) || (off_dip > p->mag_dip_tolerance_rad));
+    s->mag_disturbed = (char)disturbed;
+    int usable = p->use_mag && !disturbed && (horizontal > 1e-3);
+    s->mag_status = p->use_mag ? (disturbed ? MAG_REJECTED : MAG_USED) : MAG_DISABLED;
+    if (usable) s->mag_last_time_s = s->time_s;
+    int first = usable && !s->heading_initialized;
+    s->heading_initialized = (char)(s->heading_initialized || usable);
+
+    double r1 = fast ? maxd(p->r1, p->startup_k1) : p->r1;
+    double gain = usable ? r1 * dt_m / (1.0 + r1 * dt_m) : 0.0;
+    double ldt = (usable && learn) ? dt_m : 0.0;
+    double limit = fast ? 4.0 : p->mag_saturation_limit_rad;
+
+    double yaw_error = atan2(w[0], w[1]);
+    s->yaw_error_rad = usable ? yaw_error : 0.0;
+    double yaw_c = mind(maxd(yaw_error, -limit), limit);
+    int yaw_mode = !p->mag_full || first;
+    double angle = first ? yaw_error : (yaw_mode ? gain * yaw_c : 0.0);
+    s->z_m = s->z_m + ((yaw_mode && !first) ? p->r2 * ldt * yaw_c : 0.0);
+    turn_heading(s, angle);
+
+    int full = p->mag_full && !first && usable;
+    if (!full) return; /* step.py runs the block below scaled by 0: q and b keep their values */
+    double pr[3], d[4];
+    rotate(s->qw, -s->qx, -s->qy, -s->qz, 0.0 * s->mag_ref_dip, cos(s->mag_ref_dip),
+           -sin(s->mag_ref_dip), pr);
+    double ex = uy * pr[2] - uz * pr[1], ey = uz * pr[0] - ux * pr[2], ez = ux * pr[1] - uy * pr[0];
+    double en = sqrt(ex * ex + ey * ey + ez * ez);
+    double scale = mind(1.0, limit / maxd(en, 1e-300));
+    ex = ex * scale;
+    ey = ey * scale;
+    ez = ez * scale;
+    s->bx = s->bx - p->r2 * ldt * ex;
+    s->by = s->by - p->r2 * ldt * ey;
+    s->bz = s->bz - p->r2 * ldt * ez;
+    expmap(gain * ex, gain * ey, gain * ez, d);
+    mul_into(s, d);
+}
+
+static void cf_step(cf_state *s, const cf_params *p, const double *g, const double *acc,
+                    const double *mag, double dt)
+{
+    double gx = g[0], gy = g[1], gz = g[2], d[4], w[3];
+    s->time_s = s->time_s + dt;
+    int startup = s->time_s <= p->startup_duration_s;
+    int fast = startup || s->recovering;
+    int learn = !fast;
+
+    /* 1. predict */
+    expmap((gx - s->bx) * dt, (gy - s->by) * dt, (gz - s->bz) * dt, d);
+    mul_into(s, d);
+    turn_heading(s, s->z_m * dt);
+
+    s->clipped = 0;
+    s->accel_used = acc != NULL;
+    if (acc != NULL) {
+        double ax = acc[0], ay = acc[1], az = acc[2];
+        double an = sqrt(ax * ax + ay * ay + az * az);
+        s->g_ref = s->g_ref > 0.0 ? s->g_ref : p->gravity_m_s2;
+        double deviation = maxd(an - s->g_ref, s->g_ref - an);
+        double lw = dt / (REST_LOWPASS_TIME_CONSTANT_S + dt);
+        double glx = s->glx + lw * (gx - s->glx), gly = s->gly + lw * (gy - s->gly),
+               glz = s->glz + lw * (gz - s->glz);
+        s->glx = glx;
+        s->gly = gly;
+        s->glz = glz;
+        double alx = s->alx + lw * (ax - s->alx), aly = s->aly + lw * (ay - s->aly),
+               alz = s->alz + lw * (az - s->alz);
+        s->alx = alx;
+        s->aly = aly;
+        s->alz = alz;
+        double gdev = sqrt(pow(gx - s->glx, 2.0) + pow(gy - s->gly, 2.0) + pow(gz - s->glz, 2.0));
+        double adev = sqrt(pow(ax - s->alx, 2.0) + pow(ay - s->aly, 2.0) + pow(az - s->alz, 2.0));
+        int steady = (gdev < p->rest_gyro_threshold_rad_s) &&
+                     (adev < p->rest_accel_threshold_m_s2) &&
+                     (sqrt(pow(s->glx, 2.0) + pow(s->gly, 2.0) + pow(s->glz, 2.0)) <
+                      p->bias_limit_rad_s * 1.7320508075688772);
+        double gw = steady ? dt / (GRAVITY_TIME_CONSTANT_S + dt) : 0.0;
+        s->g_ref = s->g_ref + gw * (an - s->g_ref);
+        s->rest_timer_s = steady ? s->rest_timer_s + dt : 0.0;
+        s->at_rest = (char)(p->rest_bias_learning && learn && (s->rest_timer_s >= p->rest_time_s));
+        int quick = fast || (s->at_rest && (deviation < p->rest_accel_threshold_m_s2));
+        double decayed =
+            s->accel_hold * (p->acceleration_hold_s / (p->acceleration_hold_s + dt));
+        s->accel_hold = maxd(deviation, decayed);
+        int accelerating = s->accel_hold > p->acceleration_threshold_m_s2;
+        double rate =
+            sqrt(pow(gx - s->bx, 2.0) + pow(gy - s->by, 2.0) + pow(gz - s->bz, 2.0));
+        s->rate_lp = s->rate_lp + lw * (rate - s->rate_lp);
+        double ux = ax / s->g_ref, uy = ay / s->g_ref, uz = az / s->g_ref;
+        /* 2. error */
+        double vx = 2.0 * (s->qx * s->qz - s->qw * s->qy);
+        double vy = 2.0 * (s->qy * s->qz + s->qw * s->qx);
+        double vz = 1.0 - 2.0 * (s->qx * s->qx + s->qy * s->qy);
+        double ex = uy * vz - uz * vy, ey = uz * vx - ux * vz, ez = ux * vy - uy * vx;
+        double en = sqrt(ex * ex + ey * ey + ez * ez);
+        s->ex = ex;
+        s->ey = ey;
+        s->ez = ez;
+        s->error_norm = en;
+        /* 3. saturation by norm */
+        int tight = accelerating && (s->rate_lp < p->rotation_threshold_rad_s);
+        double limit = tight ? p->saturation_limit_rad : p->wide_saturation_limit_rad;
+        int clipped = p->use_saturation && !quick && (en > limit);
+        double scale = clipped ? limit / maxd(en, 1e-300) : 1.0;
+        /* 4. aperiodic unit in the world frame */
+        rotate(s->qw, s->qx, s->qy, s->qz, ex * scale, ey * scale, ez * scale, w);
+        double weight = quick ? 1.0 : dt / (p->aperiodic_time_constant_s + dt);
+        s->lx = s->lx + weight * (w[0] - s->lx);
+        s->ly = s->ly + weight * (w[1] - s->ly);
+        s->lz = s->lz + weight * (w[2] - s->lz);
+        double f[3];
+        rotate(s->qw, -s->qx, -s->qy, -s->qz, s->lx, s->ly, s->lz, f);
+        s->fx = f[0];
+        s->fy = f[1];
+        s->fz = f[2];
+        /* 5. regulator */
+        double k3dt = learn ? p->k3 * dt : 0.0;
+        s->cx = s->cx + k3dt * f[0];
+        s->cy = s->cy + k3dt * f[1];
+        s->cz = s->cz + k3dt * f[2];
+        double ldt = learn ? dt : 0.0;
+        s->bx = s->bx - ldt * (p->k2 * f[0] + s->cx);
+        s->by = s->by - ldt * (p->k2 * f[1] + s->cy);
+        s->bz = s->bz - ldt * (p->k2 * f[2] + s->cz);
+        double k1 = quick ? maxd(p->k1, p->startup_k1) : p->k1;
+        double gain = k1 * dt / (1.0 + k1 * dt);
+        expmap(gain * f[0], gain * f[1], gain * f[2], d);
+        mul_into(s, d);
+        /* recovery */
+        s->clip_timer_s = clipped ? s->clip_timer_s + dt : 0.0;
+        int enter = (p->recovery_trigger_s > 0.0) && (s->clip_timer_s >= p->recovery_trigger_s) &&
+                    learn;
+        int leave = s->recovering && (en < 0.5 * limit);
+        if (enter) s->recovery_count = s->recovery_count + 1;
+        s->recovering = (char)(s->recovering ? !leave : enter);
+        if (enter) s->clip_timer_s = 0.0;
+        s->clipped = (char)clipped;
+        /* bias at rest */
+        double bw = s->at_rest ? dt / (p->rest_bias_time_constant_s + dt) : 0.0;
+        s->bx = s->bx + bw * (s->glx - s->bx);
+        s->by = s->by + bw * (s->gly - s->by);
+        s->bz = s->bz + bw * (s->glz - s->bz);
+    }
+    double lim = p->bias_limit_rad_s;
+    s->bx = mind(maxd(s->bx, -lim), lim);
+    s->by = mind(maxd(s->by, -lim), lim);
+    s->bz = mind(maxd(s->bz, -lim), lim);
+
+    s->mag_reject_timer_s = s->mag_disturbed ? s->mag_reject_timer_s + dt : 0.0;
+    s->mag_status = p->use_mag ? MAG_NONE : MAG_DISABLED;
+    if (mag != NULL) magnetometer(s, p, mag, fast, learn);
+    double qn = sqrt(s->qw * s->qw + s->qx * s->qx + s->qy * s->qy + s->qz * s->qz);
+    s->qw = s->qw / qn;
+    s->qx = s->qx / qn;
+    s->qy = s->qy / qn;
+    s->qz = s->qz / qn;
+    s->phase = s->recovering ? PHASE_RECOVERING : (startup ? PHASE_STARTUP : PHASE_RUNNING);
+}
+
+/* q in the output frame (ENU as is; NED = q_ned_from_enu ⊗ q, as filter.orientation_tuple) */
+static void output_q(const cf_state *s, int ned, double *o)
+{
+    if (ned) {
+        double h = sqrt(0.5);
+        o[0] = -h * (s->qx + s->qy);
+        o[1] = h * (s->qw + s->qz);
+        o[2] = h * (s->qw - s->qz);
+        o[3] = h * (s->qy - s->qx);
+    } else {
+        o[0] = s->qw;
+        o[1] = s->qx;
+        o[2] = s->qy;
+        o[3] = s->qz;
+    }
+}
+
+/* valid_vector(): finite and non-zero norm */
+static int valid3(const double *v)
+{
+    return isfinite(v[0] + v[1] + v[2]) && (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) > 0.0;
+}
+
+/* ---- Python: Params ------------------------------------------------------------------------ */
+typedef struct {
+    PyObject_HEAD
+    cf_params p;
+} ParamsObject;
+
+typedef struct {
+    const char *name;
+    size_t offset;
+    int is_bool;
+} field_spec;
+
+#define DF(n) {#n, offsetof(cf_params, n), 0}
+#define BF(n) {#n, offsetof(cf_params, n), 1}
+static const field_spec PARAM_FIELDS[] = {
+    DF(k1), DF(k2), DF(k3), DF(saturation_limit_rad), DF(wide_saturation_limit_rad),
+    DF(rotation_threshold_rad_s), DF(acceleration_threshold_m_s2), DF(acceleration_hold_s),
+    DF(aperiodic_time_constant_s), DF(startup_duration_s), DF(startup_k1),
+    DF(recovery_trigger_s), DF(r1), DF(r2), DF(mag_saturation_limit_rad),
+    DF(mag_norm_tolerance), DF(mag_dip_tolerance_rad), DF(rest_gyro_threshold_rad_s),
+    DF(rest_accel_threshold_m_s2), DF(rest_time_s), DF(rest_bias_time_constant_s),
+    DF(bias_limit_rad_s), DF(gravity_m_s2), BF(use_saturation), BF(use_mag), BF(mag_full),
+    BF(mag_rejection), BF(rest_bias_learning), {NULL, 0, 0}};
+
+static int Params_init(ParamsObject *self, PyObject *args, PyObject *kwds)
+{
+    PyObject *view;
+    static char *kwlist[] = {"view", NULL};
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O", kwlist, &view)) return -1;
+    for (const field_spec *f = PARAM_FIELDS; f->name != NULL; f++) {
+        PyObject *v = PyObject_GetAttrString(view, f->name);
+        if (v == NULL) return -1;
+        char *dst = (char *)&self->p + f->offset;
+        if (f->is_bool) {
+            int b = PyObject_IsTrue(v);
+            Py_DECREF(v);
+            if (b < 0) return -1;
+            *(int *)dst = b;
+        } else {
+            double d = PyFloat_AsDouble(v);
+            Py_DECREF(v);
+            if (d == -1.0 && PyErr_Occurred()) return -1;
+            *(double *)dst = d;
+        }
+    }
+    PyObject *frame = PyObject_GetAttrString(view, "world_frame");
+    if (frame == NULL) return -1;
+    int ned = PyUnicode_Check(frame) && PyUnicode_CompareWithASCIIString(frame, "ned") == 0;
+    Py_DECREF(frame);
+    self->p.ned = ned;
+    return 0;
+}
+
+static PyTypeObject ParamsType = {
+    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "cf_estimator.core._kernel.Params",
+    .tp_basicsize = sizeof(ParamsObject),
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_doc = "Filter parameters for the compiled step (from step_params(FilterParams)).",
+    .tp_new = PyType_GenericNew,
+    .tp_init = (initproc)Params_init,
+};
+
+/* ---- Python: State ------------------------------------------------------------------------- */
+typedef struct {
+    PyObject_HEAD
+    cf_state s;
+} StateObject;
+
+static PyTypeObject StateType;
+
+static PyObject *State_new(PyTypeObject *type, PyObject *args, PyObject *kwds)
+{
+    StateObject *self = (StateObject *)type->tp_alloc(type, 0);
+    if (self != NULL) state_init(&self->s);
+    return (PyObject *)self;
+}
+
+/* Read a 3-vector of floats. 1: read; 0: not 3 long (nothing read); -1: error set. */
+static int read3(PyObject *o, double *v)
+{
+    if (PyTuple_CheckExact(o) || PyList_CheckExact(o)) {
+        if (Py_SIZE(o) != 3) return 0;
+        PyObject **items = PyTuple_CheckExact(o) ? ((PyTupleObject *)o)->ob_item
+                                                 : ((PyListObject *)o)->ob_item;
+        for (int i = 0; i < 3; i++) {
+            v[i] = PyFloat_AsDouble(items[i]);
+            if (v[i] == -1.0 && PyErr_Occurred()) return -1;
+        }
+        return 1;
+    }
+    if (PyObject_CheckBuffer(o)) { /* e.g. a NumPy float64 row */
+        Py_buffer b;
+        if (PyObject_GetBuffer(o, &b, PyBUF_FORMAT | PyBUF_STRIDES) == 0) {
+            int ok = b.ndim == 1 && b.itemsize == 8 && b.format != NULL &&
+                     strcmp(b.format, "d") == 0;
+            if (ok && b.shape[0] == 3) {
+                for (int i = 0; i < 3; i++)
+                    memcpy(&v[i], (char *)b.buf + i * b.strides[0], sizeof(double));
+            }
+            Py_ssize_t len = b.ndim == 1 ? b.shape[0] : -1;
+            PyBuffer_Release(&b);
+            if (ok) return len == 3 ? 1 : 0;
+        } else {
+            PyErr_Clear();
+        }
+    }
+    PyObject *seq = PySequence_Fast(o, "expected a sequence of 3 numbers");
+    if (seq == NULL) return -1;
+    int out = 0;
+    if (PySequence_Fast_GET_SIZE(seq) == 3) {
+        out = 1;
+        for (int i = 0; i < 3 && out == 1; i++) {
+            v[i] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(seq, i));
+            if (v[i] == -1.0 && PyErr_Occurred()) out = -1;
+        }
+    }
+    Py_DECREF(seq);
+    return out;
+}
+
+/* An optional 3-vector: 1 present and valid, 0 absent/invalid, -1 error. */
+static int read_optional3(PyObject *o, double *v)
+{
+    if (o == Py_None) return 0;
+    int r = read3(o, v);
+    if (r <= 0) return r;
+    return valid3(v);
+}
+
+static int check_params(PyObject *obj)
+{
+    if (!PyObject_TypeCheck(obj, &ParamsType)) {
+        PyErr_SetString(PyExc_TypeError, "params must be a cf_estimator.core._kernel.Params");
+        return 0;
+    }
+    return 1;
+}
+
+static PyObject *State_step(StateObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    double g[3], a[3], m[3];
+    if (nargs != 5) {
+        PyErr_SetString(PyExc_TypeError, "step(params, gyro, accel, mag, dt)");
+        return NULL;
+    }
+    if (!check_params(args[0])) return NULL;
+    if (read3(args[1], g) != 1) {
+        if (!PyErr_Occurred()) PyErr_SetString(PyExc_ValueError, "gyro must have 3 components");
+        return NULL;
+    }
+    int ha = args[2] == Py_None ? 0 : read3(args[2], a);
+    int hm = args[3] == Py_None ? 0 : read3(args[3], m);
+    double dt = PyFloat_AsDouble(args[4]);
+    if (ha < 0 || hm < 0 || (dt == -1.0 && PyErr_Occurred())) return NULL;
+    cf_step(&self->s, &((ParamsObject *)args[0])->p, g, ha ? a : NULL, hm ? m : NULL, dt);
+    Py_RETURN_NONE;
+}
+
+static PyObject *q_tuple(const cf_state *s, int ned)
+{
+    double q[4];
+    output_q(s, ned, q);
+    PyObject *t = PyTuple_New(4);
+    if (t == NULL) return NULL;
+    for (int i = 0; i < 4; i++) {
+        PyObject *f = PyFloat_FromDouble(q[i]);
+        if (f == NULL) {
+            Py_DECREF(t);
+            return NULL;
+        }
+        PyTuple_SET_ITEM(t, i, f);
+    }
+    return t;
+}
+
+static PyObject *State_update(StateObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    double g[3], a[3], m[3];
+    if (nargs < 4 || nargs > 5) {
+        PyErr_SetString(PyExc_TypeError, "update(params, gyro, accel, dt, mag=None)");
+        return NULL;
+    }
+    if (!check_params(args[0])) return NULL;
+    int hg = read3(args[1], g);
+    if (hg < 0) return NULL;
+    if (hg == 0) {
+        PyErr_Format(PyExc_ValueError, "gyro sample must have 3 components: %R", args[1]);
+        return NULL;
+    }
+    if (!isfinite(g[0] + g[1] + g[2])) {
+        PyObject *t = PySequence_Tuple(args[1]);
+        if (t != NULL) {
+            PyErr_Format(PyExc_ValueError, "gyro sample is not finite: %R", t);
+            Py_DECREF(t);
+        }
+        return NULL;
+    }
+    double dt = PyFloat_AsDouble(args[3]);
+    if (dt == -1.0 && PyErr_Occurred()) return NULL;
+    if (!(dt > 0.0 && isfinite(dt))) {
+        PyErr_Format(PyExc_ValueError, "dt must be a positive finite number of seconds, got %R",
+                     args[3]);
+        return NULL;
+    }
+    int ha = read_optional3(args[2], a);
+    int hm = nargs == 5 ? read_optional3(args[4], m) : 0;
+    if (ha < 0 || hm < 0) return NULL;
+    const cf_params *p = &((ParamsObject *)args[0])->p;
+    cf_step(&self->s, p, g, ha ? a : NULL, hm ? m : NULL, dt);
+    return q_tuple(&self->s, p->ned);
+}
+
+/* A C-contiguous float64 buffer of exactly `count` doubles (None allowed if `optional`). */
+static int get_array(PyObject *o, Py_buffer *b, Py_ssize_t count, int writable, int optional,
+                     const char *name)
+{
+    b->obj = NULL;
+    if (o == Py_None) {
+        if (optional) return 1;
+        PyErr_Format(PyExc_TypeError, "%s is required", name);
+        return 0;
+    }
+    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    if (PyObject_GetBuffer(o, b, flags) < 0) return 0;
+    if (b->itemsize != 8 || b->format == NULL || strcmp(b->format, "d") != 0 ||
+        b->len != count * 8) {
+        PyErr_Format(PyExc_ValueError, "%s must be a C-contiguous float64 array of %zd values",
+                     name, count);
+        PyBuffer_Release(b);
+        b->obj = NULL;
+        return 0;
+    }
+    return 1;
+}
+
+static PyObject *State_run(StateObject *self, PyObject *args)
+{
+    PyObject *params, *og, *oa, *om, *odt, *oq, *ox;
+    Py_ssize_t start;
+    if (!PyArg_ParseTuple(args, "OOOOOnOO:run", &params, &og, &oa, &om, &odt, &start, &oq, &ox))
+        return NULL;
+    if (!check_params(params)) return NULL;
+    Py_buffer bdt;
+    if (!get_array(odt, &bdt, PyObject_Length(odt), 0, 0, "dt")) return NULL;
+    Py_ssize_t n = bdt.len / 8;
+    Py_buffer bg = {0}, ba = {0}, bm = {0}, bq = {0}, bx = {0};
+    PyObject *result = NULL;
+    if (!get_array(og, &bg, 3 * n, 0, 0, "gyro") || !get_array(oa, &ba, 3 * n, 0, 0, "accel") ||
+        !get_array(om, &bm, 3 * n, 0, 1, "mag") || !get_array(oq, &bq, 4 * n, 1, 0, "q_out") ||
+        !get_array(ox, &bx, EXTRA_COLUMNS * n, 1, 1, "extra_out"))
+        goto done;
+    if (start < 0 || start > n) {
+        PyErr_SetString(PyExc_ValueError, "start out of range");
+        goto done;
+    }
+    const cf_params *p = &((ParamsObject *)params)->p;
+    const double *G = bg.buf, *A = ba.buf, *M = bm.obj ? bm.buf : NULL, *DT = bdt.buf;
+    double *Q = bq.buf, *X = bx.obj ? bx.buf : NULL;
+    Py_ssize_t bad = -1;
+    int bad_dt = 0;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = start; i < n; i++) {
+        const double *g = G + 3 * i, *a = A + 3 * i, *m = M ? M + 3 * i : NULL;
+        if (!isfinite(g[0] + g[1] + g[2])) {
+            bad = i;
+            break;
+        }
+        if (!(DT[i] > 0.0 && isfinite(DT[i]))) {
+            bad = i;
+            bad_dt = 1;
+            break;
+        }
+        cf_step(&self->s, p, g, valid3(a) ? a : NULL, (m && valid3(m)) ? m : NULL, DT[i]);
+        output_q(&self->s, p->ned, Q + 4 * i);
+        if (X) {
+            const cf_state *s = &self->s;
+            double *x = X + EXTRA_COLUMNS * i;
+            x[0] = s->ex;
+            x[1] = s->ey;
+            x[2] = s->ez;
+            x[3] = s->bx;
+            x[4] = s->by;
+            x[5] = s->bz;
+            x[6] = s->clipped;
+            x[7] = s->phase;
+            x[8] = s->at_rest;
+            x[9] = s->mag_status;
+        }
+    }
+    Py_END_ALLOW_THREADS
+    if (bad >= 0) {
+        if (bad_dt)
+            PyErr_Format(PyExc_ValueError, "dt must be positive and finite (row %zd)", bad);
+        else {
+            PyObject *t = Py_BuildValue("(ddd)", G[3 * bad], G[3 * bad + 1], G[3 * bad + 2]);
+            if (t != NULL) {
+                PyErr_Format(PyExc_ValueError, "gyro sample is not finite: %R (row %zd)", t, bad);
+                Py_DECREF(t);
+            }
+        }
+        goto done;
+    }
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    PyBuffer_Release(&bdt);
+    if (bg.obj) PyBuffer_Release(&bg);
+    if (ba.obj) PyBuffer_Release(&ba);
+    if (bm.obj) PyBuffer_Release(&bm);
+    if (bq.obj) PyBuffer_Release(&bq);
+    if (bx.obj) PyBuffer_Release(&bx);
+    return result;
+}
+
+static PyObject *State_copy(StateObject *self, PyObject *Py_UNUSED(ignored))
+{
+    StateObject *new = (StateObject *)StateType.tp_alloc(&StateType, 0);
+    if (new != NULL) new->s = self->s;
+    return (PyObject *)new;
+}
+
+static PyMethodDef State_methods[] = {
+    {"step", (PyCFunction)(void (*)(void))State_step, METH_FASTCALL,
+     "step(params, gyro, accel|None, mag|None, dt): step.step() in C (no input checks)."},
+    {"update", (PyCFunction)(void (*)(void))State_update, METH_FASTCALL,
+     "update(params, gyro, accel, dt, mag=None) -> q (w, x, y, z) in the output frame."},
+    {"run", (PyCFunction)State_run, METH_VARARGS,
+     "run(params, gyro, accel, mag|None, dt, start, q_out, extra_out|None): rows start..N-1."},
+    {"copy", (PyCFunction)State_copy, METH_NOARGS, "A copy of the state."},
+    {NULL, NULL, 0, NULL}};
+
+#define SD(n) {#n, T_DOUBLE, offsetof(StateObject, s) + offsetof(cf_state, n), 0, NULL}
+#define SB(n) {#n, T_BOOL, offsetof(StateObject, s) + offsetof(cf_state, n), 0, NULL}
+#define SI(n) {#n, T_INT, offsetof(StateObject, s) + offsetof(cf_state, n), 0, NULL}
+static PyMemberDef State_members[] = {
+    SD(qw), SD(qx), SD(qy), SD(qz), SD(bx), SD(by), SD(bz), SD(cx), SD(cy), SD(cz), SD(lx),
+    SD(ly), SD(lz), SD(z_m), SD(time_s), SD(clip_timer_s), SB(recovering), SD(rest_timer_s),
+    SD(glx), SD(gly), SD(glz), SD(alx), SD(aly), SD(alz), SB(at_rest), SD(mag_ref_norm),
+    SD(mag_ref_dip), SD(mag_ref_count), SB(mag_disturbed), SD(mag_reject_timer_s),
+    SD(mag_last_time_s), SB(heading_initialized), SD(g_ref), SD(accel_hold), SD(rate_lp),
+    SD(ex), SD(ey), SD(ez), SD(error_norm), SD(fx), SD(fy), SD(fz), SB(clipped),
+    SB(accel_used), SI(mag_status), SD(yaw_error_rad), SI(phase), SD(recovery_count),
+    {NULL, 0, 0, 0, NULL}};
+
+static PyTypeObject StateType = {
+    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "cf_estimator.core._kernel.State",
+    .tp_basicsize = sizeof(StateObject),
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_doc = "Filter state of the compiled step (the fields of step.StepState).",
+    .tp_new = State_new,
+    .tp_methods = State_methods,
+    .tp_members = State_members,
+};
+
+static struct PyModuleDef kernel_module = {
+    PyModuleDef_HEAD_INIT, "_kernel", "Compiled twin of cf_estimator.core.step.", -1, NULL};
+
+PyMODINIT_FUNC PyInit__kernel(void)
+{
+    if (PyType_Ready(&ParamsType) < 0 || PyType_Ready(&StateType) < 0) return NULL;
+    PyObject *m = PyModule_Create(&kernel_module);
+    if (m == NULL) return NULL;
+    PyObject *fields = PyList_New(0);
+    for (PyMemberDef *d = State_members; d->name != NULL; d++) {
+        PyObject *name = PyUnicode_FromString(d->name);
+        PyList_Append(fields, name);
+        Py_DECREF(name);
+    }
+    if (PyDict_SetItemString(StateType.tp_dict, "FIELDS", fields) < 0) return NULL;
+    Py_DECREF(fields);
+    PyObject *consts = Py_BuildValue("{s:d,s:d,s:i,s:d,s:d,s:d,s:i}", "REST_LOWPASS_TIME_CONSTANT_S",
+                                     REST_LOWPASS_TIME_CONSTANT_S, "GRAVITY_TIME_CONSTANT_S",
+                                     GRAVITY_TIME_CONSTANT_S, "MAG_REFERENCE_SAMPLES",
+                                     MAG_REFERENCE_SAMPLES, "MAG_RELEARN_AFTER_S",
+                                     MAG_RELEARN_AFTER_S, "MAG_MAX_DT_S", MAG_MAX_DT_S,
+                                     "SMALL_ANGLE_RAD", SMALL_ANGLE_RAD, "EXTRA_COLUMNS",
+                                     EXTRA_COLUMNS);
+    Py_INCREF(&ParamsType);
+    Py_INCREF(&StateType);
+    if (consts == NULL || PyModule_AddObject(m, "CONSTANTS", consts) < 0 ||
+        PyModule_AddObject(m, "Params", (PyObject *)&ParamsType) < 0 ||
+        PyModule_AddObject(m, "State", (PyObject *)&StateType) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
+}

@@ -1,0 +1,218 @@
+"""The compiled step (core/_kernel.c) against its reference, core/step.py run with floats.
+
+Both must give the same numbers for the same inputs: every branch of the step (start-up, rest,
+tight and wide clip, recovery, magnetometer rejection and re-learning, 'full' mode, NED output,
+missing and invalid samples, variable dt) is driven here and compared sample by sample.
+
+Without the compiled kernel these tests skip — unless CF_ESTIMATOR_REQUIRE_KERNEL=1 (set by
+scripts/test.sh, where a C compiler is present), which turns the skip into a failure.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from cf_estimator.core import kernel, ops, step
+from cf_estimator.core.batch import estimate, estimate_many
+from cf_estimator.core.filter import ComplementaryFilter
+from cf_estimator.core.params import FilterParams
+
+if not kernel.compiled_available():
+    if os.environ.get("CF_ESTIMATOR_REQUIRE_KERNEL") == "1":
+        pytest.fail("the compiled kernel did not build (CF_ESTIMATOR_REQUIRE_KERNEL=1)",
+                    pytrace=False)
+    pytest.skip("compiled kernel not built (no C compiler at install time)",
+                allow_module_level=True)
+
+G = 9.80665
+FIELD = np.array([0.0, 20.0, -40.0])  # µT, ENU-ish, any unit works
+
+
+def rich_recording(n: int = 9000, seed: int = 3) -> tuple[np.ndarray, ...]:
+    """Motion, rest, impacts, a long push (recovery), magnetic disturbances, gaps in the data
+    (the first ``n`` of 9000 samples, ~90 s)."""
+    t, gyro, acc, mag = _rich_recording(seed)
+    return t[:n], gyro[:n], acc[:n], mag[:n]
+
+
+def _rich_recording(seed: int) -> tuple[np.ndarray, ...]:
+    n = 9000
+    rng = np.random.default_rng(seed)
+    t = np.cumsum(rng.uniform(0.004, 0.016, n))  # variable dt
+    gyro = rng.normal(0.0, 0.4, (n, 3)) + 0.01
+    acc = rng.normal(0.0, 0.6, (n, 3)) + [0.3, -0.2, G]
+    mag = rng.normal(0.0, 0.5, (n, 3)) + FIELD
+    gyro[2000:3500] = 0.012 + rng.normal(0.0, 0.0005, (1500, 3))  # rest with a bias
+    acc[2000:3500] = [0.2, 0.1, G - 0.05]
+    acc[3000:3010] += [30.0, 0.0, 0.0]  # impacts during rest
+    acc[4000:6000] = [4.0, 0.0, G]  # a long steady push: clipped until recovery starts
+    gyro[4000:6000] = 0.012
+    mag[5000:7500] *= 2.5  # disturbed field, long enough (> 20 s) to be re-learned
+    mag[::4] = np.nan  # magnetometer at 3/4 rate
+    acc[100:110] = 0.0  # zero vectors: no accelerometer update
+    acc[200] = np.nan
+    return t, gyro, acc, mag
+
+
+PARAM_SETS = {
+    "defaults": FilterParams(),
+    "full_mag": FilterParams(mag_mode="full", r1=0.3, r2=0.01, k3=0.0005),
+    "ned": FilterParams(world_frame="ned", r2=0.002),
+    "tight_clip_recovery": FilterParams(saturation_limit_rad=0.005,
+                                        wide_saturation_limit_rad=0.005, recovery_trigger_s=1.0),
+    "no_rest_no_clip": FilterParams(rest_bias_learning=False, use_saturation=False,
+                                    aperiodic_time_constant_s=0.0, mag_rejection=False),
+    "no_mag": FilterParams(use_mag=False, startup_duration_s=0.0),
+}
+
+
+def test_state_fields_and_constants_are_those_of_the_reference():
+    assert list(kernel.compiled_kernel.State.FIELDS) == step.StepState.FIELDS
+    c = kernel.compiled_kernel.CONSTANTS
+    for name in ("REST_LOWPASS_TIME_CONSTANT_S", "GRAVITY_TIME_CONSTANT_S",
+                 "MAG_REFERENCE_SAMPLES", "MAG_RELEARN_AFTER_S", "MAG_MAX_DT_S"):
+        assert c[name] == getattr(step, name), name
+    assert c["SMALL_ANGLE_RAD"] == ops.SMALL_ANGLE_RAD
+
+
+@pytest.mark.parametrize("name", list(PARAM_SETS))
+def test_whole_recording_agrees_with_the_reference(name):
+    t, gyro, acc, mag = rich_recording()
+    p = PARAM_SETS[name]
+    ref = estimate(gyro, acc, mag, timestamps_s=t, params=p, backend="python")
+    out = estimate(gyro, acc, mag, timestamps_s=t, params=p, backend="compiled")
+    assert np.max(np.abs(ref.quaternion - out.quaternion)) < 1e-12
+    assert np.max(np.abs(ref.gyro_bias_rad_s - out.gyro_bias_rad_s)) < 1e-12
+    assert np.max(np.abs(ref.error_rad - out.error_rad)) < 1e-12
+    for field in ("clipped", "phase", "at_rest", "mag_status"):
+        assert np.array_equal(getattr(ref, field), getattr(out, field)), field
+    # the recording really drives the branches it is meant to
+    if name == "defaults":
+        assert ref.at_rest.any() and ref.clipped.any() and (ref.mag_status == 2).any()
+    if name == "tight_clip_recovery":
+        assert (ref.phase == 3).any()
+
+
+def test_states_agree_field_by_field_after_a_recording():
+    t, gyro, acc, mag = rich_recording(4000)
+    dts = np.diff(t, prepend=t[0] - 0.01)
+    ends = {}
+    for backend in ("python", "compiled"):
+        f = ComplementaryFilter(PARAM_SETS["full_mag"], backend=backend)
+        for g, a, m, dt in zip(gyro.tolist(), acc.tolist(), mag.tolist(), dts.tolist(),
+                               strict=True):
+            f.update(g, a, dt, m)
+        s = f.state_snapshot()
+        ends[backend] = {k: getattr(s, k) for k in step.StepState.FIELDS}
+    for k, v in ends["python"].items():
+        assert ends["compiled"][k] == pytest.approx(v, abs=1e-12), k
+
+
+def test_update_accepts_the_same_inputs_and_refuses_the_same_ones():
+    fs = {b: ComplementaryFilter(backend=b, initial_orientation=(1, 0, 0, 0))
+          for b in ("python", "compiled")}
+    inputs = [
+        ((0.1, 0.0, 0.2), (0.0, 0.0, G), 0.01, FIELD.tolist()),  # tuples and lists
+        (np.array([0.1, 0.0, 0.2]), np.array([0.1, 0.0, G]), 0.01, np.array(FIELD)),
+        (np.arange(6.0)[::2] * 0.01, [0.0, 0.0], 0.01, None),  # strided row; bad-length accel
+        ([0.0, 0.0, 0.1], None, 0.02, [math.nan, 0.0, 1.0]),  # no accel, NaN magnetometer
+        ([0.0, 0.0, 0.1], (0.0, 0.0, 0.0), 0.02, (0, 0, 0)),  # zero vectors: skipped
+    ]
+    for g, a, dt, m in inputs:
+        qs = {b: f.update(g, a, dt, m) for b, f in fs.items()}
+        assert isinstance(qs["compiled"], tuple)
+        assert qs["compiled"] == pytest.approx(qs["python"], abs=1e-15)
+    for bad_args, match in (
+        (((math.nan, 0.0, 0.0), (0.0, 0.0, G), 0.01), "gyro sample is not finite"),
+        (((0.0, 0.0, 0.0), (0.0, 0.0, G), 0.0), "dt must be a positive finite"),
+        (((0.0, 0.0, 0.0), (0.0, 0.0, G), math.inf), "dt must be a positive finite"),
+    ):
+        for f in fs.values():
+            with pytest.raises(ValueError, match=match):
+                f.update(*bad_args)
+
+
+def test_state_copy_and_assignment_work_as_for_the_reference():
+    f = ComplementaryFilter(backend="compiled")
+    f.update((0.0, 0.0, 0.0), (0.0, 0.0, G), 0.01)
+    f.initialize((0.0, 1.0, 0.0, 0.0), heading_known=False)  # writes q, flags and phase
+    s = f.state_snapshot()
+    assert (s.qx, s.heading_initialized, s.phase) == (1.0, False, step.PHASE_STARTUP)
+    f.update((0.1, 0.0, 0.0), (0.0, 0.0, -G), 0.01)
+    assert f.state_snapshot().qw != s.qw and s.qx == 1.0  # the snapshot is a copy
+
+
+def test_estimate_many_agrees_across_backends():
+    t, gyro, acc, mag = rich_recording(3000)
+    sets = [p for p in PARAM_SETS.values() if p.world_frame == "enu"][:3] + [FilterParams(k1=0.9)]
+    a = estimate_many(sets, gyro, acc, mag, timestamps_s=t, backend="python")
+    b = estimate_many(sets, gyro, acc, mag, timestamps_s=t, backend="compiled")
+    assert a is not None and b is not None and a.shape == b.shape == (4, 3000, 4)
+    assert np.max(np.abs(a - b)) < 1e-12
+    seen = []
+    estimate_many(sets, gyro, acc, mag, timestamps_s=t, backend="compiled",
+                  on_candidate=lambda k, q: seen.append((k, q.copy())))
+    assert [k for k, _ in seen] == [0, 1, 2, 3]
+    assert all(np.array_equal(q, b[k], equal_nan=True) for k, q in seen)
+
+
+def test_a_non_finite_gyro_row_stops_the_run_with_its_row_number():
+    t, gyro, acc, mag = rich_recording(500)
+    gyro[321, 1] = math.inf
+    with pytest.raises(ValueError, match=r"not finite.*row 321"):
+        estimate(gyro, acc, mag, timestamps_s=t, backend="compiled")
+    with pytest.raises(ValueError, match="not finite"):
+        estimate(gyro, acc, mag, timestamps_s=t, backend="python")
+
+
+def test_backend_choice_is_validated():
+    with pytest.raises(ValueError, match="unknown filter backend"):
+        ComplementaryFilter(backend="fortran")
+    assert ComplementaryFilter().backend == kernel.resolve_backend()
+
+
+vec = st.one_of(
+    st.tuples(*[st.floats(-50, 50, allow_nan=False)] * 3),
+    st.sampled_from([(0.0, 0.0, 0.0), (math.nan, 1.0, 0.0), (math.inf, 0.0, 0.0)]),
+)
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    samples=st.lists(
+        st.tuples(st.tuples(*[st.floats(-8, 8, allow_nan=False)] * 3), vec, st.none() | vec,
+                  st.floats(1e-4, 0.5)),
+        min_size=1, max_size=60),
+    k1=st.floats(0.01, 5.0), limit=st.floats(1e-3, 1.0), mode=st.sampled_from(["yaw", "full"]),
+    startup=st.floats(0.0, 1.0),
+)
+def test_random_streams_agree(samples, k1, limit, mode, startup):
+    p = FilterParams(k1=k1, k2=0.1 * k1, saturation_limit_rad=limit, mag_mode=mode, r2=0.01,
+                     startup_duration_s=startup, recovery_trigger_s=0.3)
+    fs = [ComplementaryFilter(p, backend=b, initial_orientation=(0.9, 0.1, -0.3, 0.3))
+          for b in ("python", "compiled")]
+    for g, a, m, dt in samples:
+        qa, qb = (f.update(g, a, dt, m) for f in fs)
+        assert qb == pytest.approx(qa, abs=1e-12)
+
+
+@pytest.mark.parametrize("backend", ["python", "compiled"])
+def test_a_filter_survives_deepcopy_and_pickle_with_its_state(backend):
+    import copy
+    import pickle
+
+    t, gyro, acc, mag = rich_recording(800)
+    f = ComplementaryFilter(FilterParams(k1=0.7), backend=backend)
+    for g, a, m in zip(gyro[:500], acc[:500], mag[:500], strict=True):
+        f.update(g, a, 0.01, m)
+    clones = [copy.deepcopy(f), pickle.loads(pickle.dumps(f))]
+    for g, a, m in zip(gyro[500:], acc[500:], mag[500:], strict=True):
+        q = f.update(g, a, 0.01, m)
+        assert all(c.update(g, a, 0.01, m) == q for c in clones)
+    assert all(c.backend == backend and c.params.k1 == 0.7 for c in clones)
