@@ -209,3 +209,42 @@ def test_cli_tune_smoke_writes_loadable_yaml(broad_dir, tmp_path, capsys):
     assert "before" in text and "after" in text
     params, _ = load_filter_params(out)
     assert isinstance(params, FilterParams)
+
+
+def test_grid_points_combine_values_and_drop_invalid_ones():
+    from cf_estimator.bench.grid import grid_points
+
+    pts = grid_points(FilterParams(), {"k1": [0.2, 1.0], "k2": [0.001, 0.2]})
+    # k2 = 0.2 with k1 = 0.2 and T = 2 s is unstable (T < k1/k2 = 1 s fails): dropped
+    assert sorted((p.k1, p.k2) for p in pts) == [(0.2, 0.001), (1.0, 0.001), (1.0, 0.2)]
+
+
+def test_grid_half_means_split_trials_by_prefix():
+    from cf_estimator.bench.grid import half_means
+
+    scores = {"02_a": (np.array([1.0, 2.0]), np.array([0.5, 0.1])),
+              "03_b": (np.array([3.0, 4.0]), np.array([0.7, 0.3])),
+              "05_c": (np.array([5.0, 0.0]), np.array([0.9, 0.5]))}
+    m = half_means(scores, ["02", "05"])
+    assert m["A"]["total"].tolist() == [3.0, 1.0] and m["B"]["total"].tolist() == [3.0, 4.0]
+    assert m["all"]["inclination"] == pytest.approx([0.7, 0.3])
+
+
+def test_grid_command_prints_every_point_best_first(broad_dir, capsys):
+    from cf_estimator.bench.grid import main as grid_main
+
+    assert grid_main(["--data", str(broad_dir), "--set", "k1=0.05,0.35", "--set", "r1=0,0.1",
+                      "--split", "01", "--jobs", "1"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    rows = [ln for ln in lines if "k1=" in ln]
+    assert len(rows) == 4 and lines[0].startswith("4 grid point(s) on 2 trial(s)")
+    incl = [float(r.split()[0]) for r in rows]
+    assert incl == sorted(incl)
+    # the printed figures are the tuner's scores: recompute the first row's
+    first = dict(kv.split("=") for kv in rows[0].split()[6:])
+    p = FilterParams(k1=float(first["k1"]), r1=float(first["r1"]))
+    trials = [broad.load_trial(t) for t in broad.list_trials(broad_dir)]
+    scores = tuning.score_candidates([p], trials)
+    assert incl[0] == pytest.approx(np.mean([v[1][0] for v in scores.values()]), abs=1e-4)
+    with pytest.raises(SystemExit):
+        grid_main(["--data", str(broad_dir), "--set", "no_such=1"])

@@ -152,7 +152,7 @@ class FilterParams:
         group="magnetometer",
     )
     r1: float = param(
-        0.1,
+        0.07,
         "1/s",
         "Proportional gain of the magnetometer channel (seed 004 W2 = r1 + r2/s).",
         minimum=0.0,
@@ -211,7 +211,7 @@ class FilterParams:
     rest_gyro_threshold_rad_s: float = param(
         0.035,
         "rad/s",
-        "Rest detection: low-passed |gyro - bias| below this.",
+        "Rest detection: gyro within this of its 0.5 s low-passed mean.",
         minimum=0.0,
         maximum=10.0,
         minimum_exclusive=True,
@@ -220,7 +220,7 @@ class FilterParams:
     rest_accel_threshold_m_s2: float = param(
         0.5,
         "m/s^2",
-        "Rest detection: low-passed accelerometer within this of its mean.",
+        "Rest detection: accelerometer within this of its 0.5 s low-passed mean.",
         minimum=0.0,
         maximum=100.0,
         minimum_exclusive=True,
