@@ -192,6 +192,10 @@ def test_cli_bench_broad_smoke(broad_dir, tmp_path, capsys):
     assert set(entry) == {"cf_estimator_9d", "cf_estimator_6d"}
     assert set(entry["cf_estimator_9d"]) == set(broad.METRICS)
     assert entry["cf_estimator_9d"]["total_rmse_deg"] < 2.0
+    png = tmp_path / "per_trial.png"
+    assert main(["bench", "broad", "--data", str(broad_dir), "--plot", str(png), "--jobs", "1",
+                 "--quiet"]) == 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
 
 
 def test_cli_bench_broad_errors(tmp_path, capsys):

@@ -51,6 +51,8 @@ def register(subparsers: Any) -> None:
     b.add_argument("--trials", metavar="LIST", help="comma-separated trial names, prefixes "
                    "(e.g. 07) or patterns (e.g. '*magnet*'); default: all files")
     b.add_argument("--json", metavar="OUT", help="write per-trial and per-group results as JSON")
+    b.add_argument("--plot", metavar="PNG", help="bar chart per trial: 9-D total and 6-D "
+                   "inclination RMSE of every algorithm")
     b.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
                    help="worker processes, one trial each (default %(default)s)")
     b.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
@@ -180,6 +182,13 @@ def run_broad(args: Any) -> int:
     print(f"cf_estimator parameters: {args.params or 'shipped defaults'}")
     print()
     print(broad.format_tables(result), end="")
+    if args.plot:
+        from cf_estimator.bench.plots import plot_broad_per_trial
+
+        try:
+            plot_broad_per_trial(result.to_json(), args.plot)
+        except OSError as exc:
+            raise CliError(f"cannot write {args.plot}: {exc.strerror or exc}") from None
     if args.json:
         doc = result.to_json()
         doc["meta"] = {
@@ -223,7 +232,7 @@ def run_speed(args: Any) -> int:
     bag = _bag_throughput(args)  # first: a bad --bag fails before the long measurements
     rates = speed.per_sample_rates(args.samples, tuple(peers))
     pipe = speed.pipeline_times_us(args.samples)
-    batched = {p: speed.batched_rate(p, max(200, args.samples // 20)) for p in sizes}
+    batched = {p: speed.batched_rate(p, args.samples) for p in sizes}
     print(speed.format_speed(rates, pipe, batched), end="")
     print(speed.format_bag_throughput(bag), end="")
     if args.json:
