@@ -356,3 +356,20 @@ def test_batch_api_rate_and_timestamps_agree_and_bad_stamps_are_refused():
 def test_batched_filter_refuses_mixed_world_frames():
     with pytest.raises(ValueError, match="world_frame"):
         BatchedFilter([FilterParams(), FilterParams(world_frame="ned")])
+
+
+def test_a_field_parallel_to_gravity_gives_no_heading_the_next_usable_one_does():
+    """At the magnetic pole (or with a saturated vertical reading) the field has no horizontal
+    component: initialisation must not claim a heading; the first usable sample then sets it."""
+    for make in (lambda p: ComplementaryFilter(p), lambda p: BatchedFilter([p, p])):
+        f = make(FilterParams())
+        f.update((0.0, 0.0, 0.0), (0.0, 0.0, G), DT, (0.0, 0.0, -48e-6))  # vertical field
+        state = f._state if isinstance(f, ComplementaryFilter) else f.state  # noqa: SLF001
+        assert not np.any(state.heading_initialized)
+        # the next sample has a horizontal field pointing along sensor +x: north = sensor x,
+        # i.e. the sensor's x axis points north (yaw = +90° in ENU)
+        f.update((0.0, 0.0, 0.0), (0.0, 0.0, G), DT, (30e-6, 0.0, -40e-6))
+        assert np.all(state.heading_initialized if isinstance(f, BatchedFilter)
+                      else f._state.heading_initialized)  # noqa: SLF001
+        q = np.atleast_2d(f.orientation)[0]
+        assert math.degrees(quat.to_euler(q)[2]) == pytest.approx(90.0, abs=1e-6)

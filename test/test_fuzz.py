@@ -37,7 +37,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
-from rosbags.typesys import Stores, get_typestore
+from ros_test_helpers import Header, Imu, MagneticField, Quaternion, Time, Vector3
 
 from cf_estimator.core.filter import ComplementaryFilter
 from cf_estimator.core.params import FilterParams
@@ -74,13 +74,6 @@ def profile(name: str) -> settings:
 
 
 # -- real messages (rosbags Jazzy typestore) ----------------------------------------------------
-TS = get_typestore(Stores.ROS2_JAZZY)
-Time = TS.types["builtin_interfaces/msg/Time"]
-Header = TS.types["std_msgs/msg/Header"]
-Vector3 = TS.types["geometry_msgs/msg/Vector3"]
-Quaternion = TS.types["geometry_msgs/msg/Quaternion"]
-Imu = TS.types["sensor_msgs/msg/Imu"]
-MagneticField = TS.types["sensor_msgs/msg/MagneticField"]
 
 G = 9.80665
 T0_NS = 1_700_000_000 * 10**9

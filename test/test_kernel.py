@@ -216,3 +216,26 @@ def test_a_filter_survives_deepcopy_and_pickle_with_its_state(backend):
         q = f.update(g, a, 0.01, m)
         assert all(c.update(g, a, 0.01, m) == q for c in clones)
     assert all(c.backend == backend and c.params.k1 == 0.7 for c in clones)
+
+
+def test_absurd_magnitudes_are_refused_or_skipped_the_same_way():
+    """A gyro beyond GYRO_LIMIT_RAD_S is refused; an accelerometer/magnetometer sample whose
+    squared norm overflows is skipped like a NaN one — in both backends."""
+    from cf_estimator.core.filter import GYRO_LIMIT_RAD_S
+
+    assert kernel.compiled_kernel is not None
+    fs = [ComplementaryFilter(backend=b, initial_orientation=(1, 0, 0, 0))
+          for b in ("python", "compiled")]
+    for f in fs:
+        with pytest.raises(ValueError, match="beyond 1e\\+09 rad/s"):
+            f.update((2 * GYRO_LIMIT_RAD_S, 0.0, 0.0), (0.0, 0.0, G), 0.01)
+        q = f.update((GYRO_LIMIT_RAD_S, 0.0, 0.0), (0.0, 0.0, G), 0.01)  # the limit itself: ok
+        assert q is not None and all(math.isfinite(c) for c in q)
+    qs = [f.update((0.1, 0.0, 0.0), (1e200, 0.0, 0.0), 0.01, (0.0, 1e300, 1e300)) for f in fs]
+    assert qs[1] == pytest.approx(qs[0], abs=1e-12)
+    assert all(not f.status().accel_used and f.status().mag_status == "none" for f in fs)
+    t, gyro, acc, mag = rich_recording(300)
+    gyro[123, 0] = -5e9
+    for backend in ("python", "compiled"):
+        with pytest.raises(ValueError, match="beyond"):
+            estimate(gyro, acc, mag, timestamps_s=t, backend=backend)

@@ -221,6 +221,19 @@ def test_wheel_contains_every_module_of_the_package(wheel, source_copy):
     assert not missing, f"{wheel.name} lacks modules {missing}"
 
 
+def test_wheel_carries_the_compiled_step_when_a_compiler_is_present(wheel):
+    """The C twin of the step is built into the wheel (optional: skipped without a compiler,
+    unless CF_ESTIMATOR_REQUIRE_KERNEL=1, which scripts/test.sh sets when cc exists)."""
+    import os
+
+    names = zipfile.ZipFile(wheel).namelist()
+    built = [n for n in names if re.fullmatch(rf"{PACKAGE}/core/_kernel\..*\.(so|pyd)", n)]
+    if not built and os.environ.get("CF_ESTIMATOR_REQUIRE_KERNEL") != "1":
+        pytest.skip("no C compiler: the wheel is pure Python (the reference step runs)")
+    assert len(built) == 1, f"{wheel.name}: compiled kernel missing ({names[:5]}...)"
+    assert "py3-none-any" not in wheel.name  # a platform wheel, since it carries binary code
+
+
 def test_wheel_declares_both_console_scripts_and_the_package_xml_version(wheel):
     with zipfile.ZipFile(wheel) as zf:
         (entry_points,) = [n for n in zf.namelist() if n.endswith(".dist-info/entry_points.txt")]

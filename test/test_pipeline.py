@@ -9,20 +9,12 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from rosbags.typesys import Stores, get_typestore
+from ros_test_helpers import Header, Imu, MagneticField, Quaternion, Time, Vector3
 
 from cf_estimator.core import quaternion as quat
 from cf_estimator.core.params import FilterParams
 from cf_estimator.pipeline import DiagnosticsReport, ImuPipeline, PipelineOutput, PipelineParams
 from cf_estimator.pipeline.diagnostics import ERROR, OK, WARN
-
-TS = get_typestore(Stores.ROS2_JAZZY)
-Time = TS.types["builtin_interfaces/msg/Time"]
-Header = TS.types["std_msgs/msg/Header"]
-Vector3 = TS.types["geometry_msgs/msg/Vector3"]
-Quaternion = TS.types["geometry_msgs/msg/Quaternion"]
-Imu = TS.types["sensor_msgs/msg/Imu"]
-MagneticField = TS.types["sensor_msgs/msg/MagneticField"]
 
 G = 9.80665
 T0_NS = 1_700_000_000 * 10**9

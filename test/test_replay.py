@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from ros_test_helpers import read_topics
 from rosbags.convert import convert
 
 from cf_estimator.bag import io
@@ -71,14 +72,6 @@ def replayed(bags, tmp_path_factory):
     for key, src in bags.items():
         out[key] = replay_bag(src, d / f"out_{key}", options=opts)
     out["mcap_again"] = replay_bag(bags["mcap"], d / "out_mcap_again", options=opts)
-    return out
-
-
-def read_topics(path: Path) -> dict[str, list[io.BagMessage]]:
-    out: dict[str, list[io.BagMessage]] = {}
-    with io.open_bag(path) as bag:
-        for m in bag.messages([t.topic for t in bag.topics]):
-            out.setdefault(m.topic, []).append(m)
     return out
 
 

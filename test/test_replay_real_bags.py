@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from ros_test_helpers import read_topics
 from rosbags.convert import convert
 
 from cf_estimator.bag import io
@@ -38,14 +39,6 @@ def _to_ros2(src: Path, dst: Path, storage: str) -> Path:
     return dst
 
 
-def _read(path: Path) -> dict[str, list[io.BagMessage]]:
-    out: dict[str, list[io.BagMessage]] = {}
-    with io.open_bag(path) as bag:
-        for m in bag.messages([t.topic for t in bag.topics]):
-            out.setdefault(m.topic, []).append(m)
-    return out
-
-
 def _stamp(msg) -> int:
     return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
 
@@ -55,7 +48,8 @@ def ardrone(tmp_path_factory):
     src = _require(ARDRONE)
     d = tmp_path_factory.mktemp("ardrone")
     result = replay_bag(src, d / "out", options=ReplayOptions(progress=False))
-    return {"src": src, "dir": d, "result": result, "in": _read(src), "out": _read(d / "out")}
+    return {"src": src, "dir": d, "result": result, "in": read_topics(src),
+            "out": read_topics(d / "out")}
 
 
 @pytest.fixture(scope="module")
@@ -64,7 +58,8 @@ def sparkfun(tmp_path_factory):
     d = tmp_path_factory.mktemp("sparkfun")
     ros2 = _to_ros2(src, d / "sparkfun_mcap", "mcap")
     result = replay_bag(ros2, d / "out", options=ReplayOptions(progress=False))
-    return {"src": src, "dir": d, "result": result, "in": _read(src), "out": _read(d / "out")}
+    return {"src": src, "dir": d, "result": result, "in": read_topics(src),
+            "out": read_topics(d / "out")}
 
 
 def _orientations(msgs: list[io.BagMessage]) -> np.ndarray:
@@ -144,7 +139,7 @@ def test_ros1_and_ros2_copies_of_the_quadrotor_bag_give_identical_outputs(ardron
     ros2 = _to_ros2(ardrone["src"], d / "ardrone_sqlite3", "sqlite3")
     replay_bag(ros2, d / "out_sqlite3", options=ReplayOptions(progress=False))
     a = ardrone["out"][OUT_IMU_TOPIC]
-    b = _read(d / "out_sqlite3")[OUT_IMU_TOPIC]
+    b = read_topics(d / "out_sqlite3")[OUT_IMU_TOPIC]
     assert [(m.log_time_ns, _orientations([m]).tolist()) for m in a] == [
         (m.log_time_ns, _orientations([m]).tolist()) for m in b]
 
@@ -157,7 +152,7 @@ def test_sparkfun_frame_ids_give_a_warning_not_a_failure(sparkfun, tmp_path, cap
     assert rc == 0
     assert "cf-estimator: warning:" in err and "frame_id" in err
     assert "error" not in err.lower().replace("error path", "")
-    out = _read(tmp_path / "out")[OUT_IMU_TOPIC]
+    out = read_topics(tmp_path / "out")[OUT_IMU_TOPIC]
     assert out[0].msg.header.frame_id == "/imu"  # outputs keep the input frame id
 
 

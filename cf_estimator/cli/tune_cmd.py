@@ -279,8 +279,8 @@ def run(args: Any) -> int:
     if not limits and final[1] > final[0]:  # rounding cost more than the search gained
         best = result.best
         final = evaluate([base, best])
-    print(f"objective ({objective}, decimated data): before {final[0]:.4f}  after "
-          f"{final[1]:.4f}")
+    rate = "full rate" if args.decimate == 1 else f"decimated x{args.decimate}"
+    print(f"objective ({objective}, {rate}): before {final[0]:.4f}  after {final[1]:.4f}")
     print("parameters:")
     for d in space:
         print(f"  {d.name:<28} {getattr(base, d.name):>10.5g} -> {getattr(best, d.name):<10.5g}")

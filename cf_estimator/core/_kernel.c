@@ -38,7 +38,8 @@
 #define MAG_RELEARN_AFTER_S 20.0
 #define MAG_MAX_DT_S 1.0
 #define SMALL_ANGLE_RAD 1e-6
-#define EXTRA_COLUMNS 10 /* e(3), b(3), clipped, phase, at_rest, mag_status */
+#define EXTRA_COLUMNS 10
+#define GYRO_LIMIT_RAD_S 1e9 /* filter.GYRO_LIMIT_RAD_S */ /* e(3), b(3), clipped, phase, at_rest, mag_status */
 
 /* ------------------------------------------------------------------------------------------ */
 typedef struct {
@@ -331,11 +332,23 @@ static void output_q(const cf_state *s, int ned, double *o)
     }
 }
 
-/* valid_vector(): finite and non-zero norm */
+/* valid_vector(): finite, with a non-zero finite squared norm */
 static int valid3(const double *v)
 {
-    return isfinite(v[0] + v[1] + v[2]) && (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) > 0.0;
+    double n2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+    return isfinite(v[0] + v[1] + v[2]) && n2 > 0.0 && n2 < INFINITY;
 }
+
+/* the gyro checks of ComplementaryFilter.update: 0 ok, 1 not finite, 2 beyond the limit */
+static int gyro_problem(const double *g)
+{
+    if (!isfinite(g[0] + g[1] + g[2])) return 1;
+    return fabs(g[0]) > GYRO_LIMIT_RAD_S || fabs(g[1]) > GYRO_LIMIT_RAD_S ||
+           fabs(g[2]) > GYRO_LIMIT_RAD_S ? 2 : 0;
+}
+
+static const char *GYRO_PROBLEM[] = {"", "gyro sample is not finite",
+                                     "gyro sample beyond 1e+09 rad/s"};
 
 /* ---- Python: Params ------------------------------------------------------------------------ */
 typedef struct {
@@ -526,10 +539,11 @@ static PyObject *State_update(StateObject *self, PyObject *const *args, Py_ssize
         PyErr_Format(PyExc_ValueError, "gyro sample must have 3 components: %R", args[1]);
         return NULL;
     }
-    if (!isfinite(g[0] + g[1] + g[2])) {
+    int problem = gyro_problem(g);
+    if (problem) {
         PyObject *t = PySequence_Tuple(args[1]);
         if (t != NULL) {
-            PyErr_Format(PyExc_ValueError, "gyro sample is not finite: %R", t);
+            PyErr_Format(PyExc_ValueError, "%s: %R", GYRO_PROBLEM[problem], t);
             Py_DECREF(t);
         }
         return NULL;
@@ -596,11 +610,12 @@ static PyObject *State_run(StateObject *self, PyObject *args)
     const double *G = bg.buf, *A = ba.buf, *M = bm.obj ? bm.buf : NULL, *DT = bdt.buf;
     double *Q = bq.buf, *X = bx.obj ? bx.buf : NULL;
     Py_ssize_t bad = -1;
-    int bad_dt = 0;
+    int bad_dt = 0, problem = 0;
     Py_BEGIN_ALLOW_THREADS
     for (Py_ssize_t i = start; i < n; i++) {
         const double *g = G + 3 * i, *a = A + 3 * i, *m = M ? M + 3 * i : NULL;
-        if (!isfinite(g[0] + g[1] + g[2])) {
+        problem = gyro_problem(g);
+        if (problem) {
             bad = i;
             break;
         }
@@ -633,7 +648,8 @@ static PyObject *State_run(StateObject *self, PyObject *args)
         else {
             PyObject *t = Py_BuildValue("(ddd)", G[3 * bad], G[3 * bad + 1], G[3 * bad + 2]);
             if (t != NULL) {
-                PyErr_Format(PyExc_ValueError, "gyro sample is not finite: %R (row %zd)", t, bad);
+                PyErr_Format(PyExc_ValueError, "%s: %R (row %zd)", GYRO_PROBLEM[problem], t,
+                             bad);
                 Py_DECREF(t);
             }
         }

@@ -13,7 +13,12 @@ from types import SimpleNamespace
 import numpy as np
 
 from cf_estimator.core import quaternion as quat
-from cf_estimator.core.filter import orientation_from_vectors, step_params, valid_vector
+from cf_estimator.core.filter import (
+    heading_from_mag,
+    orientation_from_vectors,
+    step_params,
+    valid_vector,
+)
 from cf_estimator.core.ops import ArrayOps
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import PHASE_STARTUP, StepState, step
@@ -48,7 +53,7 @@ class BatchedFilter:
         """Initialise all filters from one sample (as the single filter does); False if invalid."""
         if not valid_vector(accel_m_s2):
             return False
-        use_mag = self._view.use_mag & valid_vector(mag)
+        use_mag = self._view.use_mag & heading_from_mag(accel_m_s2, mag)
         q_mag = orientation_from_vectors(accel_m_s2, mag) if valid_vector(mag) else None
         q_acc = orientation_from_vectors(accel_m_s2, None)
         s = self._state

@@ -45,12 +45,28 @@ def step_params(params: FilterParams) -> SimpleNamespace:
     return view
 
 
+#: Largest gyro component [rad/s] the filter accepts (far beyond any sensor; keeps every
+#: intermediate of the step finite).
+GYRO_LIMIT_RAD_S = 1e9
+
+
 def valid_vector(v: Vector | None) -> bool:
-    """True when v is three finite components with a non-zero norm."""
+    """True when v is three finite components with a non-zero, finite squared norm."""
     if v is None or len(v) != 3:
         return False
     x, y, z = float(v[0]), float(v[1]), float(v[2])
-    return math.isfinite(x + y + z) and (x * x + y * y + z * z) > 0.0
+    n2 = x * x + y * y + z * z
+    return math.isfinite(x + y + z) and 0.0 < n2 < math.inf
+
+
+def heading_from_mag(accel: Vector, mag: Vector | None) -> bool:
+    """True when ``mag`` (valid) has a horizontal component to take a heading from: not parallel
+    to the gravity direction given by ``accel`` (then :func:`orientation_from_vectors` uses it)."""
+    if not valid_vector(mag):
+        return False
+    m = np.asarray(mag, dtype=float)
+    east = np.cross(m, np.asarray(accel, dtype=float) / np.linalg.norm(accel))
+    return bool(np.linalg.norm(east) > 1e-9 * np.linalg.norm(m))
 
 
 def orientation_from_vectors(accel: Vector, mag: Vector | None = None) -> np.ndarray:
@@ -183,7 +199,7 @@ class ComplementaryFilter:
         """Initialise from one accelerometer (and magnetometer) sample; False if not valid."""
         if not valid_vector(accel_m_s2):
             return False
-        use_mag = self._params.use_mag and valid_vector(mag)
+        use_mag = self._params.use_mag and heading_from_mag(accel_m_s2, mag)
         q = orientation_from_vectors(accel_m_s2, mag if use_mag else None)
         self.initialize(self._to_output(q), heading_known=use_mag)
         return True
@@ -193,7 +209,8 @@ class ComplementaryFilter:
     ) -> tuple[float, float, float, float] | None:
         """Process one sample; returns q_world_from_sensor (w, x, y, z) or None before init.
 
-        gyro [rad/s] must be finite and dt [s] > 0 (ValueError otherwise); an invalid or
+        gyro [rad/s] must be finite and within ±GYRO_LIMIT_RAD_S, dt [s] > 0 (ValueError
+        otherwise); an invalid (non-finite, zero or overflowing norm) or
         missing accelerometer/magnetometer sample is skipped for this step (gyro-only).
         Magnetometer units are free (only the direction and relative norm are used).
         """
@@ -205,6 +222,9 @@ class ComplementaryFilter:
         gx, gy, gz = (float(c) for c in gyro_rad_s)
         if not math.isfinite(gx + gy + gz):
             raise ValueError(f"gyro sample is not finite: {tuple(gyro_rad_s)!r}")
+        if max(abs(gx), abs(gy), abs(gz)) > GYRO_LIMIT_RAD_S:
+            raise ValueError(f"gyro sample beyond {GYRO_LIMIT_RAD_S:g} rad/s: "
+                             f"{tuple(gyro_rad_s)!r}")
         if not (dt_s > 0.0 and math.isfinite(dt_s)):
             raise ValueError(f"dt must be a positive finite number of seconds, got {dt_s!r}")
         acc = tuple(float(c) for c in accel_m_s2) if valid_vector(accel_m_s2) else None
