@@ -237,7 +237,10 @@ def run_speed(args: Any) -> int:
     print(speed.format_bag_throughput(bag), end="")
     if args.json:
         batched_json = {str(k): v for k, v in batched.items()}
-        _write_json(args.json, {"per_sample_hz": rates, "pipeline": pipe,
+        from cf_estimator.core.kernel import resolve_backend
+
+        _write_json(args.json, {"filter_backend": resolve_backend(),
+                                "per_sample_hz": rates, "pipeline": pipe,
                                 "batched_param_samples_per_s": batched_json,
                                 "bag_throughput": dataclasses.asdict(bag)})
     return 0

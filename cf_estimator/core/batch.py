@@ -168,6 +168,8 @@ def estimate_many(
     """
     if not params:
         raise ValueError("estimate_many needs at least one parameter set")
+    if len({p.world_frame for p in params}) != 1:
+        raise ValueError("all parameter sets of a batch must share world_frame")
     gyro, acc, mg = _rows(gyro_rad_s, accel_m_s2, mag)
     n = gyro.shape[0]
     t = sample_times(n, rate_hz, timestamps_s)
