@@ -10,7 +10,6 @@
  *   Params(view)  the parameter view of step_params() (FilterParams fields + mag_full), frozen;
  *   State()       the filter state: one attribute per StepState field (same names, units and
  *                 frames: q* = q_world(ENU)_from_sensor, b* gyro bias [rad/s, sensor], ...), and
- *     .step(params, gyro, accel|None, mag|None, dt)      = step.step(...) with FloatOps
  *     .update(params, gyro, accel, dt, mag=None)         = ComplementaryFilter.update once
  *                                                          initialised (checks, step, output q)
  *     .run(params, gyro, accel, mag|None, dt, start, q_out, extra_out|None)
@@ -488,26 +487,6 @@ static int check_params(PyObject *obj)
     return 1;
 }
 
-static PyObject *State_step(StateObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    double g[3], a[3], m[3];
-    if (nargs != 5) {
-        PyErr_SetString(PyExc_TypeError, "step(params, gyro, accel, mag, dt)");
-        return NULL;
-    }
-    if (!check_params(args[0])) return NULL;
-    if (read3(args[1], g) != 1) {
-        if (!PyErr_Occurred()) PyErr_SetString(PyExc_ValueError, "gyro must have 3 components");
-        return NULL;
-    }
-    int ha = args[2] == Py_None ? 0 : read3(args[2], a);
-    int hm = args[3] == Py_None ? 0 : read3(args[3], m);
-    double dt = PyFloat_AsDouble(args[4]);
-    if (ha < 0 || hm < 0 || (dt == -1.0 && PyErr_Occurred())) return NULL;
-    cf_step(&self->s, &((ParamsObject *)args[0])->p, g, ha ? a : NULL, hm ? m : NULL, dt);
-    Py_RETURN_NONE;
-}
-
 static PyObject *q_tuple(const cf_state *s, int ned)
 {
     double q[4];
@@ -675,8 +654,6 @@ static PyObject *State_copy(StateObject *self, PyObject *Py_UNUSED(ignored))
 }
 
 static PyMethodDef State_methods[] = {
-    {"step", (PyCFunction)(void (*)(void))State_step, METH_FASTCALL,
-     "step(params, gyro, accel|None, mag|None, dt): step.step() in C (no input checks)."},
     {"update", (PyCFunction)(void (*)(void))State_update, METH_FASTCALL,
      "update(params, gyro, accel, dt, mag=None) -> q (w, x, y, z) in the output frame."},
     {"run", (PyCFunction)State_run, METH_VARARGS,
