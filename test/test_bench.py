@@ -238,3 +238,7 @@ def test_grid_command_prints_every_point_best_first(broad_dir, capsys):
     assert incl[0] == pytest.approx(np.mean([v[1][0] for v in scores.values()]), abs=1e-4)
     with pytest.raises(SystemExit):
         grid_main(["--data", str(broad_dir), "--set", "no_such=1"])
+    capsys.readouterr()
+    assert grid_main(["--data", str(broad_dir / "missing"), "--set", "k1=0.3"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("grid: ") and "missing" in err[0]

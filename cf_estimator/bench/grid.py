@@ -17,6 +17,7 @@ import argparse
 import dataclasses
 import itertools
 import os
+import sys
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -94,14 +95,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1))
     args = ap.parse_args(argv)
     from cf_estimator.cli.bench_cmd import _load_params
+    from cf_estimator.cli.main import CliError
 
-    base = _load_params(args.params)
+    try:
+        base = _load_params(args.params)
+        info = broad.read_trial_info(args.data)
+        trials = [broad.load_trial(p, info) for p in broad.list_trials(args.data, None)]
+    except (CliError, broad.BroadDataError) as exc:  # one line, as the CLI's errors
+        print(f"grid: {exc}", file=sys.stderr)
+        return getattr(exc, "code", 1)
     values = dict(args.set)
     points = grid_points(base, values)
     if not points:
         ap.error("no valid parameter combination in the grid")
-    info = broad.read_trial_info(args.data)
-    trials = [broad.load_trial(p, info) for p in broad.list_trials(args.data, None)]
     scores = tuning.score_candidates(points, trials, jobs=args.jobs)
     means = half_means(scores, [s.strip() for s in args.split.split(",") if s.strip()])
     print(f"{len(points)} grid point(s) on {len(trials)} trial(s); RMSE [deg], mean over trials")

@@ -11,12 +11,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import multiprocessing
-import os
 from collections.abc import Sequence
 
 import numpy as np
 
+from cf_estimator.bench.parallel import run_tasks
 from cf_estimator.core.batch import estimate
 from cf_estimator.core.params import FilterParams
 from cf_estimator.metrics import tilt_error_rad
@@ -85,13 +84,7 @@ def run_scenarios(names: Sequence[str], params: FilterParams, peers: Sequence[st
         if n not in SCENARIOS:
             raise ValueError(f"unknown scenario {n!r}; valid: {', '.join(SCENARIOS)}")
     tasks = [(n, params, tuple(peers), seed, duration_s) for n in names]
-    if jobs <= 1 or len(tasks) <= 1:
-        chunks = [_one(t) for t in tasks]
-    else:
-        ctx = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
-        with ctx.Pool(min(jobs, len(tasks))) as pool:
-            chunks = pool.map(_one, tasks)
-    return [r for c in chunks for r in c]
+    return [r for c in run_tasks(_one, tasks, jobs) for r in c]
 
 
 def format_table(rows: list[dict]) -> str:

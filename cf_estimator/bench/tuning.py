@@ -27,8 +27,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import multiprocessing
-import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
@@ -36,6 +34,7 @@ import numpy as np
 
 from cf_estimator.bench.bagtrial import BagTrial
 from cf_estimator.bench.broad import Trial
+from cf_estimator.bench.parallel import run_tasks
 from cf_estimator.core.batch import estimate_many
 from cf_estimator.core.params import FilterParams
 from cf_estimator.metrics import rmse_deg
@@ -208,15 +207,6 @@ def _chunks(n: int, parts: int) -> list[slice]:
     return [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
 
 
-def _run_tasks(worker: Callable[[tuple], object], tasks: list[tuple], jobs: int) -> list:
-    """``[worker(t) for t in tasks]``, in a process pool when ``jobs`` > 1."""
-    if jobs <= 1 or len(tasks) <= 1:
-        return [worker(t) for t in tasks]
-    ctx = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
-    with ctx.Pool(min(jobs, len(tasks))) as pool:
-        return pool.map(worker, tasks, chunksize=1)
-
-
 def _split(n_candidates: int, n_units: int, jobs: int) -> list[slice]:
     """Candidate slices so that ``n_units`` × slices fills ``jobs`` (one slice when it does)."""
     return _chunks(n_candidates, max(1, jobs // max(1, n_units)))
@@ -229,7 +219,7 @@ def score_candidates(candidates: Sequence[FilterParams], trials: Sequence[Trial]
     cands = list(candidates)
     parts = _split(len(cands), len(trials), jobs)
     tasks = [(cands[s], t) for t in trials for s in parts]
-    out = _run_tasks(_score_worker, tasks, jobs)
+    out = run_tasks(_score_worker, tasks, jobs)
     scores = {}
     for i, t in enumerate(trials):
         mine = out[i * len(parts):(i + 1) * len(parts)]
@@ -338,7 +328,7 @@ def scenario_peaks(candidates: Sequence[FilterParams], names: Sequence[str] = (
     cands = list(candidates)
     parts = _split(len(cands), len(names), jobs)
     tasks = [(cands[s], n, seed) for n in names for s in parts]
-    out = _run_tasks(_scenario_worker, tasks, jobs)
+    out = run_tasks(_scenario_worker, tasks, jobs)
     cols = [np.concatenate(out[i * len(parts):(i + 1) * len(parts)]) for i in range(len(names))]
     return np.stack(cols, axis=1)
 

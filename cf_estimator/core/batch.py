@@ -17,10 +17,9 @@ from numpy.typing import ArrayLike
 
 from cf_estimator.core import quaternion as quat
 from cf_estimator.core.batched import BatchedFilter
-from cf_estimator.core.filter import EXTRA_COLUMNS, ComplementaryFilter
+from cf_estimator.core.filter import EXTRA_COLUMNS, ComplementaryFilter, state_extras
 from cf_estimator.core.kernel import resolve_backend
 from cf_estimator.core.params import FilterParams
-from cf_estimator.core.step import PHASE_STARTUP
 
 
 @dataclass
@@ -111,7 +110,7 @@ def _run_filter(f: ComplementaryFilter, gyro: np.ndarray, acc: np.ndarray, mg: n
             start = 1
         q_out[start - 1] = f.orientation_tuple()
         if extra_out is not None:
-            extra_out[start - 1, 7] = PHASE_STARTUP
+            extra_out[start - 1] = state_extras(f._state)  # noqa: SLF001 - read-only
         f.run_rows(gyro, acc, mg, np.diff(t, prepend=t[0]), start, q_out, extra_out)
 
 

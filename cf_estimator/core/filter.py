@@ -59,14 +59,21 @@ def valid_vector(v: Vector | None) -> bool:
     return math.isfinite(x + y + z) and 0.0 < n2 < math.inf
 
 
+def _east(up: np.ndarray, mag: Vector) -> np.ndarray | None:
+    """Unit magnetic east (mag × up) in the sensor frame, None when the field is parallel to the
+    unit vertical ``up`` (no horizontal component: no heading)."""
+    east = np.cross(np.asarray(mag, dtype=float), up)
+    norm = np.linalg.norm(east)
+    return east / norm if norm > 1e-9 * np.linalg.norm(mag) else None
+
+
 def heading_from_mag(accel: Vector, mag: Vector | None) -> bool:
     """True when ``mag`` (valid) has a horizontal component to take a heading from: not parallel
     to the gravity direction given by ``accel`` (then :func:`orientation_from_vectors` uses it)."""
     if not valid_vector(mag):
         return False
-    m = np.asarray(mag, dtype=float)
-    east = np.cross(m, np.asarray(accel, dtype=float) / np.linalg.norm(accel))
-    return bool(np.linalg.norm(east) > 1e-9 * np.linalg.norm(m))
+    up = np.asarray(accel, dtype=float)
+    return _east(up / np.linalg.norm(up), mag) is not None  # type: ignore[arg-type]
 
 
 def orientation_from_vectors(accel: Vector, mag: Vector | None = None) -> np.ndarray:
@@ -77,13 +84,9 @@ def orientation_from_vectors(accel: Vector, mag: Vector | None = None) -> np.nda
     """
     up = np.asarray(accel, dtype=float)
     up = up / np.linalg.norm(up)
-    if mag is not None:
-        east = np.cross(np.asarray(mag, dtype=float), up)
-        norm = np.linalg.norm(east)
-        if norm > 1e-9 * np.linalg.norm(mag):
-            east /= norm
-            north = np.cross(up, east)
-            return quat.from_matrix(np.vstack([east, north, up]))
+    east = _east(up, mag) if mag is not None else None
+    if east is not None:
+        return quat.from_matrix(np.vstack([east, np.cross(up, east), up]))
     roll = math.atan2(up[1], up[2])
     pitch = math.atan2(-up[0], math.hypot(up[1], up[2]))
     return quat.from_euler(roll, pitch, 0.0)
@@ -112,6 +115,12 @@ class FilterStatus:
 #: Columns of :meth:`ComplementaryFilter.run_rows`'s ``extra_out``: raw error e (3, rad, sensor),
 #: bias b (3, rad/s, sensor), clipped, phase, at_rest, mag_status.
 EXTRA_COLUMNS = 10
+
+
+def state_extras(s: Any) -> tuple:
+    """One ``extra_out`` row (EXTRA_COLUMNS values) from a filter state (_kernel.c writes the
+    same columns in ``State.run``)."""
+    return (s.ex, s.ey, s.ez, s.bx, s.by, s.bz, s.clipped, s.phase, s.at_rest, s.mag_status)
 
 
 class ComplementaryFilter:
@@ -261,8 +270,7 @@ class ComplementaryFilter:
         for i in range(start, len(dts)):
             q_out[i] = self.update(g_rows[i], a_rows[i], dts[i], m_rows[i] if m_rows else None)
             if extra_out is not None:
-                extra_out[i] = (s.ex, s.ey, s.ez, s.bx, s.by, s.bz, s.clipped, s.phase,
-                                s.at_rest, s.mag_status)
+                extra_out[i] = state_extras(s)
 
     # -- outputs -----------------------------------------------------------------------------
     def _to_output(self, q_enu: Any) -> np.ndarray:
