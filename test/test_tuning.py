@@ -130,7 +130,7 @@ def test_scenario_peaks_equal_bench_scenarios():
 def test_new_dims_are_searchable_and_clip_levels_stay_ordered():
     names = ["saturation_limit_rad", "wide_saturation_limit_rad", "rotation_threshold_rad_s",
              "acceleration_threshold_m_s2", "acceleration_hold_s", "rest_time_s",
-             "rest_bias_time_constant_s", "rest_gyro_threshold_rad_s"]
+             "rest_window_s", "rest_gyro_threshold_rad_s"]
     space = tuning.space_from_names(names)
     assert [d.name for d in space] == names
     assert {"wide_saturation_limit_rad", "rotation_threshold_rad_s",

@@ -86,17 +86,20 @@ SEARCHABLE: tuple[Dim, ...] = (
     Dim("rotation_threshold_rad_s", 0.03, 3.0),
     Dim("acceleration_threshold_m_s2", 0.05, 5.0),
     Dim("acceleration_hold_s", 0.1, 10.0),
-    # rest detection and the direct bias update at rest (matter only with rest phases)
-    Dim("rest_gyro_threshold_rad_s", 0.005, 0.2),
+    # the error path's aperiodic unit: how much of each correction it also sees
+    Dim("aperiodic_prefilter", 0.01, 1.0, zero_prob=0.2),
+    # stillness detection (matters only with still phases) and in-motion bias learning
+    Dim("rest_gyro_threshold_rad_s", 0.002, 0.1),
     Dim("rest_time_s", 0.3, 10.0),
-    Dim("rest_bias_time_constant_s", 0.3, 60.0),
+    Dim("rest_window_s", 0.1, 2.0),
+    Dim("bias_learning_k2", 0.002, 0.5, zero_prob=0.2),
 )
 
 #: Searched by default: the loop gains, both clip levels and what selects between them, the
 #: aperiodic unit, the magnetometer gains and the recovery trigger. The acceleration hold and
 #: the rest parameters can be chosen with ``space_from_names``.
 DEFAULT_SEARCH: tuple[str, ...] = (
-    "k1", "k2", "saturation_limit_rad", "aperiodic_time_constant_s", "r1", "r2",
+    "k1", "k2", "saturation_limit_rad", "aperiodic_time_constant_s", "aperiodic_prefilter", "r1", "r2",
     "recovery_trigger_s", "wide_saturation_limit_rad", "rotation_threshold_rad_s",
     "acceleration_threshold_m_s2",
 )

@@ -31,14 +31,18 @@
 #define MAG_REJECTED 2
 #define MAG_DISABLED 3
 /* constants of step.py (test_kernel.py checks they agree) */
-#define REST_LOWPASS_TIME_CONSTANT_S 0.5
+#define RATE_LOWPASS_TIME_CONSTANT_S 0.5
+#define REST_NOISE_SIGMAS 2.0
+#define REST_SAMPLE_SIGMAS 8.0
+#define BIAS_RANDOM_WALK_RAD_S_SQRT_S 2e-4
 #define GRAVITY_TIME_CONSTANT_S 10.0
 #define MAG_REFERENCE_SAMPLES 20
 #define MAG_RELEARN_AFTER_S 20.0
 #define MAG_MAX_DT_S 1.0
 #define SMALL_ANGLE_RAD 1e-6
-#define EXTRA_COLUMNS 10
-#define GYRO_LIMIT_RAD_S 1e9 /* filter.GYRO_LIMIT_RAD_S */ /* e(3), b(3), clipped, phase, at_rest, mag_status */
+#define EXTRA_COLUMNS 11
+#define GYRO_LIMIT_RAD_S 1e9 /* filter.GYRO_LIMIT_RAD_S */
+/* extra columns: e(3), b(3), clipped, phase, at_rest, mag_status, bias sigma */
 
 /* ------------------------------------------------------------------------------------------ */
 typedef struct {
@@ -46,14 +50,16 @@ typedef struct {
         acceleration_threshold_m_s2, acceleration_hold_s, aperiodic_time_constant_s,
         startup_duration_s, startup_k1, recovery_trigger_s, r1, r2, mag_saturation_limit_rad,
         mag_norm_tolerance, mag_dip_tolerance_rad, rest_gyro_threshold_rad_s,
-        rest_accel_threshold_m_s2, rest_time_s, rest_bias_time_constant_s, bias_limit_rad_s,
-        gravity_m_s2;
+        rest_accel_threshold_m_s2, rest_time_s, rest_window_s, bias_prior_sigma_rad_s,
+        bias_learning_k2, bias_limit_rad_s, gravity_m_s2, prefilter;
     int use_saturation, use_mag, mag_full, mag_rejection, rest_bias_learning, ned;
 } cf_params;
 
 typedef struct {
     double qw, qx, qy, qz, bx, by, bz, cx, cy, cz, lx, ly, lz, z_m, time_s, clip_timer_s,
-        rest_timer_s, glx, gly, glz, alx, aly, alz, mag_ref_norm, mag_ref_dip, mag_ref_count,
+        rest_timer_s, blk_n, blk_t, blk_gx, blk_gy, blk_gz, blk_ax, blk_ay, blk_az, blk_g2, blk_a2,
+        prev_n, pgx, pgy, pgz, pax, pay, paz, blk_d, last_n, lgx, lgy, lgz, lax, lay, laz,
+        noise_g2, noise_a2, bias_var, mag_ref_norm, mag_ref_dip, mag_ref_count,
         mag_reject_timer_s, mag_last_time_s, g_ref, accel_hold, rate_lp, ex, ey, ez, error_norm,
         fx, fy, fz, yaw_error_rad, recovery_count;
     char recovering, at_rest, mag_disturbed, heading_initialized, clipped, accel_used;
@@ -65,6 +71,7 @@ static void state_init(cf_state *s)
     memset(s, 0, sizeof(*s));
     s->qw = 1.0;
     s->mag_last_time_s = -1.0;
+    s->bias_var = -1.0;
 }
 
 /* ---- the step (mirrors step.py) ----------------------------------------------------------- */
@@ -193,11 +200,96 @@ static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int
     mul_into(s, d);
 }
 
+/* _stillness() of step.py: block statistics, rest, bias from still blocks */
+static void stillness(cf_state *s, const cf_params *p, const double *g, const double *a,
+                      double dt)
+{
+    double gx = g[0], gy = g[1], gz = g[2], ax = a[0], ay = a[1], az = a[2];
+    s->blk_n = s->blk_n + 1.0;
+    s->blk_t = s->blk_t + dt;
+    s->blk_gx = s->blk_gx + gx;
+    s->blk_gy = s->blk_gy + gy;
+    s->blk_gz = s->blk_gz + gz;
+    s->blk_ax = s->blk_ax + ax;
+    s->blk_ay = s->blk_ay + ay;
+    s->blk_az = s->blk_az + az;
+    double seen = s->last_n > 0.0 ? 1.0 : 0.0;
+    s->blk_g2 = s->blk_g2 + seen * (pow(gx - s->lgx, 2.0) + pow(gy - s->lgy, 2.0) +
+                                    pow(gz - s->lgz, 2.0));
+    s->blk_a2 = s->blk_a2 + seen * (pow(ax - s->lax, 2.0) + pow(ay - s->lay, 2.0) +
+                                    pow(az - s->laz, 2.0));
+    s->blk_d = s->blk_d + seen;
+    s->lgx = gx;
+    s->lgy = gy;
+    s->lgz = gz;
+    s->lax = ax;
+    s->lay = ay;
+    s->laz = az;
+    s->last_n = s->last_n + 1.0;
+    int has_prev = s->prev_n > 0.0;
+    int jump_g = sqrt(pow(gx - s->pgx, 2.0) + pow(gy - s->pgy, 2.0) + pow(gz - s->pgz, 2.0)) >
+                 (p->rest_gyro_threshold_rad_s + REST_SAMPLE_SIGMAS * sqrt(s->noise_g2));
+    int jump_a = sqrt(pow(ax - s->pax, 2.0) + pow(ay - s->pay, 2.0) + pow(az - s->paz, 2.0)) >
+                 (p->rest_accel_threshold_m_s2 + REST_SAMPLE_SIGMAS * sqrt(s->noise_a2));
+    if (has_prev && (jump_g || jump_a)) s->rest_timer_s = 0.0;
+
+    int done = s->blk_t >= p->rest_window_s;
+    double n = s->blk_n;
+    double mgx = s->blk_gx / n, mgy = s->blk_gy / n, mgz = s->blk_gz / n;
+    double max_ = s->blk_ax / n, may = s->blk_ay / n, maz = s->blk_az / n;
+    double nd = 2.0 * maxd(s->blk_d, 1.0);
+    double noise_g2 = s->blk_g2 / nd, noise_a2 = s->blk_a2 / nd;
+    double spread = 1.0 / n + 1.0 / maxd(s->prev_n, 1.0);
+    double dg = sqrt(pow(mgx - s->pgx, 2.0) + pow(mgy - s->pgy, 2.0) + pow(mgz - s->pgz, 2.0));
+    double da = sqrt(pow(max_ - s->pax, 2.0) + pow(may - s->pay, 2.0) + pow(maz - s->paz, 2.0));
+    int still = has_prev &&
+                (dg < p->rest_gyro_threshold_rad_s + REST_NOISE_SIGMAS * sqrt(noise_g2 * spread)) &&
+                (da < p->rest_accel_threshold_m_s2 + REST_NOISE_SIGMAS * sqrt(noise_a2 * spread)) &&
+                (sqrt(mgx * mgx + mgy * mgy + mgz * mgz) <
+                 p->bias_limit_rad_s * 1.7320508075688772);
+    if (done) s->rest_timer_s = still ? s->rest_timer_s + s->blk_t : 0.0;
+    s->at_rest = (char)(p->rest_bias_learning && (s->rest_timer_s >= p->rest_time_s));
+    int measure = done && s->at_rest;
+    double r = maxd(noise_g2 / (3.0 * n), 1e-12);
+    double k = measure ? s->bias_var / (s->bias_var + r) : 0.0;
+    s->bx = s->bx + k * (mgx - s->bx);
+    s->by = s->by + k * (mgy - s->by);
+    s->bz = s->bz + k * (mgz - s->bz);
+    s->bias_var = s->bias_var - k * s->bias_var;
+    double gw = (done && still) ? s->blk_t / (GRAVITY_TIME_CONSTANT_S + s->blk_t) : 0.0;
+    s->g_ref = s->g_ref + gw * (sqrt(max_ * max_ + may * may + maz * maz) - s->g_ref);
+    if (done) {
+        s->noise_g2 = noise_g2;
+        s->noise_a2 = noise_a2;
+        s->pgx = mgx;
+        s->pgy = mgy;
+        s->pgz = mgz;
+        s->pax = max_;
+        s->pay = may;
+        s->paz = maz;
+        s->prev_n = n;
+    }
+    double keep = done ? 0.0 : 1.0;
+    s->blk_n = s->blk_n * keep;
+    s->blk_t = s->blk_t * keep;
+    s->blk_d = s->blk_d * keep;
+    s->blk_gx = s->blk_gx * keep;
+    s->blk_gy = s->blk_gy * keep;
+    s->blk_gz = s->blk_gz * keep;
+    s->blk_ax = s->blk_ax * keep;
+    s->blk_ay = s->blk_ay * keep;
+    s->blk_az = s->blk_az * keep;
+    s->blk_g2 = s->blk_g2 * keep;
+    s->blk_a2 = s->blk_a2 * keep;
+}
+
 static void cf_step(cf_state *s, const cf_params *p, const double *g, const double *acc,
                     const double *mag, double dt)
 {
     double gx = g[0], gy = g[1], gz = g[2], d[4], w[3];
     s->time_s = s->time_s + dt;
+    s->bias_var = (s->bias_var < 0.0 ? pow(p->bias_prior_sigma_rad_s, 2.0) : s->bias_var) +
+                  pow(BIAS_RANDOM_WALK_RAD_S_SQRT_S, 2.0) * dt;
     int startup = s->time_s <= p->startup_duration_s;
     int fast = startup || s->recovering;
     int learn = !fast;
@@ -214,34 +306,17 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
         double an = sqrt(ax * ax + ay * ay + az * az);
         s->g_ref = s->g_ref > 0.0 ? s->g_ref : p->gravity_m_s2;
         double deviation = maxd(an - s->g_ref, s->g_ref - an);
-        double lw = dt / (REST_LOWPASS_TIME_CONSTANT_S + dt);
-        double glx = s->glx + lw * (gx - s->glx), gly = s->gly + lw * (gy - s->gly),
-               glz = s->glz + lw * (gz - s->glz);
-        s->glx = glx;
-        s->gly = gly;
-        s->glz = glz;
-        double alx = s->alx + lw * (ax - s->alx), aly = s->aly + lw * (ay - s->aly),
-               alz = s->alz + lw * (az - s->alz);
-        s->alx = alx;
-        s->aly = aly;
-        s->alz = alz;
-        double gdev = sqrt(pow(gx - s->glx, 2.0) + pow(gy - s->gly, 2.0) + pow(gz - s->glz, 2.0));
-        double adev = sqrt(pow(ax - s->alx, 2.0) + pow(ay - s->aly, 2.0) + pow(az - s->alz, 2.0));
-        int steady = (gdev < p->rest_gyro_threshold_rad_s) &&
-                     (adev < p->rest_accel_threshold_m_s2) &&
-                     (sqrt(pow(s->glx, 2.0) + pow(s->gly, 2.0) + pow(s->glz, 2.0)) <
-                      p->bias_limit_rad_s * 1.7320508075688772);
-        double gw = steady ? dt / (GRAVITY_TIME_CONSTANT_S + dt) : 0.0;
-        s->g_ref = s->g_ref + gw * (an - s->g_ref);
-        s->rest_timer_s = steady ? s->rest_timer_s + dt : 0.0;
-        s->at_rest = (char)(p->rest_bias_learning && learn && (s->rest_timer_s >= p->rest_time_s));
-        int quick = fast || (s->at_rest && (deviation < p->rest_accel_threshold_m_s2));
+        stillness(s, p, g, acc, dt);
+        double steady_g = sqrt(s->pax * s->pax + s->pay * s->pay + s->paz * s->paz);
+        int quick = fast || (s->at_rest && (maxd(steady_g - s->g_ref, s->g_ref - steady_g) <
+                                            p->rest_accel_threshold_m_s2));
         double decayed =
             s->accel_hold * (p->acceleration_hold_s / (p->acceleration_hold_s + dt));
         s->accel_hold = maxd(deviation, decayed);
         int accelerating = s->accel_hold > p->acceleration_threshold_m_s2;
         double rate =
             sqrt(pow(gx - s->bx, 2.0) + pow(gy - s->by, 2.0) + pow(gz - s->bz, 2.0));
+        double lw = dt / (RATE_LOWPASS_TIME_CONSTANT_S + dt);
         s->rate_lp = s->rate_lp + lw * (rate - s->rate_lp);
         double ux = ax / s->g_ref, uy = ay / s->g_ref, uz = az / s->g_ref;
         /* 2. error */
@@ -261,28 +336,40 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
         double scale = clipped ? limit / maxd(en, 1e-300) : 1.0;
         /* 4. aperiodic unit in the world frame */
         rotate(s->qw, s->qx, s->qy, s->qz, ex * scale, ey * scale, ez * scale, w);
-        double weight = quick ? 1.0 : dt / (p->aperiodic_time_constant_s + dt);
+        double weight = dt / (p->aperiodic_time_constant_s + dt);
         s->lx = s->lx + weight * (w[0] - s->lx);
         s->ly = s->ly + weight * (w[1] - s->ly);
         s->lz = s->lz + weight * (w[2] - s->lz);
         double f[3];
-        rotate(s->qw, -s->qx, -s->qy, -s->qz, s->lx, s->ly, s->lz, f);
+        if (quick)
+            rotate(s->qw, -s->qx, -s->qy, -s->qz, w[0], w[1], w[2], f);
+        else
+            rotate(s->qw, -s->qx, -s->qy, -s->qz, s->lx, s->ly, s->lz, f);
         s->fx = f[0];
         s->fy = f[1];
         s->fz = f[2];
-        /* 5. regulator */
+        /* 5. regulator (k1, k2 raised while the bias is uncertain) */
+        double share = mind(s->bias_var / pow(p->bias_prior_sigma_rad_s, 2.0), 1.0);
+        double k2 = maxd(p->k2, p->bias_learning_k2 * share);
+        double k1 = maxd(p->k1, 2.0 * sqrt(k2));
         double k3dt = learn ? p->k3 * dt : 0.0;
         s->cx = s->cx + k3dt * f[0];
         s->cy = s->cy + k3dt * f[1];
         s->cz = s->cz + k3dt * f[2];
         double ldt = learn ? dt : 0.0;
-        s->bx = s->bx - ldt * (p->k2 * f[0] + s->cx);
-        s->by = s->by - ldt * (p->k2 * f[1] + s->cy);
-        s->bz = s->bz - ldt * (p->k2 * f[2] + s->cz);
-        double k1 = quick ? maxd(p->k1, p->startup_k1) : p->k1;
+        s->bx = s->bx - ldt * (k2 * f[0] + s->cx);
+        s->by = s->by - ldt * (k2 * f[1] + s->cy);
+        s->bz = s->bz - ldt * (k2 * f[2] + s->cz);
+        s->bias_var = s->bias_var / (1.0 + ldt * k2 / maxd(k1, 1e-3));
+        k1 = quick ? maxd(k1, p->startup_k1) : k1;
         double gain = k1 * dt / (1.0 + k1 * dt);
         expmap(gain * f[0], gain * f[1], gain * f[2], d);
         mul_into(s, d);
+        double dec = gain * (quick ? 1.0 : p->prefilter);
+        double ux_ = quick ? w[0] : s->lx, uy_ = quick ? w[1] : s->ly, uz_ = quick ? w[2] : s->lz;
+        s->lx = s->lx - dec * ux_;
+        s->ly = s->ly - dec * uy_;
+        s->lz = s->lz - dec * uz_;
         /* recovery */
         s->clip_timer_s = clipped ? s->clip_timer_s + dt : 0.0;
         int enter = (p->recovery_trigger_s > 0.0) && (s->clip_timer_s >= p->recovery_trigger_s) &&
@@ -292,11 +379,6 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
         s->recovering = (char)(s->recovering ? !leave : enter);
         if (enter) s->clip_timer_s = 0.0;
         s->clipped = (char)clipped;
-        /* bias at rest */
-        double bw = s->at_rest ? dt / (p->rest_bias_time_constant_s + dt) : 0.0;
-        s->bx = s->bx + bw * (s->glx - s->bx);
-        s->by = s->by + bw * (s->gly - s->by);
-        s->bz = s->bz + bw * (s->glz - s->bz);
     }
     double lim = p->bias_limit_rad_s;
     s->bx = mind(maxd(s->bx, -lim), lim);
@@ -369,8 +451,9 @@ static const field_spec PARAM_FIELDS[] = {
     DF(aperiodic_time_constant_s), DF(startup_duration_s), DF(startup_k1),
     DF(recovery_trigger_s), DF(r1), DF(r2), DF(mag_saturation_limit_rad),
     DF(mag_norm_tolerance), DF(mag_dip_tolerance_rad), DF(rest_gyro_threshold_rad_s),
-    DF(rest_accel_threshold_m_s2), DF(rest_time_s), DF(rest_bias_time_constant_s),
-    DF(bias_limit_rad_s), DF(gravity_m_s2), BF(use_saturation), BF(use_mag), BF(mag_full),
+    DF(rest_accel_threshold_m_s2), DF(rest_time_s), DF(rest_window_s),
+    DF(bias_prior_sigma_rad_s), DF(bias_learning_k2), DF(bias_limit_rad_s), DF(gravity_m_s2),
+    DF(prefilter), BF(use_saturation), BF(use_mag), BF(mag_full),
     BF(mag_rejection), BF(rest_bias_learning), {NULL, 0, 0}};
 
 static int Params_init(ParamsObject *self, PyObject *args, PyObject *kwds)
@@ -618,6 +701,7 @@ static PyObject *State_run(StateObject *self, PyObject *args)
             x[7] = s->phase;
             x[8] = s->at_rest;
             x[9] = s->mag_status;
+            x[10] = sqrt(s->bias_var);
         }
     }
     Py_END_ALLOW_THREADS
@@ -667,7 +751,10 @@ static PyMethodDef State_methods[] = {
 static PyMemberDef State_members[] = {
     SD(qw), SD(qx), SD(qy), SD(qz), SD(bx), SD(by), SD(bz), SD(cx), SD(cy), SD(cz), SD(lx),
     SD(ly), SD(lz), SD(z_m), SD(time_s), SD(clip_timer_s), SB(recovering), SD(rest_timer_s),
-    SD(glx), SD(gly), SD(glz), SD(alx), SD(aly), SD(alz), SB(at_rest), SD(mag_ref_norm),
+    SD(blk_n), SD(blk_t), SD(blk_gx), SD(blk_gy), SD(blk_gz), SD(blk_ax), SD(blk_ay),
+    SD(blk_az), SD(blk_g2), SD(blk_a2), SD(prev_n), SD(pgx), SD(pgy), SD(pgz), SD(pax), SD(pay),
+    SD(paz), SD(blk_d), SD(last_n), SD(lgx), SD(lgy), SD(lgz), SD(lax), SD(lay), SD(laz),
+    SD(noise_g2), SD(noise_a2), SD(bias_var), SB(at_rest), SD(mag_ref_norm),
     SD(mag_ref_dip), SD(mag_ref_count), SB(mag_disturbed), SD(mag_reject_timer_s),
     SD(mag_last_time_s), SB(heading_initialized), SD(g_ref), SD(accel_hold), SD(rate_lp),
     SD(ex), SD(ey), SD(ez), SD(error_norm), SD(fx), SD(fy), SD(fz), SB(clipped),
@@ -700,8 +787,11 @@ PyMODINIT_FUNC PyInit__kernel(void)
     }
     if (PyDict_SetItemString(StateType.tp_dict, "FIELDS", fields) < 0) return NULL;
     Py_DECREF(fields);
-    PyObject *consts = Py_BuildValue("{s:d,s:d,s:i,s:d,s:d,s:d,s:i}", "REST_LOWPASS_TIME_CONSTANT_S",
-                                     REST_LOWPASS_TIME_CONSTANT_S, "GRAVITY_TIME_CONSTANT_S",
+    PyObject *consts = Py_BuildValue("{s:d,s:d,s:d,s:d,s:d,s:i,s:d,s:d,s:d,s:i}",
+                                     "RATE_LOWPASS_TIME_CONSTANT_S", RATE_LOWPASS_TIME_CONSTANT_S,
+                                     "REST_NOISE_SIGMAS", REST_NOISE_SIGMAS,
+                                     "REST_SAMPLE_SIGMAS", REST_SAMPLE_SIGMAS,
+                                     "BIAS_RANDOM_WALK_RAD_S_SQRT_S", BIAS_RANDOM_WALK_RAD_S_SQRT_S, "GRAVITY_TIME_CONSTANT_S",
                                      GRAVITY_TIME_CONSTANT_S, "MAG_REFERENCE_SAMPLES",
                                      MAG_REFERENCE_SAMPLES, "MAG_RELEARN_AFTER_S",
                                      MAG_RELEARN_AFTER_S, "MAG_MAX_DT_S", MAG_MAX_DT_S,

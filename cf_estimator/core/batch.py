@@ -20,6 +20,7 @@ from cf_estimator.core.batched import BatchedFilter
 from cf_estimator.core.filter import EXTRA_COLUMNS, ComplementaryFilter, state_extras
 from cf_estimator.core.kernel import resolve_backend
 from cf_estimator.core.params import FilterParams
+from cf_estimator.core.step import BIAS_CONVERGED_SIGMA_RAD_S
 
 
 @dataclass
@@ -32,8 +33,15 @@ class EstimateResult:
     clipped: np.ndarray  #: (N,) bool: saturation active
     gyro_bias_rad_s: np.ndarray  #: (N, 3) bias estimate, sensor frame
     phase: np.ndarray  #: (N,) int: 0 uninitialized, 1 startup, 2 running, 3 recovering
-    at_rest: np.ndarray  #: (N,) bool
+    at_rest: np.ndarray  #: (N,) bool: still (block statistics); the bias is learned from the gyro
     mag_status: np.ndarray  #: (N,) int: 0 none, 1 used, 2 rejected, 3 disabled
+    gyro_bias_sigma_rad_s: np.ndarray  #: (N,) standard deviation of the bias estimate [rad/s]
+
+    @property
+    def gyro_bias_converged(self) -> np.ndarray:
+        """(N,) bool: the bias estimate's standard deviation is below
+        :data:`~cf_estimator.core.step.BIAS_CONVERGED_SIGMA_RAD_S`."""
+        return self.gyro_bias_sigma_rad_s < BIAS_CONVERGED_SIGMA_RAD_S
 
     def euler_rad(self) -> np.ndarray:
         """(N, 3) roll, pitch, yaw [rad] (aerospace ZYX) of :attr:`quaternion`."""
@@ -142,6 +150,7 @@ def estimate(
     return EstimateResult(
         t, out_q, extra[:, 0:3], extra[:, 6] != 0.0, extra[:, 3:6],
         extra[:, 7].astype(np.int8), extra[:, 8] != 0.0, extra[:, 9].astype(np.int8),
+        extra[:, 10],
     )
 
 

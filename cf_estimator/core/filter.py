@@ -26,6 +26,7 @@ from cf_estimator.core.kernel import compiled_kernel, resolve_backend
 from cf_estimator.core.ops import FloatOps
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import (
+    BIAS_CONVERGED_SIGMA_RAD_S,
     MAG_STATUS_NAMES,
     PHASE_NAMES,
     PHASE_STARTUP,
@@ -42,6 +43,7 @@ def step_params(params: FilterParams) -> SimpleNamespace:
     """The parameter view the step reads: FilterParams fields plus derived flags."""
     view = SimpleNamespace(**as_dict(params))
     view.mag_full = params.mag_mode == "full"
+    view.prefilter = params.aperiodic_prefilter
     return view
 
 
@@ -103,7 +105,9 @@ class FilterStatus:
     clipped: bool  #: the saturation unit was active
     processed_error_rad: tuple[float, float, float]  #: after saturation and aperiodic unit
     gyro_bias_rad_s: tuple[float, float, float]  #: bias estimate, sensor frame
-    at_rest: bool
+    gyro_bias_sigma_rad_s: float  #: standard deviation of the bias estimate [rad/s]
+    gyro_bias_converged: bool  #: sigma below BIAS_CONVERGED_SIGMA_RAD_S
+    at_rest: bool  #: still (block statistics) for rest_time_s: the bias is learned from the gyro
     accel_used: bool
     mag_status: str  #: none | used | rejected | disabled
     heading_initialized: bool
@@ -113,14 +117,20 @@ class FilterStatus:
 
 
 #: Columns of :meth:`ComplementaryFilter.run_rows`'s ``extra_out``: raw error e (3, rad, sensor),
-#: bias b (3, rad/s, sensor), clipped, phase, at_rest, mag_status.
-EXTRA_COLUMNS = 10
+#: bias b (3, rad/s, sensor), clipped, phase, at_rest, mag_status, bias sigma [rad/s].
+EXTRA_COLUMNS = 11
 
 
 def state_extras(s: Any) -> tuple:
     """One ``extra_out`` row (EXTRA_COLUMNS values) from a filter state (_kernel.c writes the
     same columns in ``State.run``)."""
-    return (s.ex, s.ey, s.ez, s.bx, s.by, s.bz, s.clipped, s.phase, s.at_rest, s.mag_status)
+    return (s.ex, s.ey, s.ez, s.bx, s.by, s.bz, s.clipped, s.phase, s.at_rest, s.mag_status,
+            bias_sigma(s))
+
+
+def bias_sigma(s: Any) -> float:
+    """Standard deviation of the bias estimate [rad/s] (the prior before the first step)."""
+    return math.sqrt(s.bias_var) if s.bias_var >= 0.0 else math.nan
 
 
 class ComplementaryFilter:
@@ -322,6 +332,8 @@ class ComplementaryFilter:
             clipped=bool(s.clipped),
             processed_error_rad=(float(s.fx), float(s.fy), float(s.fz)),
             gyro_bias_rad_s=tuple(float(c) for c in self.gyro_bias_rad_s),  # type: ignore[arg-type]
+            gyro_bias_sigma_rad_s=bias_sigma(s),
+            gyro_bias_converged=bias_sigma(s) < BIAS_CONVERGED_SIGMA_RAD_S,
             at_rest=bool(s.at_rest),
             accel_used=bool(s.accel_used),
             mag_status=MAG_STATUS_NAMES[int(s.mag_status)],

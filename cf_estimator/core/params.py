@@ -103,12 +103,24 @@ class FilterParams:
         group="error path",
     )
     aperiodic_time_constant_s: float = param(
-        2.0,
+        3.0,
         "s",
         "Time constant T of the aperiodic unit 1/(T*s+1) on the clipped error, applied "
         "in the world frame (0 = off). Must satisfy T < k1/k2 for stability.",
         minimum=0.0,
         maximum=1000.0,
+        group="error path",
+    )
+    aperiodic_prefilter: float = param(
+        0.3,
+        "1",
+        "Share of each correction that also turns what the aperiodic unit holds. 1: the unit is "
+        "a pre-filter of the measured specific force in the world frame (its memory always "
+        "matches the current estimate, as in VQF); 0: the thesis's unit on the clipped error, "
+        "whose memory of already-corrected error keeps acting (slower, smoother loop). Chosen "
+        "by measurement on BROAD, EuRoC and the thesis scenarios (BENCHMARKS.md).",
+        minimum=0.0,
+        maximum=1.0,
         group="error path",
     )
     startup_duration_s: float = param(
@@ -204,44 +216,69 @@ class FilterParams:
     rest_bias_learning: bool = param(
         True,
         "",
-        "Detect rest: then learn the gyro bias directly from the gyro, and run the error "
-        "path as in start-up (no clip, no lag, gain startup_k1).",
+        "Detect stillness: then learn the gyro bias from the gyro's block means, and run the "
+        "error path as in start-up (no clip, no lag, gain startup_k1) while |a| = ‖g‖.",
+        group="bias",
+    )
+    rest_window_s: float = param(
+        0.5,
+        "s",
+        "Stillness detection: block length. Each block's gyro and accelerometer means are "
+        "compared with the previous block's.",
+        minimum=0.0,
+        maximum=60.0,
+        minimum_exclusive=True,
         group="bias",
     )
     rest_gyro_threshold_rad_s: float = param(
-        0.035,
+        0.01,
         "rad/s",
-        "Rest detection: gyro within this of its 0.5 s low-passed mean.",
+        "Stillness detection: the gyro block mean may change by this much from one block to "
+        "the next, plus 4 standard deviations of the observed noise floor (vibration).",
         minimum=0.0,
         maximum=10.0,
         minimum_exclusive=True,
         group="bias",
     )
     rest_accel_threshold_m_s2: float = param(
-        0.5,
+        0.2,
         "m/s^2",
-        "Rest detection: accelerometer within this of its 0.5 s low-passed mean.",
+        "Stillness detection: the accelerometer block mean may change by this much, plus 4 "
+        "standard deviations of the observed noise floor; at rest the error path is quick only "
+        "while the block mean's norm is within this of ‖g‖.",
         minimum=0.0,
         maximum=100.0,
         minimum_exclusive=True,
         group="bias",
     )
     rest_time_s: float = param(
-        1.5,
+        1.0,
         "s",
-        "Rest detection: conditions must hold this long.",
+        "Stillness detection: still blocks must follow each other this long before the sensor "
+        "counts as at rest (and each further still block measures the bias).",
         minimum=0.0,
         maximum=600.0,
         minimum_exclusive=True,
         group="bias",
     )
-    rest_bias_time_constant_s: float = param(
-        3.0,
-        "s",
-        "Time constant of the direct bias update while at rest.",
+    bias_prior_sigma_rad_s: float = param(
+        0.1,
+        "rad/s",
+        "Prior standard deviation of the gyro bias (uncalibrated MEMS gyros: several deg/s). "
+        "It weighs the first still blocks against the initial estimate 0.",
         minimum=0.0,
-        maximum=3600.0,
+        maximum=10.0,
         minimum_exclusive=True,
+        group="bias",
+    )
+    bias_learning_k2: float = param(
+        0.05,
+        "1/s^2",
+        "Integral gain while the bias is uncertain (no still phase yet): the loop's k2 is "
+        "raised towards this in proportion to the bias variance, and k1 to at least 2*sqrt(k2), "
+        "so a large bias is learned in flight within tens of seconds (0 = off).",
+        minimum=0.0,
+        maximum=10.0,
         group="bias",
     )
     bias_limit_rad_s: float = param(

@@ -41,8 +41,18 @@ MAG_REJECTED = 2  # norm or dip off the learned reference: disturbance, ignored
 MAG_DISABLED = 3  # use_mag is off
 MAG_STATUS_NAMES = {0: "none", 1: "used", 2: "rejected", 3: "disabled"}
 
-#: Low-pass time constant of the rest detector's gyro/accelerometer means [s].
-REST_LOWPASS_TIME_CONSTANT_S = 0.5
+#: Low-pass time constant of the rotation rate that selects the clip level [s].
+RATE_LOWPASS_TIME_CONSTANT_S = 0.5
+#: Stillness: a change of the block means within this many standard deviations of the observed
+#: noise floor is no change (the floor includes rotor vibration, so vibration is not motion).
+REST_NOISE_SIGMAS = 2.0
+#: A single sample this many noise standard deviations (plus the thresholds) away from the last
+#: block mean ends a still phase at once, without waiting for the block to end.
+REST_SAMPLE_SIGMAS = 8.0
+#: Bias random walk [rad/s/sqrt(s)]: how fast the confidence in a learned bias fades.
+BIAS_RANDOM_WALK_RAD_S_SQRT_S = 2e-4
+#: The bias estimate counts as converged below this standard deviation [rad/s].
+BIAS_CONVERGED_SIGMA_RAD_S = 0.005
 #: Time constant [s] with which ‖g‖ follows |a| while the sensor is steady: slow enough that a
 #: steady linear acceleration of a few seconds (the thesis's 25 m/s in 5 s) is not absorbed.
 GRAVITY_TIME_CONSTANT_S = 10.0
@@ -60,6 +70,10 @@ class StepState:
     Frames and units: q* = q_world(ENU)_from_sensor; b* gyro-bias estimate [rad/s, sensor];
     c* k3-path state [rad/s², sensor]; l* aperiodic-unit state [rad, world]; z_m yaw-rate
     correction [rad/s, world z]; e* last raw error [rad, sensor]; f* last processed error.
+    Stillness: blk_* sums of the current block (gyro [rad/s], accel [m/s²], *2 sums of squared
+    differences), p* means of the previous block, l* the last sample, noise_*2 the last block's
+    noise variance (sum over axes),
+    bias_var variance of the bias estimate [(rad/s)²].
     """
 
     FIELDS = [
@@ -81,12 +95,34 @@ class StepState:
         "clip_timer_s",
         "recovering",
         "rest_timer_s",
-        "glx",
-        "gly",
-        "glz",
-        "alx",
-        "aly",
-        "alz",
+        "blk_n",
+        "blk_t",
+        "blk_gx",
+        "blk_gy",
+        "blk_gz",
+        "blk_ax",
+        "blk_ay",
+        "blk_az",
+        "blk_g2",
+        "blk_a2",
+        "prev_n",
+        "pgx",
+        "pgy",
+        "pgz",
+        "pax",
+        "pay",
+        "paz",
+        "blk_d",
+        "last_n",
+        "lgx",
+        "lgy",
+        "lgz",
+        "lax",
+        "lay",
+        "laz",
+        "noise_g2",
+        "noise_a2",
+        "bias_var",
         "at_rest",
         "mag_ref_norm",
         "mag_ref_dip",
@@ -130,6 +166,7 @@ class StepState:
             setattr(self, name, false & True)
         self.qw = zero + 1.0
         self.mag_last_time_s = zero - 1.0
+        self.bias_var = zero - 1.0  # < 0: not yet set from the parameters (first step sets it)
 
     def copy(self) -> StepState:
         """A copy (arrays copied too)."""
@@ -189,6 +226,80 @@ def _normalize(s: StepState, o: Any) -> None:
     s.qw, s.qx, s.qy, s.qz = s.qw / n, s.qx / n, s.qy / n, s.qz / n
 
 
+def _stillness(s: StepState, p: Any, gyro: tuple, accel: tuple, dt: Any, o: Any) -> None:
+    """Stillness detection and bias learning at rest, on blocks of ``rest_window_s``.
+
+    Still = the gyro and accelerometer block means did not change from the previous block by
+    more than the thresholds plus REST_NOISE_SIGMAS standard deviations of a block-mean
+    difference. The noise (sensor noise and rotor vibration) is measured in each block from
+    sample-to-sample differences, which slow motion hardly changes: vibration averages out in a
+    block mean and widens the tolerance by what it adds to it; a constant gyro bias cancels in
+    the difference. After ``rest_time_s`` of still blocks the sensor is at rest: each further
+    still block is a measurement of the bias (its gyro mean, variance from its noise), fused
+    with the estimate by its variance (a scalar Kalman update), and ‖g‖ follows |a| slowly.
+    """
+    gx, gy, gz = gyro
+    ax, ay, az = accel
+    s.blk_n = s.blk_n + 1.0
+    s.blk_t = s.blk_t + dt
+    s.blk_gx, s.blk_gy, s.blk_gz = s.blk_gx + gx, s.blk_gy + gy, s.blk_gz + gz
+    s.blk_ax, s.blk_ay, s.blk_az = s.blk_ax + ax, s.blk_ay + ay, s.blk_az + az
+    # squared sample-to-sample differences (noise); the first sample has none
+    seen = o.where(s.last_n > 0.0, 1.0, 0.0)
+    s.blk_g2 = s.blk_g2 + seen * ((gx - s.lgx) ** 2 + (gy - s.lgy) ** 2 + (gz - s.lgz) ** 2)
+    s.blk_a2 = s.blk_a2 + seen * ((ax - s.lax) ** 2 + (ay - s.lay) ** 2 + (az - s.laz) ** 2)
+    s.blk_d = s.blk_d + seen
+    s.lgx, s.lgy, s.lgz, s.lax, s.lay, s.laz = gx, gy, gz, ax, ay, az
+    s.last_n = s.last_n + 1.0
+    has_prev = s.prev_n > 0.0
+    # a sample far outside the noise around the last block's mean ends rest at once
+    jump_g = o.sqrt((gx - s.pgx) ** 2 + (gy - s.pgy) ** 2 + (gz - s.pgz) ** 2) > (
+        p.rest_gyro_threshold_rad_s + REST_SAMPLE_SIGMAS * o.sqrt(s.noise_g2))
+    jump_a = o.sqrt((ax - s.pax) ** 2 + (ay - s.pay) ** 2 + (az - s.paz) ** 2) > (
+        p.rest_accel_threshold_m_s2 + REST_SAMPLE_SIGMAS * o.sqrt(s.noise_a2))
+    s.rest_timer_s = o.where(has_prev & (jump_g | jump_a), 0.0, s.rest_timer_s)
+
+    done = s.blk_t >= p.rest_window_s
+    n = s.blk_n
+    mgx, mgy, mgz = s.blk_gx / n, s.blk_gy / n, s.blk_gz / n
+    max_, may, maz = s.blk_ax / n, s.blk_ay / n, s.blk_az / n
+    # white-noise variance (sum over axes) from differences: E|x_k - x_k-1|^2 = 2 var
+    nd = 2.0 * o.maximum(s.blk_d, 1.0)
+    noise_g2, noise_a2 = s.blk_g2 / nd, s.blk_a2 / nd
+    spread = 1.0 / n + 1.0 / o.maximum(s.prev_n, 1.0)
+    dg = o.sqrt((mgx - s.pgx) ** 2 + (mgy - s.pgy) ** 2 + (mgz - s.pgz) ** 2)
+    da = o.sqrt((max_ - s.pax) ** 2 + (may - s.pay) ** 2 + (maz - s.paz) ** 2)
+    still = (
+        has_prev
+        & (dg < p.rest_gyro_threshold_rad_s + REST_NOISE_SIGMAS * o.sqrt(noise_g2 * spread))
+        & (da < p.rest_accel_threshold_m_s2 + REST_NOISE_SIGMAS * o.sqrt(noise_a2 * spread))
+        & (o.sqrt(mgx * mgx + mgy * mgy + mgz * mgz) < p.bias_limit_rad_s * 1.7320508075688772)
+    )
+    s.rest_timer_s = o.where(done, o.where(still, s.rest_timer_s + s.blk_t, 0.0), s.rest_timer_s)
+    s.at_rest = p.rest_bias_learning & (s.rest_timer_s >= p.rest_time_s)
+    # a still block at rest measures the bias: scalar Kalman update per axis
+    measure = done & s.at_rest
+    r = o.maximum(noise_g2 / (3.0 * n), 1e-12)
+    k = o.where(measure, s.bias_var / (s.bias_var + r), 0.0)
+    s.bx, s.by, s.bz = s.bx + k * (mgx - s.bx), s.by + k * (mgy - s.by), s.bz + k * (mgz - s.bz)
+    s.bias_var = s.bias_var - k * s.bias_var
+    gw = o.where(done & still, s.blk_t / (GRAVITY_TIME_CONSTANT_S + s.blk_t), 0.0)
+    s.g_ref = s.g_ref + gw * (o.sqrt(max_ * max_ + may * may + maz * maz) - s.g_ref)
+    # next block
+    s.noise_g2 = o.where(done, noise_g2, s.noise_g2)
+    s.noise_a2 = o.where(done, noise_a2, s.noise_a2)
+    s.pgx, s.pgy, s.pgz = (o.where(done, mgx, s.pgx), o.where(done, mgy, s.pgy),
+                           o.where(done, mgz, s.pgz))
+    s.pax, s.pay, s.paz = (o.where(done, max_, s.pax), o.where(done, may, s.pay),
+                           o.where(done, maz, s.paz))
+    s.prev_n = o.where(done, n, s.prev_n)
+    keep = o.where(done, 0.0, 1.0)
+    s.blk_n, s.blk_t, s.blk_d = s.blk_n * keep, s.blk_t * keep, s.blk_d * keep
+    s.blk_gx, s.blk_gy, s.blk_gz = s.blk_gx * keep, s.blk_gy * keep, s.blk_gz * keep
+    s.blk_ax, s.blk_ay, s.blk_az = s.blk_ax * keep, s.blk_ay * keep, s.blk_az * keep
+    s.blk_g2, s.blk_a2 = s.blk_g2 * keep, s.blk_a2 * keep
+
+
 def step(
     s: StepState,
     p: Any,
@@ -206,6 +317,8 @@ def step(
     """
     gx, gy, gz = gyro
     s.time_s = s.time_s + dt
+    s.bias_var = o.where(s.bias_var < 0.0, p.bias_prior_sigma_rad_s ** 2, s.bias_var) + (
+        BIAS_RANDOM_WALK_RAD_S_SQRT_S ** 2 * dt)
     startup = s.time_s <= p.startup_duration_s
     fast = startup | s.recovering  # trust the accelerometer fully, learn no bias
     learn = o.not_(fast)
@@ -223,40 +336,19 @@ def step(
         an = o.sqrt(ax * ax + ay * ay + az * az)
         s.g_ref = o.where(s.g_ref > 0.0, s.g_ref, p.gravity_m_s2)  # ‖g‖: prior, learned below
         deviation = o.maximum(an - s.g_ref, s.g_ref - an)  # | |a| - ‖g‖ |
-        # rest detection on this very sample (a disturbance is never taken for rest)
-        lw = dt / (REST_LOWPASS_TIME_CONSTANT_S + dt)
-        s.glx, s.gly, s.glz = (
-            s.glx + lw * (gx - s.glx),
-            s.gly + lw * (gy - s.gly),
-            s.glz + lw * (gz - s.glz),
-        )
-        s.alx, s.aly, s.alz = (
-            s.alx + lw * (ax - s.alx),
-            s.aly + lw * (ay - s.aly),
-            s.alz + lw * (az - s.alz),
-        )
-        gdev = o.sqrt((gx - s.glx) ** 2 + (gy - s.gly) ** 2 + (gz - s.glz) ** 2)
-        adev = o.sqrt((ax - s.alx) ** 2 + (ay - s.aly) ** 2 + (az - s.alz) ** 2)
-        steady = (
-            (gdev < p.rest_gyro_threshold_rad_s)
-            & (adev < p.rest_accel_threshold_m_s2)
-            & (o.sqrt(s.glx**2 + s.gly**2 + s.glz**2) < p.bias_limit_rad_s * 1.7320508075688772)
-        )
-        # ‖g‖ follows |a| slowly whenever the sensor is steady (not only at rest: a recording that
-        # starts in motion would otherwise seed a wrong ‖g‖ that keeps rest out for ever)
-        gw = o.where(steady, dt / (GRAVITY_TIME_CONSTANT_S + dt), 0.0)
-        s.g_ref = s.g_ref + gw * (an - s.g_ref)
-        s.rest_timer_s = o.where(steady, s.rest_timer_s + dt, 0.0)
-        s.at_rest = p.rest_bias_learning & learn & (s.rest_timer_s >= p.rest_time_s)
-        # at rest the gyro mean is the bias, whatever the accelerometer says; but the error path
-        # trusts the accelerometer only if |a| = ‖g‖: a steady linear acceleration (constant
-        # accelerometer, still gyro: the 25 m/s manoeuvre) is not gravity
-        quick = fast | (s.at_rest & (deviation < p.rest_accel_threshold_m_s2))
+        _stillness(s, p, gyro, accel, dt, o)
+        # at rest the block mean of the gyro is the bias, whatever the accelerometer says; but
+        # the error path trusts the accelerometer only if |a| = ‖g‖: a steady linear
+        # acceleration (constant accelerometer, still gyro: the 25 m/s manoeuvre) is not gravity
+        steady_g = o.sqrt(s.pax * s.pax + s.pay * s.pay + s.paz * s.paz)  # last block's |a|
+        quick = fast | (s.at_rest & (o.maximum(steady_g - s.g_ref, s.g_ref - steady_g)
+                                     < p.rest_accel_threshold_m_s2))
         # linear-acceleration detector: peak hold of | |a| - ‖g‖ |
         decayed = s.accel_hold * (p.acceleration_hold_s / (p.acceleration_hold_s + dt))
         s.accel_hold = o.maximum(deviation, decayed)
         accelerating = s.accel_hold > p.acceleration_threshold_m_s2
         rate = o.sqrt((gx - s.bx) ** 2 + (gy - s.by) ** 2 + (gz - s.bz) ** 2)
+        lw = dt / (RATE_LOWPASS_TIME_CONSTANT_S + dt)
         s.rate_lp = s.rate_lp + lw * (rate - s.rate_lp)
         # seed 000: e = (a/‖g‖) × ĝ — scaled by gravity, not by |a|, so the error stays linear in
         # the linear acceleration and the aperiodic unit averages zero-mean accelerations out
@@ -276,23 +368,38 @@ def step(
         scale = o.where(clipped, limit / o.maximum(en, 1e-300), 1.0)
         # 4. aperiodic unit in the world frame (weight 1 = unit bypassed)
         wx, wy, wz = _rotate(s.qw, s.qx, s.qy, s.qz, ex * scale, ey * scale, ez * scale)
-        weight = o.where(quick, 1.0, dt / (p.aperiodic_time_constant_s + dt))
+        weight = dt / (p.aperiodic_time_constant_s + dt)
         s.lx = s.lx + weight * (wx - s.lx)
         s.ly = s.ly + weight * (wy - s.ly)
         s.lz = s.lz + weight * (wz - s.lz)
-        fx, fy, fz = _rotate(s.qw, -s.qx, -s.qy, -s.qz, s.lx, s.ly, s.lz)
+        # quick (start-up, recovery, rest): the error bypasses the unit, which keeps running so
+        # that it holds the recent mean error, not the last noisy sample, when the bypass ends
+        lx, ly, lz = o.where(quick, wx, s.lx), o.where(quick, wy, s.ly), o.where(quick, wz, s.lz)
+        fx, fy, fz = _rotate(s.qw, -s.qx, -s.qy, -s.qz, lx, ly, lz)
         s.fx, s.fy, s.fz = fx, fy, fz
-        # 5. PI(+k3) regulator: integral states are the bias estimate
+        # 5. PI(+k3) regulator: integral states are the bias estimate. While the bias is
+        # uncertain (no still phase yet) the loop runs faster: k2 up to bias_learning_k2 in
+        # proportion to the bias variance, k1 kept at least critically damping it
+        share = o.minimum(s.bias_var / (p.bias_prior_sigma_rad_s ** 2), 1.0)
+        k2 = o.maximum(p.k2, p.bias_learning_k2 * share)
+        k1 = o.maximum(p.k1, 2.0 * o.sqrt(k2))
         k3dt = o.where(learn, p.k3 * dt, 0.0)
         s.cx, s.cy, s.cz = s.cx + k3dt * fx, s.cy + k3dt * fy, s.cz + k3dt * fz
         ldt = o.where(learn, dt, 0.0)
-        s.bx = s.bx - ldt * (p.k2 * fx + s.cx)
-        s.by = s.by - ldt * (p.k2 * fy + s.cy)
-        s.bz = s.bz - ldt * (p.k2 * fz + s.cz)
-        k1 = o.where(quick, o.maximum(p.k1, p.startup_k1), p.k1)
+        s.bx = s.bx - ldt * (k2 * fx + s.cx)
+        s.by = s.by - ldt * (k2 * fy + s.cy)
+        s.bz = s.bz - ldt * (k2 * fz + s.cz)
+        # the integral learns the bias with time constant ~k1/k2: its variance shrinks so
+        s.bias_var = s.bias_var / (1.0 + ldt * k2 / o.maximum(k1, 1e-3))
+        k1 = o.where(quick, o.maximum(k1, p.startup_k1), k1)
         gain = k1 * dt / (1.0 + k1 * dt)
         dw, dx, dy, dz = _exp(gain * fx, gain * fy, gain * fz, o)
         s.qw, s.qx, s.qy, s.qz = _mul(s.qw, s.qx, s.qy, s.qz, dw, dx, dy, dz)
+        # the correction (world frame: gain * (lx, ly, lz)) also turns, by the share
+        # aperiodic_prefilter, the filtered error the unit holds (1: a pre-filter of the specific
+        # force whose memory matches the current estimate); always so in the quick bypass
+        dec = gain * o.where(quick, 1.0, p.prefilter)
+        s.lx, s.ly, s.lz = s.lx - dec * lx, s.ly - dec * ly, s.lz - dec * lz
         # recovery: a long unbroken clip is a real attitude error, not a disturbance
         s.clip_timer_s = o.where(clipped, s.clip_timer_s + dt, 0.0)
         enter = (p.recovery_trigger_s > 0.0) & (s.clip_timer_s >= p.recovery_trigger_s) & learn
@@ -302,13 +409,6 @@ def step(
         s.clip_timer_s = o.where(enter, 0.0, s.clip_timer_s)
         s.clipped = clipped
 
-        # direct bias learning at rest
-        bw = o.where(s.at_rest, dt / (p.rest_bias_time_constant_s + dt), 0.0)
-        s.bx, s.by, s.bz = (
-            s.bx + bw * (s.glx - s.bx),
-            s.by + bw * (s.gly - s.by),
-            s.bz + bw * (s.glz - s.bz),
-        )
     lim = p.bias_limit_rad_s
     s.bx = o.minimum(o.maximum(s.bx, -lim), lim)
     s.by = o.minimum(o.maximum(s.by, -lim), lim)
