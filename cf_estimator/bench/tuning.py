@@ -99,8 +99,8 @@ SEARCHABLE: tuple[Dim, ...] = (
 #: aperiodic unit, the magnetometer gains and the recovery trigger. The acceleration hold and
 #: the rest parameters can be chosen with ``space_from_names``.
 DEFAULT_SEARCH: tuple[str, ...] = (
-    "k1", "k2", "saturation_limit_rad", "aperiodic_time_constant_s", "aperiodic_prefilter", "r1", "r2",
-    "recovery_trigger_s", "wide_saturation_limit_rad", "rotation_threshold_rad_s",
+    "k1", "k2", "saturation_limit_rad", "aperiodic_time_constant_s", "aperiodic_prefilter",
+    "r1", "r2", "recovery_trigger_s", "wide_saturation_limit_rad", "rotation_threshold_rad_s",
     "acceleration_threshold_m_s2",
 )
 

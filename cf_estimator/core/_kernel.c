@@ -33,6 +33,7 @@
 /* constants of step.py (test_kernel.py checks they agree) */
 #define RATE_LOWPASS_TIME_CONSTANT_S 0.5
 #define REST_NOISE_SIGMAS 2.0
+#define QUICK_LAG_TIME_CONSTANT_S 0.2
 #define REST_SAMPLE_SIGMAS 8.0
 #define BIAS_RANDOM_WALK_RAD_S_SQRT_S 2e-4
 #define GRAVITY_TIME_CONSTANT_S 10.0
@@ -336,7 +337,8 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
         double scale = clipped ? limit / maxd(en, 1e-300) : 1.0;
         /* 4. aperiodic unit in the world frame */
         rotate(s->qw, s->qx, s->qy, s->qz, ex * scale, ey * scale, ez * scale, w);
-        double weight = dt / (p->aperiodic_time_constant_s + dt);
+        double weight =
+            dt / ((quick ? QUICK_LAG_TIME_CONSTANT_S : p->aperiodic_time_constant_s) + dt);
         s->lx = s->lx + weight * (w[0] - s->lx);
         s->ly = s->ly + weight * (w[1] - s->ly);
         s->lz = s->lz + weight * (w[2] - s->lz);
@@ -365,11 +367,10 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
         double gain = k1 * dt / (1.0 + k1 * dt);
         expmap(gain * f[0], gain * f[1], gain * f[2], d);
         mul_into(s, d);
-        double dec = gain * (quick ? 1.0 : p->prefilter);
-        double ux_ = quick ? w[0] : s->lx, uy_ = quick ? w[1] : s->ly, uz_ = quick ? w[2] : s->lz;
-        s->lx = s->lx - dec * ux_;
-        s->ly = s->ly - dec * uy_;
-        s->lz = s->lz - dec * uz_;
+        double dec = quick ? 0.0 : gain * p->prefilter;
+        s->lx = s->lx - dec * s->lx;
+        s->ly = s->ly - dec * s->ly;
+        s->lz = s->lz - dec * s->lz;
         /* recovery */
         s->clip_timer_s = clipped ? s->clip_timer_s + dt : 0.0;
         int enter = (p->recovery_trigger_s > 0.0) && (s->clip_timer_s >= p->recovery_trigger_s) &&
@@ -787,7 +788,8 @@ PyMODINIT_FUNC PyInit__kernel(void)
     }
     if (PyDict_SetItemString(StateType.tp_dict, "FIELDS", fields) < 0) return NULL;
     Py_DECREF(fields);
-    PyObject *consts = Py_BuildValue("{s:d,s:d,s:d,s:d,s:d,s:i,s:d,s:d,s:d,s:i}",
+    PyObject *consts = Py_BuildValue("{s:d,s:d,s:d,s:d,s:d,s:d,s:i,s:d,s:d,s:d,s:i}",
+                                     "QUICK_LAG_TIME_CONSTANT_S", QUICK_LAG_TIME_CONSTANT_S,
                                      "RATE_LOWPASS_TIME_CONSTANT_S", RATE_LOWPASS_TIME_CONSTANT_S,
                                      "REST_NOISE_SIGMAS", REST_NOISE_SIGMAS,
                                      "REST_SAMPLE_SIGMAS", REST_SAMPLE_SIGMAS,

@@ -43,6 +43,8 @@ MAG_STATUS_NAMES = {0: "none", 1: "used", 2: "rejected", 3: "disabled"}
 
 #: Low-pass time constant of the rotation rate that selects the clip level [s].
 RATE_LOWPASS_TIME_CONSTANT_S = 0.5
+#: Time constant [s] of the aperiodic unit while the error bypasses it (start-up, rest, recovery).
+QUICK_LAG_TIME_CONSTANT_S = 0.2
 #: Stillness: a change of the block means within this many standard deviations of the observed
 #: noise floor is no change (the floor includes rotor vibration, so vibration is not motion).
 REST_NOISE_SIGMAS = 2.0
@@ -368,12 +370,13 @@ def step(
         scale = o.where(clipped, limit / o.maximum(en, 1e-300), 1.0)
         # 4. aperiodic unit in the world frame (weight 1 = unit bypassed)
         wx, wy, wz = _rotate(s.qw, s.qx, s.qy, s.qz, ex * scale, ey * scale, ez * scale)
-        weight = dt / (p.aperiodic_time_constant_s + dt)
+        weight = dt / (o.where(quick, QUICK_LAG_TIME_CONSTANT_S, p.aperiodic_time_constant_s) + dt)
         s.lx = s.lx + weight * (wx - s.lx)
         s.ly = s.ly + weight * (wy - s.ly)
         s.lz = s.lz + weight * (wz - s.lz)
-        # quick (start-up, recovery, rest): the error bypasses the unit, which keeps running so
-        # that it holds the recent mean error, not the last noisy sample, when the bypass ends
+        # quick (start-up, recovery, rest): the error bypasses the unit, which follows it with a
+        # short lag, so that it holds the recent mean error, not the last noisy sample (nor a
+        # long memory of errors the quick loop has already removed), when the bypass ends
         lx, ly, lz = o.where(quick, wx, s.lx), o.where(quick, wy, s.ly), o.where(quick, wz, s.lz)
         fx, fy, fz = _rotate(s.qw, -s.qx, -s.qy, -s.qz, lx, ly, lz)
         s.fx, s.fy, s.fz = fx, fy, fz
@@ -397,9 +400,9 @@ def step(
         s.qw, s.qx, s.qy, s.qz = _mul(s.qw, s.qx, s.qy, s.qz, dw, dx, dy, dz)
         # the correction (world frame: gain * (lx, ly, lz)) also turns, by the share
         # aperiodic_prefilter, the filtered error the unit holds (1: a pre-filter of the specific
-        # force whose memory matches the current estimate); always so in the quick bypass
-        dec = gain * o.where(quick, 1.0, p.prefilter)
-        s.lx, s.ly, s.lz = s.lx - dec * lx, s.ly - dec * ly, s.lz - dec * lz
+        # force whose memory matches the current estimate)
+        dec = o.where(quick, 0.0, gain * p.prefilter)
+        s.lx, s.ly, s.lz = s.lx - dec * s.lx, s.ly - dec * s.ly, s.lz - dec * s.lz
         # recovery: a long unbroken clip is a real attitude error, not a disturbance
         s.clip_timer_s = o.where(clipped, s.clip_timer_s + dt, 0.0)
         enter = (p.recovery_trigger_s > 0.0) & (s.clip_timer_s >= p.recovery_trigger_s) & learn
