@@ -50,7 +50,8 @@ setup(
     ],
     extras_require={
         "test": ["pytest", "hypothesis", "ruff"],
-        "bench": ["vqf", "imufusion", "ahrs"],
+        # riann: RIANN on ONNX Runtime (~80 MB installed, no torch); its weights ship inside
+        "bench": ["vqf", "imufusion", "ahrs", "riann"],
     },
     entry_points={
         "console_scripts": [

@@ -3,6 +3,11 @@
 Error quaternion in the earth frame q_err = q_est ⊗ q_ref⁻¹; total error 2·acos|w|, heading
 error 2·atan|z/w|, inclination error 2·acos√(w² + z²) [rad]; RMSE in degrees. Used by the
 benchmarks, the bag replay's reference statistics and the demo.
+
+The inclination error is the angle between the estimated and the true "up" seen in the sensor
+frame: for q_err = (w, x, y, z), R_err·e_z has z component 1 − 2(x² + y²) = 2(w² + z²) − 1
+= cos(2·acos√(w² + z²)). It is therefore blind to any heading (yaw) offset between the two
+world frames: the metric for 6-D estimates and for references whose heading is arbitrary.
 """
 
 from __future__ import annotations
@@ -59,3 +64,20 @@ def rmse_deg(
 def tilt_error_rad(q_est: ArrayLike, q_ref: ArrayLike) -> np.ndarray:
     """Inclination (tilt) error [rad] per sample (the BROAD inclination metric, unsquared)."""
     return error_angles(error_quaternion(q_est, q_ref))[2]
+
+
+def inclination_error_deg(q_est: ArrayLike, q_ref: ArrayLike) -> np.ndarray:
+    """Inclination error [deg] per sample: angle between estimated and true up in the sensor
+    frame (NaN where either quaternion is NaN); both q_world_from_sensor, world z up."""
+    return np.degrees(tilt_error_rad(q_est, q_ref))
+
+
+def rms_max(errors: ArrayLike, mask: ArrayLike | None = None) -> tuple[float, float, int]:
+    """(RMS, max, count) of ``errors`` over ``mask`` (all samples if None); NaN errors inside
+    the mask propagate (a missing estimate is not silently skipped); (nan, nan, 0) if empty."""
+    e = np.asarray(errors, dtype=float).reshape(-1)
+    if mask is not None:
+        e = e[np.asarray(mask, dtype=bool).reshape(-1)]
+    if e.size == 0:
+        return float("nan"), float("nan"), 0
+    return float(np.sqrt(np.mean(e * e))), float(np.max(e)), int(e.size)

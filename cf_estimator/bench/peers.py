@@ -156,3 +156,37 @@ def runners() -> dict[str, Callable[..., dict[str, np.ndarray]]]:
         return run
 
     return {"vqf": vqf, "fusion": single(run_fusion), "madgwick": single(run_madgwick)}
+
+
+def run_vqf_offline(gyro: np.ndarray, acc: np.ndarray, mag: np.ndarray | None, rate_hz: float
+                    ) -> dict[str, np.ndarray]:
+    """Offline (acausal, whole-recording) VQF at its defaults (``vqf.offlineVQF``); same frames
+    and outputs as :func:`run_vqf`."""
+    vqf = _require("vqf")
+    g = np.ascontiguousarray(gyro, dtype=float)
+    a = np.ascontiguousarray(acc, dtype=float)
+    m = None if mag is None else np.ascontiguousarray(_nan_rows_to_zero(mag))
+    out = vqf.offlineVQF(g, a, m, 1.0 / rate_hz)
+    return {"6d": out["quat6D"]} if m is None else {"6d": out["quat6D"], "9d": out["quat9D"]}
+
+
+def run_riann(gyro: np.ndarray, acc: np.ndarray, rate_hz: float) -> np.ndarray:
+    """RIANN (PyPI ``riann``: a recurrent network on ONNX Runtime with its shipped weights;
+    Weber, Gühmann, Seel, AI 2(3), 2021), 6-D only, over the whole recording at once.
+
+    Inputs acc m/s², gyro rad/s, and the sample period; output (w, x, y, z) sensor-to-earth with
+    the earth z axis up (its heading is arbitrary), float32 → normalised float64. The weights are
+    passed by path: riann 0.2.0 cannot locate its own file on Python 3.11 (it asks
+    ``importlib.resources.path`` for a module, not a package).
+    """
+    try:
+        import importlib.resources
+
+        from riann import RIANN
+    except ImportError:
+        raise PeerUnavailable(
+            "peer 'riann' needs the PyPI package 'riann' (pip install '.[bench]')") from None
+    model = RIANN(str(importlib.resources.files("riann") / "riann.onnx"))
+    q = np.asarray(model.predict(np.asarray(acc, dtype=float), np.asarray(gyro, dtype=float),
+                                 float(rate_hz)), dtype=float)
+    return q / np.linalg.norm(q, axis=1, keepdims=True)

@@ -15,7 +15,7 @@ import sys
 import time
 from typing import TYPE_CHECKING, Any
 
-from cf_estimator.cli.main import CliError
+from cf_estimator.cli.main import CliError, finite_float
 
 if TYPE_CHECKING:
     from cf_estimator.bench.speed import BagThroughput
@@ -57,6 +57,34 @@ def register(subparsers: Any) -> None:
                    help="worker processes, one trial each (default %(default)s)")
     b.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     b.set_defaults(run=run_broad)
+
+    e = sub.add_parser(
+        "euroc", help="inclination error on real multirotor flights (EuRoC MAV, ASL folders)",
+        description=(
+            "Runs our filter (6-D: EuRoC has no magnetometer) and the --peers on every EuRoC "
+            "flight in --data (a flight folder holding mav0/imu0/data.csv, or any directory of "
+            "them, searched recursively) and prints per flight and as the mean over flights the "
+            "inclination error [deg] against the ground truth (mav0/state_groundtruth_estimate0/"
+            "data.csv or groundtruth_tum.txt, slerped onto the IMU stamps): RMS / max over the "
+            "samples after the first --settle seconds. Peers whose package is not installed are "
+            "skipped with a note."
+        ),
+    )
+    e.add_argument("--data", required=True, metavar="DIR",
+                   help="EuRoC flight folder, or a directory of them")
+    e.add_argument("--groundtruth", metavar="FILE", help="ground-truth file (ASL csv or TUM "
+                   "trajectory, detected) for a single flight folder given as --data")
+    e.add_argument("--settle", type=finite_float, default=10.0, metavar="S",
+                   help="seconds after the first IMU sample before scoring (default %(default)s)")
+    e.add_argument("--peers", default="all", metavar="LIST",
+                   help="comma-separated: vqf,vqf_offline,madgwick,fusion,riann, 'all' "
+                   "(default: those installed) or 'none'")
+    e.add_argument("--params", metavar="YAML", help="ROS 2 parameter file for our filter "
+                   "(default: the shipped defaults, FilterParams())")
+    e.add_argument("--json", metavar="OUT", help="write per-flight scores and means as JSON")
+    e.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
+                   help="worker processes, one flight each (default %(default)s)")
+    e.set_defaults(run=run_euroc)
 
     s = sub.add_parser(
         "scenarios", help="peak/RMS tilt error under the thesis disturbances (simulated)",
@@ -195,6 +223,59 @@ def run_broad(args: Any) -> int:
             "data": str(args.data), "peers": peers, "params_file": args.params,
             "cf_estimator_params": as_dict(params),
             "metrics": "BROAD: q_err = q_est * inv(q_ref); RMSE over movement samples [deg]",
+        }
+        _write_json(args.json, doc)
+    return 0
+
+
+def run_euroc(args: Any) -> int:
+    """``bench euroc``."""
+    from cf_estimator.bench import euroc
+    from cf_estimator.bench import euroc_eval as ev
+    from cf_estimator.schema import as_dict
+
+    text = args.peers.strip()
+    names = [] if text in ("", "none") else ev.peer_names() if text == "all" else _csv(text)
+    try:
+        peers, skipped = ev.select_peers(names)
+    except ValueError as exc:
+        raise CliError(str(exc), 2) from None
+    for p in skipped:
+        pkg = ev.ALGORITHMS[p].package
+        print(f"cf-estimator: note: peer {p!r} skipped: PyPI package {pkg!r} not installed "
+              "(pip install '.[bench]')", file=sys.stderr)
+    if args.jobs < 1:
+        raise CliError("--jobs must be >= 1", 2)
+    if args.settle < 0:
+        raise CliError(f"--settle must be >= 0 (got {args.settle:g})", 2)
+    params = _load_params(args.params)
+    try:
+        if args.groundtruth:
+            folders = euroc.find_flights(args.data)
+            if len(folders) != 1:
+                raise euroc.EurocDataError(
+                    f"--groundtruth needs a single flight folder as --data ({len(folders)} found)")
+            flights = [euroc.load_flight(folders[0], args.groundtruth)]
+        else:
+            flights = euroc.load_flights(args.data)
+    except euroc.EurocDataError as exc:
+        raise CliError(str(exc), 2) from None
+    result = ev.run_euroc(flights, params, peers, args.settle, jobs=args.jobs)
+    print(f"EuRoC: {len(result.flights)} flight(s) from {args.data}; 6-D inclination error "
+          f"[deg] vs ground truth after the first {args.settle:g} s: RMS / max")
+    print(f"cf_estimator parameters: {args.params or 'shipped defaults'}")
+    for name, info in result.info.items():
+        for note in info["notes"]:
+            print(f"  note: {name}: {note}")
+    print()
+    print(ev.format_table(result), end="")
+    if args.json:
+        doc = result.to_json()
+        doc["meta"] = {
+            "data": str(args.data), "peers": peers, "peers_skipped": skipped,
+            "params_file": args.params, "cf_estimator_params": as_dict(params),
+            "metrics": "inclination error: angle between estimated and true up in the sensor "
+                       "frame [deg]; RMS and max over samples with ground truth, t >= settle_s",
         }
         _write_json(args.json, doc)
     return 0

@@ -247,3 +247,57 @@ def windows_overlap(windows: Sequence[tuple[float, float, str]]) -> bool:
     """True if any two (start_s, end_s, label) windows overlap."""
     spans = sorted((w[0], w[1]) for w in windows)
     return any(b0 < a1 for (_, a1), (b0, _) in zip(spans, spans[1:], strict=False))
+
+
+#: Rotor speed at hover [rev/s] of the simulated multirotor (≈ 4500 rpm; blade pass 2× that).
+ROTOR_HOVER_HZ = 75.0
+
+
+def rotor_vibration(
+    t_s: ArrayLike,
+    rotor_speed: ArrayLike,
+    rng: np.random.Generator,
+    *,
+    accel_rms_m_s2: float = 3.0,
+    gyro_rms_rad_s: float = 0.03,
+    hover_hz: float = ROTOR_HOVER_HZ,
+    n_rotors: int = 6,
+    speed_spread: float = 0.04,
+) -> tuple[FloatArray, FloatArray]:
+    """Rotor vibration seen by the accelerometer and the gyro: sensor-frame disturbances
+    (accel (N, 3) [m/s²], gyro (N, 3) [rad/s]), both zero-mean.
+
+    Each of ``n_rotors`` rotors spins at ``hover_hz``·``rotor_speed``(t)·(1 + δᵢ), δᵢ drawn
+    uniformly in ±``speed_spread`` (the vehicle's differential thrust), and shakes the sensor at
+    its rotation frequency (imbalance) and twice it (blade pass of a two-blade rotor): 2·n_rotors
+    sinusoids, phase-continuous, each along a fixed random direction (the frame's response),
+    amplitude ∝ ``rotor_speed``² (imbalance force ∝ speed²). Scaled so that at
+    ``rotor_speed`` = 1 the RMS of the vibration vector's norm is ``accel_rms_m_s2`` (resp.
+    ``gyro_rms_rad_s``). With rotor speeds 0.7–1.1 (idle on the ground to climbing) and
+    75 Hz at hover, the content lies in 50–180 Hz. Sampled as it is, without an anti-alias
+    filter: at 200 Hz the components above 100 Hz alias to 20–100 Hz, as on an IMU read
+    at a low rate.
+    """
+    t = np.asarray(t_s, dtype=float)
+    r = np.asarray(rotor_speed, dtype=float)
+    if r.shape != t.shape:
+        raise ValueError(f"rotor_speed must have shape {t.shape}, got {r.shape}")
+    n = t.shape[0]
+    delta = rng.uniform(-speed_spread, speed_spread, n_rotors)
+    harmonics = np.array([1.0, 2.0])
+    # rotor phase [rev] = ∫ hover_hz·r dt (trapezoid; r is smooth)
+    rev = np.concatenate(([0.0], np.cumsum(0.5 * (r[1:] + r[:-1]) * np.diff(t)))) * hover_hz
+    out = []
+    for rms in (accel_rms_m_s2, gyro_rms_rad_s):
+        weights = rng.uniform(0.5, 1.0, (n_rotors, harmonics.size))
+        amps = rms * weights / np.sqrt(0.5 * np.sum(weights**2))
+        dirs = rng.normal(size=(n_rotors, harmonics.size, 3))
+        dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
+        phase0 = rng.uniform(0.0, 2 * np.pi, (n_rotors, harmonics.size))
+        vib = np.zeros((n, 3))
+        for i in range(n_rotors):
+            for j, h in enumerate(harmonics):
+                s = np.sin(2 * np.pi * h * (1 + delta[i]) * rev + phase0[i, j])
+                vib += (amps[i, j] * r**2 * s)[:, None] * dirs[i, j][None, :]
+        out.append(vib)
+    return out[0], out[1]

@@ -7,14 +7,16 @@ motion, the disturbance draws and the sensor noise, in that order). Frames and u
 
 from __future__ import annotations
 
+import dataclasses
+import inspect
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from cf_estimator.core.quaternion import from_euler as quat_from_euler_zyx
 from cf_estimator.scenarios import disturbances as dist
-from cf_estimator.scenarios.motion import Truth, hover, static, uav_flight
+from cf_estimator.scenarios.motion import Truth, hover, multirotor_flight, static, uav_flight
 from cf_estimator.scenarios.sensors import ImuData, SensorModel, measure
 
 Window = tuple[float, float, str]
@@ -34,6 +36,8 @@ class Scenario:
             labels ``"impacts"``, ``"vibration"``, ``"acceleration"``.
         rate_hz: sample rate [Hz].
         seed: the seed it was generated from.
+        events: named times [s] of the run (``uav``: rotors_on, takeoff, cruise, landing,
+            touchdown, rotors_off); empty for the others.
     """
 
     name: str
@@ -44,30 +48,39 @@ class Scenario:
     disturbance_windows: list[Window]
     rate_hz: float
     seed: int
+    events: dict[str, float] = field(default_factory=dict)
 
     @property
     def duration_s(self) -> float:
         """Length of the run [s] (N samples span N/rate)."""
         return float(self.truth.n_samples / self.rate_hz)
 
+    @property
+    def gyro_bias_true_rad_s(self) -> np.ndarray:
+        """The true gyro bias (N, 3) [rad/s] in the sensor frame (constant + random walk; rotor
+        vibration and white noise are not bias)."""
+        assert self.imu.gyro_bias_rad_s is not None
+        return self.imu.gyro_bias_rad_s
 
-ScenarioFactory = Callable[[float | None, float | None, int], Scenario]
+
+ScenarioFactory = Callable[..., Scenario]
+"""``factory(rate_hz | None, duration_s | None, seed, **options) -> Scenario``."""
 
 DEFAULT_RATE_HZ = {
     "static": 200.0, "static_150": 200.0, "flight": 200.0, "impacts": 1000.0,
-    "vibration": 1000.0, "acceleration": 200.0, "thesis": 1000.0,
+    "vibration": 1000.0, "acceleration": 200.0, "thesis": 1000.0, "uav": 200.0,
 }
 """Default sample rate [Hz] of each scenario (impacts and vibration need ≥ 500/480 Hz)."""
 
 DEFAULT_DURATION_S = {
     "static": 60.0, "static_150": 60.0, "flight": 120.0, "impacts": 70.0, "vibration": 55.0,
-    "acceleration": 45.0, "thesis": 120.0,
+    "acceleration": 45.0, "thesis": 120.0, "uav": 120.0,
 }
 """Default duration [s] of each scenario."""
 
 _MIN_DURATION_S = {
     "static": 1.0, "static_150": 1.0, "flight": 20.0, "impacts": 60.0, "vibration": 45.0,
-    "acceleration": 20.0, "thesis": 110.0,
+    "acceleration": 20.0, "thesis": 110.0, "uav": 40.0,
 }
 
 # Thesis disturbance layout [s]
@@ -216,6 +229,44 @@ def scenario_thesis(rate_hz: float | None, duration_s: float | None, seed: int) 
                    [imp, vib, acc], d)
 
 
+#: Default constant gyro bias of the ``uav`` scenario [rad/s] (sensor x, y, z): uncalibrated
+#: MEMS-gyro size (EuRoC's ADIS16448: ≈ (−0.002, 0.021, 0.077)), large on every axis.
+UAV_GYRO_BIAS_RAD_S = (0.06, -0.08, 0.1)
+
+
+def scenario_uav(
+    rate_hz: float | None, duration_s: float | None, seed: int, *,
+    gyro_bias_rad_s: tuple[float, float, float] = UAV_GYRO_BIAS_RAD_S,
+    vibration_m_s2: float = 3.0, gyro_vibration_rad_s: float = 0.03,
+    cruise_speed_m_s: float = 6.0, land: bool = True, model: SensorModel | None = None,
+) -> Scenario:
+    """Multirotor: large gyro bias, rotor vibration on the ground and in flight, cruise, turns."""
+    rate, duration = _setup("uav", rate_hz, duration_s)
+    rng = np.random.default_rng(seed)
+    flight = multirotor_flight(duration, rate, rng, cruise_speed_m_s=cruise_speed_m_s, land=land)
+    acc_vib, gyro_vib = dist.rotor_vibration(flight.truth.t_s, flight.rotor_speed, rng,
+                                             accel_rms_m_s2=vibration_m_s2,
+                                             gyro_rms_rad_s=gyro_vibration_rad_s)
+    base = SensorModel() if model is None else model
+    sensor = dataclasses.replace(base, gyro_bias_rad_s=tuple(float(b) for b in gyro_bias_rad_s))
+    ev = flight.events
+    bias = ", ".join(f"{b:g}" for b in sensor.gyro_bias_rad_s or ())
+    text = (
+        f"Multirotor flight: at rest on the ground, rotors on at {ev['rotors_on']:g} s (idle "
+        f"vibration), take-off at {ev['takeoff']:g} s, cruise at {cruise_speed_m_s:g} m/s from "
+        f"{ev['cruise']:g} s with coordinated turns, climbs and speed changes; attitude set by "
+        "thrust (tilt = acceleration and linear drag), accelerometer along body z plus rotor "
+        "drag; " + (f"landing {ev['landing']:.1f}-{ev['touchdown']:.1f} s; " if land else "")
+        + f"constant gyro bias ({bias}) rad/s; rotor vibration {vibration_m_s2:g} m/s^2 and "
+        f"{gyro_vibration_rad_s:g} rad/s RMS at hover (6 rotors, 1x and 2x rotor speed, "
+        "50-180 Hz, aliased as sampled); default MEMS noise."
+    )
+    windows = [(ev["rotors_on"], ev.get("rotors_off", flight.truth.t_s[-1]), "vibration")]
+    imu = measure(flight.truth, sensor, rng)
+    imu = imu.with_accel_disturbance(acc_vib).with_gyro_disturbance(gyro_vib)
+    return Scenario("uav", flight.truth, imu, sensor, text, windows, rate, seed, dict(ev))
+
+
 SCENARIOS: dict[str, ScenarioFactory] = {
     "static": scenario_static,
     "static_150": scenario_static_150,
@@ -224,17 +275,21 @@ SCENARIOS: dict[str, ScenarioFactory] = {
     "vibration": scenario_vibration,
     "acceleration": scenario_acceleration,
     "thesis": scenario_thesis,
+    "uav": scenario_uav,
 }
 """Scenario factories ``(rate_hz | None, duration_s | None, seed) -> Scenario`` by name."""
 
 
 def make_scenario(
-    name: str, rate_hz: float | None = None, duration_s: float | None = None, seed: int = 0
+    name: str, rate_hz: float | None = None, duration_s: float | None = None, seed: int = 0,
+    **options: object,
 ) -> Scenario:
     """Build the named scenario (``rate_hz``/``duration_s`` None = the scenario's default).
 
-    Raises ``ValueError`` naming the valid scenarios for an unknown name, and for a duration
-    below the scenario's minimum or a rate too low for its disturbances.
+    ``options`` go to the scenario's factory (keyword arguments of ``scenario_<name>``, e.g.
+    ``make_scenario("uav", gyro_bias_rad_s=(0.1, 0, 0))``). Raises ``ValueError`` naming the
+    valid scenarios for an unknown name, for an option the scenario does not take, and for a
+    duration below the scenario's minimum or a rate too low for its disturbances.
     """
     try:
         factory = SCENARIOS[name]
@@ -242,4 +297,9 @@ def make_scenario(
         raise ValueError(
             f"unknown scenario {name!r}; valid: {', '.join(SCENARIOS)}"
         ) from None
-    return factory(rate_hz, duration_s, seed)
+    if options:
+        accepted = inspect.signature(factory).parameters
+        bad = [k for k in options if k not in accepted or k in ("rate_hz", "duration_s", "seed")]
+        if bad:
+            raise ValueError(f"scenario {name!r} takes no option {bad[0]!r}")
+    return factory(rate_hz, duration_s, seed, **options)

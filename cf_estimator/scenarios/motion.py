@@ -20,7 +20,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 
+from cf_estimator.core.quaternion import conjugate as quat_conjugate
 from cf_estimator.core.quaternion import from_euler as quat_from_euler_zyx
+from cf_estimator.core.quaternion import log as quat_log
+from cf_estimator.core.quaternion import multiply as quat_multiply
 from cf_estimator.core.quaternion import normalize as quat_normalize
 from cf_estimator.core.quaternion import to_euler as euler_zyx_from_quat
 from cf_estimator.scenarios.integration import FloatArray, integrate_body_rates
@@ -390,3 +393,152 @@ def random_rotation(
             val, _, integ = _tones(t, rng, accel_amplitude_m_s2, 0.05, 0.5)
             acc[:, i], vel[:, i] = val, integ
     return from_body_rates(t, w, q0, acc, vel)
+
+
+# --------------------------------------------------------------------------------------------
+# Multirotor flight with thrust-consistent attitude
+
+
+@dataclass(frozen=True, eq=False)
+class MultirotorFlight:
+    """A multirotor flight whose attitude follows from its thrust (see :func:`multirotor_flight`).
+
+    Attributes:
+        truth: the motion (orientation, body rates, world acceleration and velocity).
+        rotor_speed: (N,) rotor speed relative to the hover speed (0 = stopped, 1 = hover).
+        events: times [s]: ``rotors_on``, ``takeoff``, ``cruise`` (cruise speed first reached),
+            and with landing ``landing`` (descent starts), ``touchdown``, ``rotors_off``.
+    """
+
+    truth: Truth
+    rotor_speed: FloatArray
+    events: dict[str, float]
+
+
+#: ∫ of the bump 64u³(1−u)³ over u ∈ [0, 1] (height gained per m/s of peak and s of duration).
+_BUMP_AREA = 64.0 / 140.0
+
+
+def multirotor_flight(
+    duration_s: float,
+    rate_hz: float,
+    rng: np.random.Generator,
+    *,
+    ground_s: float = 5.0,
+    rotors_on_s: float = 1.0,
+    idle_speed: float = 0.7,
+    cruise_speed_m_s: float = 6.0,
+    drag_per_s: float = 0.35,
+    max_accel_m_s2: float = 2.5,
+    max_yaw_rate_rad_s: float = 0.5,
+    centripetal_max_m_s2: float = 3.0,
+    land: bool = True,
+    gravity: float = GRAVITY_M_S2,
+) -> MultirotorFlight:
+    """A multirotor flight (take-off from rest, sustained forward flight, turns, climbs, landing).
+
+    Sequence: ``ground_s`` at rest on level ground (random heading; rotors start at
+    ``rotors_on_s`` and idle at ``idle_speed`` × hover speed); take-off (vertical speed bump of
+    1.5 m/s over 4 s, ≈ 2.7 m); acceleration to ``cruise_speed_m_s``; then, until the landing,
+    straight cruise legs of 2–6 s between random manoeuvres: coordinated turns of ±45–150°
+    (velocity along the heading, yaw rate ≤ ``max_yaw_rate_rad_s``, centripetal acceleration
+    ≤ ``centripetal_max_m_s2``), climbs or descents of 1–4 m (kept 2–15 m above the ground) and
+    speed changes to 0.5–1.3 × cruise; with ``land``: stop, descend to the ground, rest (rotors
+    idle 2 s, then off).
+
+    Physics: thrust acts along body z, so the attitude is *set by* the acceleration: the
+    specific thrust f_T = a + (0, 0, g) + ``drag_per_s``·v (world frame; the last term balances
+    a linear rotor/body drag, so steady cruise at speed v needs a forward tilt atan(k·v/g), about
+    12° at 6 m/s) gives body z = f_T/‖f_T‖, and body x is the heading projected perpendicular
+    to it (ZYX yaw = heading). Body rates are the exact increments of that attitude
+    (ω_k = Log(q_{k−1}* ⊗ q_k)/dt_k), so the project's integration rule reproduces it to
+    rounding. The accelerometer (:func:`~cf_estimator.scenarios.sensors.measure`) then reads
+    Rᵀ(a − g_world) = ‖f_T‖·e_z + Rᵀ·(drag specific force): along body z plus a rotor-drag part,
+    as on a real multirotor. Rotor speed = √(‖f_T‖/g) in the air (thrust ∝ speed²).
+    """
+    t = sample_times(duration_s, rate_hz)
+    d = _Design(t, rng.uniform(-np.pi, np.pi))
+    takeoff_s, climb_peak, climb_dur = ground_s, 1.5, 4.0
+    d.add_vertical(takeoff_s, climb_dur, climb_peak)
+    altitude = climb_peak * climb_dur * _BUMP_AREA
+    stop_dur = max(2.0, 1.875 * 1.3 * cruise_speed_m_s / max_accel_m_s2)
+    descent_dur, rest_after = 5.0, 3.0
+    landing_block = (stop_dur + 0.5 + descent_dur + rest_after) if land else 0.5
+    tc = takeoff_s + climb_dur + 0.5
+    acc_dur = max(2.0, 1.875 * cruise_speed_m_s / max_accel_m_s2)
+    end = t[-1] - landing_block
+    if tc + acc_dur + 1.0 > end:
+        need = tc + acc_dur + 1.0 + landing_block
+        raise ValueError(f"multirotor_flight needs duration_s >= {need:.0f} s, got {duration_s:g}")
+    d.add_speed(tc, acc_dur, cruise_speed_m_s)
+    speed = cruise_speed_m_s
+    cruise_at = tc + acc_dur
+    tc = cruise_at + rng.uniform(2.0, 6.0)
+    while tc < end:
+        kind = ("turn", "turn", "climb", "speed")[rng.integers(4)]
+        if kind == "turn":
+            amp = np.deg2rad(rng.uniform(45.0, 150.0)) * rng.choice((-1.0, 1.0))
+            dur = max(3.0, 1.875 * abs(amp) / max_yaw_rate_rad_s,
+                      1.875 * abs(amp) * speed / centripetal_max_m_s2)
+        elif kind == "climb":
+            dur = rng.uniform(4.0, 6.0)
+            dh = rng.uniform(1.0, 4.0) * rng.choice((-1.0, 1.0))
+            if not 2.0 <= altitude + dh <= 15.0:
+                dh = -dh
+            amp = dh / (dur * _BUMP_AREA)
+        else:
+            target = rng.uniform(0.5, 1.3) * cruise_speed_m_s
+            amp = target - speed
+            dur = max(2.0, 1.875 * abs(amp) / max_accel_m_s2)
+        if tc + dur > end:
+            break
+        if kind == "turn":
+            d.add_angle(2, True, tc, dur, amp)
+        elif kind == "climb":
+            d.add_vertical(tc, dur, amp)
+            altitude += amp * dur * _BUMP_AREA
+        else:
+            d.add_speed(tc, dur, amp)
+            speed += amp
+        tc += dur + rng.uniform(2.0, 6.0)
+    events = {"rotors_on": float(rotors_on_s), "takeoff": float(takeoff_s),
+              "cruise": float(cruise_at)}
+    touchdown = np.inf
+    if land:
+        tl = t[-1] - landing_block + 0.25
+        d.add_speed(tl, stop_dur, -speed)
+        descent = tl + stop_dur + 0.25
+        d.add_vertical(descent, descent_dur, -altitude / (descent_dur * _BUMP_AREA))
+        touchdown = descent + descent_dur
+        events.update(landing=float(descent), touchdown=float(touchdown),
+                      rotors_off=float(touchdown + 2.0))
+    (_, _, _), (_, _, _), (yaw, dyaw, _) = d.ang
+    v, dv, _ = d.speed
+    heading = np.stack((np.cos(yaw), np.sin(yaw), np.zeros_like(yaw)), axis=-1)
+    left = np.stack((-np.sin(yaw), np.cos(yaw), np.zeros_like(yaw)), axis=-1)
+    vel = v[:, None] * heading
+    vel[:, 2] = d.vz[0]
+    acc = dv[:, None] * heading + (v * dyaw)[:, None] * left
+    acc[:, 2] = d.vz[1]
+    thrust = acc + drag_per_s * vel
+    thrust[:, 2] += gravity
+    # thrust direction in the heading frame (Rz(−yaw)·z_b) → ZYX roll and pitch
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    zx = cy * thrust[:, 0] + sy * thrust[:, 1]
+    zy = -sy * thrust[:, 0] + cy * thrust[:, 1]
+    zz = thrust[:, 2]
+    roll = np.arctan2(-zy, np.hypot(zx, zz))
+    pitch = np.arctan2(zx, zz)
+    q = quat_from_euler_zyx(roll, pitch, yaw)
+    w = np.zeros((t.shape[0], 3))
+    w[1:] = quat_log(quat_multiply(quat_conjugate(q[:-1]), q[1:])) / np.diff(t)[:, None]
+    truth = from_body_rates(t, w, q[0], acc, vel)
+    rotor = np.sqrt(np.linalg.norm(thrust, axis=1) / gravity)
+    airborne = _smoothstep(t, takeoff_s - 0.5, 0.5)[0]
+    if land:
+        airborne = airborne - _smoothstep(t, touchdown, 0.5)[0]
+    spin = _smoothstep(t, rotors_on_s, 0.5)[0]
+    if land:
+        spin = spin - _smoothstep(t, events["rotors_off"], 0.5)[0]
+    rotor_speed = spin * (idle_speed + (rotor - idle_speed) * airborne)
+    return MultirotorFlight(truth, rotor_speed, events)

@@ -102,6 +102,8 @@ class ImuData:
         accel_bias_m_s2: the true constant accelerometer bias (3,) [m/s²]; None if unknown.
         accel_disturbance_m_s2: the sensor-frame specific-force disturbance (N, 3) [m/s²] that
             was added to ``accel_m_s2`` (impacts, vibration); None if none was added.
+        gyro_disturbance_rad_s: the disturbance (N, 3) [rad/s] added to ``gyro_rad_s`` (rotor
+            vibration); None if none was added. Not part of ``gyro_bias_rad_s``.
     """
 
     t_s: FloatArray
@@ -111,11 +113,12 @@ class ImuData:
     gyro_bias_rad_s: FloatArray | None = None
     accel_bias_m_s2: FloatArray | None = None
     accel_disturbance_m_s2: FloatArray | None = None
+    gyro_disturbance_rad_s: FloatArray | None = None
 
     def __post_init__(self) -> None:
         n = np.shape(self.t_s)[0]
         for name in ("gyro_rad_s", "accel_m_s2", "mag_T", "gyro_bias_rad_s",
-                     "accel_disturbance_m_s2"):
+                     "accel_disturbance_m_s2", "gyro_disturbance_rad_s"):
             value = getattr(self, name)
             if value is not None and np.shape(value) != (n, 3):
                 raise ValueError(f"ImuData.{name} must have shape ({n}, 3), got {np.shape(value)}")
@@ -135,6 +138,16 @@ class ImuData:
         total = d if self.accel_disturbance_m_s2 is None else self.accel_disturbance_m_s2 + d
         return dataclasses.replace(self, accel_m_s2=self.accel_m_s2 + d,
                                    accel_disturbance_m_s2=total)
+
+    def with_gyro_disturbance(self, disturbance_rad_s: FloatArray) -> ImuData:
+        """Copy with a sensor-frame rate disturbance (N, 3) [rad/s] added to the gyro only,
+        also accumulated in ``gyro_disturbance_rad_s``."""
+        d = np.asarray(disturbance_rad_s, dtype=float)
+        if d.shape != self.gyro_rad_s.shape:
+            raise ValueError(f"disturbance must have shape {self.gyro_rad_s.shape}, got {d.shape}")
+        total = d if self.gyro_disturbance_rad_s is None else self.gyro_disturbance_rad_s + d
+        return dataclasses.replace(self, gyro_rad_s=self.gyro_rad_s + d,
+                                   gyro_disturbance_rad_s=total)
 
 
 def _bias(explicit: Vec3 | None, std: float, rng: np.random.Generator) -> FloatArray:

@@ -1,0 +1,216 @@
+"""EuRoC benchmark: run our filter and the peers over flights, score the inclination.
+
+Every algorithm is 6-D (EuRoC has no magnetometer) and returns q_world_from_sensor (world z up;
+heading irrelevant). Score per flight: inclination error (:func:`cf_estimator.metrics.
+inclination_error_deg`) against the slerped ground truth, RMS and max over the samples at least
+``settle_s`` after the first IMU sample that have a ground truth. The mean row is the mean over
+flights of each flight's RMS (and of each flight's max).
+
+Algorithms are entries of :data:`ALGORITHMS` (name → :class:`Algorithm`); ``ours`` entries
+always run with the given :class:`FilterParams`, the others are peers chosen by name. Add one
+with :func:`register`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cf_estimator import metrics
+from cf_estimator.bench.euroc import Flight
+from cf_estimator.bench.parallel import run_tasks
+from cf_estimator.core.batch import estimate
+from cf_estimator.core.params import FilterParams
+
+#: Default settling time [s] after the first IMU sample before the scoring starts.
+SETTLE_S = 10.0
+SCORES = ("inclination_rms_deg", "inclination_max_deg")
+
+Runner = Callable[[Flight, FilterParams], np.ndarray]
+
+
+@dataclass(frozen=True)
+class Algorithm:
+    """An estimator for the benchmark.
+
+    Attributes:
+        name: column label and ``--peers`` name.
+        run: f(flight, params) → q_world_from_sensor (N, 4) w x y z (NaN rows allowed before
+            the estimator's initialisation; ``params`` matters only to ours).
+        package: PyPI package it needs (None: part of cf_estimator).
+        ours: True for our filter's variants (always run), False for peers (chosen by name).
+    """
+
+    name: str
+    run: Runner
+    package: str | None = None
+    ours: bool = False
+
+
+def _ours_online(flight: Flight, params: FilterParams) -> np.ndarray:
+    p = dataclasses.replace(params, use_mag=False)
+    return estimate(flight.gyro_rad_s, flight.accel_m_s2, None, timestamps_s=flight.t_s,
+                    params=p).quaternion
+
+
+def _peer(name: str) -> Runner:
+    from cf_estimator.bench import peers
+
+    def run(flight: Flight, _params: FilterParams) -> np.ndarray:
+        g, a, r = flight.gyro_rad_s, flight.accel_m_s2, flight.rate_hz
+        if name == "vqf":
+            return peers.run_vqf(g, a, None, r)["6d"]
+        if name == "vqf_offline":
+            return peers.run_vqf_offline(g, a, None, r)["6d"]
+        if name == "fusion":
+            return peers.run_fusion(g, a, None, r)
+        if name == "madgwick":
+            return peers.run_madgwick(g, a, None, r)
+        if name == "riann":
+            return peers.run_riann(g, a, r)
+        raise ValueError(f"no runner for peer {name!r}")
+
+    return run
+
+
+ALGORITHMS: dict[str, Algorithm] = {}
+
+
+def register(algorithm: Algorithm) -> None:
+    """Add (or replace) an algorithm; columns follow the registration order."""
+    ALGORITHMS[algorithm.name] = algorithm
+
+
+register(Algorithm("cf_estimator", _ours_online, ours=True))
+for _name, _package in (("vqf", "vqf"), ("vqf_offline", "vqf"), ("madgwick", "ahrs"),
+                        ("fusion", "imufusion"), ("riann", "riann")):
+    register(Algorithm(_name, _peer(_name), _package))
+
+
+def peer_names() -> list[str]:
+    """Names of the peers (non-``ours`` algorithms), in registration order."""
+    return [a.name for a in ALGORITHMS.values() if not a.ours]
+
+
+def installed(algorithm: Algorithm) -> bool:
+    """True if the algorithm's package imports here."""
+    if algorithm.package is None:
+        return True
+    try:
+        importlib.import_module(algorithm.package)
+    except ImportError:
+        return False
+    return True
+
+
+def select_peers(names: Sequence[str]) -> tuple[list[str], list[str]]:
+    """(peers to run, peers skipped because their package is not installed), order kept;
+    ValueError for an unknown name."""
+    valid = peer_names()
+    for n in names:
+        if n not in valid:
+            raise ValueError(f"unknown peer {n!r}; valid: {', '.join(valid)}, all, none")
+    run = [n for n in names if installed(ALGORITHMS[n])]
+    return run, [n for n in names if n not in run]
+
+
+# -- scoring -----------------------------------------------------------------------------------
+def score_flight(flight: Flight, q_est: np.ndarray, settle_s: float = SETTLE_S
+                 ) -> dict[str, float]:
+    """``{inclination_rms_deg, inclination_max_deg, n_scored}`` over the samples at
+    ``t ≥ settle_s`` with a ground truth (an estimate's NaN there gives NaN)."""
+    err = metrics.inclination_error_deg(q_est, flight.q_ref)
+    mask = (flight.t_s >= settle_s) & flight.has_reference
+    rms, peak, n = metrics.rms_max(err, mask)
+    return {"inclination_rms_deg": rms, "inclination_max_deg": peak, "n_scored": n}
+
+
+def evaluate_flight(flight: Flight, params: FilterParams, peers: Sequence[str] = (),
+                    settle_s: float = SETTLE_S) -> dict[str, dict[str, float]]:
+    """``{algorithm: score}`` for ours and ``peers`` on one flight."""
+    names = [a.name for a in ALGORITHMS.values() if a.ours] + list(peers)
+    return {n: score_flight(flight, ALGORITHMS[n].run(flight, params), settle_s) for n in names}
+
+
+@dataclass
+class EurocResult:
+    """Per-flight scores ``flights[flight][algorithm] = {score: value}`` plus flight facts."""
+
+    flights: dict[str, dict[str, dict[str, float]]] = field(default_factory=dict)
+    info: dict[str, dict] = field(default_factory=dict)
+    settle_s: float = SETTLE_S
+
+    def algorithms(self) -> list[str]:
+        """Algorithm names in first-seen order."""
+        return list(dict.fromkeys(a for per in self.flights.values() for a in per))
+
+    def mean(self, algorithm: str, score: str) -> float:
+        """Mean over flights of a score (NaN if any flight lacks it or is NaN)."""
+        vals = [per.get(algorithm, {}).get(score, math.nan) for per in self.flights.values()]
+        return float(np.mean(vals)) if vals else math.nan
+
+    def to_json(self) -> dict:
+        """``{"settle_s", "flights": {...}, "mean": {algorithm: {score: deg}}, "info": {...}}``."""
+        flights = {f: {a: {k: _json(v) for k, v in s.items()} for a, s in per.items()}
+                   for f, per in self.flights.items()}
+        mean = {a: {s: _json(self.mean(a, s)) for s in SCORES} for a in self.algorithms()}
+        return {"settle_s": self.settle_s, "flights": flights, "mean": mean, "info": self.info}
+
+
+def _json(v: float) -> float | int | None:
+    if isinstance(v, int):
+        return v
+    return None if v is None or not math.isfinite(v) else round(float(v), 6)
+
+
+def flight_info(flight: Flight) -> dict:
+    """Facts about a flight for reports: path, ground truth, sample counts, notes."""
+    has = flight.has_reference
+    return {"path": str(flight.path), "groundtruth": str(flight.groundtruth_path),
+            "samples": flight.n_samples, "samples_with_groundtruth": int(has.sum()),
+            "duration_s": round(float(flight.t_s[-1]), 3), "rate_hz": round(flight.rate_hz, 3),
+            "notes": list(flight.notes)}
+
+
+def _worker(task: tuple) -> dict[str, dict[str, float]]:
+    flight, params, peers, settle_s = task
+    return evaluate_flight(flight, params, peers, settle_s)
+
+
+def run_euroc(flights: Sequence[Flight], params: FilterParams, peers: Sequence[str] = (),
+              settle_s: float = SETTLE_S, jobs: int = 1) -> EurocResult:
+    """Evaluate every flight (one process per flight when ``jobs`` > 1), order kept."""
+    tasks = [(f, params, tuple(peers), settle_s) for f in flights]
+    result = EurocResult(settle_s=settle_s)
+    for flight, scores in zip(flights, run_tasks(_worker, tasks, jobs), strict=True):
+        result.flights[flight.name] = scores
+        result.info[flight.name] = flight_info(flight)
+    return result
+
+
+def format_table(result: EurocResult) -> str:
+    """Flights × algorithms, cells ``RMS / max`` [deg], then the mean over flights."""
+    algos = result.algorithms()
+    names = list(result.flights)
+    w = max([len(n) for n in names] + [len("mean")])
+    cw = max([len(a) for a in algos] + [13])
+
+    def cell(rms: float, peak: float) -> str:
+        if not (math.isfinite(rms) and math.isfinite(peak)):
+            return f"  {'nan':>{cw}}"
+        return f"  {f'{rms:.2f} / {peak:.1f}':>{cw}}"
+
+    lines = [f"  {'flight':<{w}}" + "".join(f"  {a:>{cw}}" for a in algos)]
+    for n in names:
+        per = result.flights[n]
+        lines.append(f"  {n:<{w}}" + "".join(
+            cell(per.get(a, {}).get(SCORES[0], math.nan), per.get(a, {}).get(SCORES[1], math.nan))
+            for a in algos))
+    lines.append(f"  {'mean':<{w}}" + "".join(
+        cell(result.mean(a, SCORES[0]), result.mean(a, SCORES[1])) for a in algos))
+    return "\n".join(lines) + "\n"
