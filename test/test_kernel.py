@@ -75,7 +75,8 @@ PARAM_SETS = {
 def test_state_fields_and_constants_are_those_of_the_reference():
     assert list(kernel.compiled_kernel.State.FIELDS) == step.StepState.FIELDS
     c = kernel.compiled_kernel.CONSTANTS
-    for name in ("RATE_LOWPASS_TIME_CONSTANT_S", "QUICK_LAG_TIME_CONSTANT_S", "REST_NOISE_SIGMAS", "REST_SAMPLE_SIGMAS",
+    for name in ("REST_GATE_SIGMAS", "REST_GATE_OVERRIDE_S", "RATE_LOWPASS_TIME_CONSTANT_S",
+                 "QUICK_LAG_TIME_CONSTANT_S", "REST_NOISE_SIGMAS", "REST_SAMPLE_SIGMAS",
                  "BIAS_RANDOM_WALK_RAD_S_SQRT_S", "GRAVITY_TIME_CONSTANT_S",
                  "MAG_REFERENCE_SAMPLES", "MAG_RELEARN_AFTER_S", "MAG_MAX_DT_S"):
         assert c[name] == getattr(step, name), name

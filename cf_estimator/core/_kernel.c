@@ -35,6 +35,8 @@
 #define REST_NOISE_SIGMAS 2.0
 #define QUICK_LAG_TIME_CONSTANT_S 0.2
 #define REST_SAMPLE_SIGMAS 8.0
+#define REST_GATE_SIGMAS 5.0
+#define REST_GATE_OVERRIDE_S 10.0
 #define BIAS_RANDOM_WALK_RAD_S_SQRT_S 2e-4
 #define GRAVITY_TIME_CONSTANT_S 10.0
 #define MAG_REFERENCE_SAMPLES 20
@@ -60,7 +62,7 @@ typedef struct {
     double qw, qx, qy, qz, bx, by, bz, cx, cy, cz, lx, ly, lz, z_m, time_s, clip_timer_s,
         rest_timer_s, blk_n, blk_t, blk_gx, blk_gy, blk_gz, blk_ax, blk_ay, blk_az, blk_g2, blk_a2,
         prev_n, pgx, pgy, pgz, pax, pay, paz, blk_d, last_n, lgx, lgy, lgz, lax, lay, laz,
-        noise_g2, noise_a2, bias_var, mag_ref_norm, mag_ref_dip, mag_ref_count,
+        noise_g2, noise_a2, bias_var, gate_timer_s, mag_ref_norm, mag_ref_dip, mag_ref_count,
         mag_reject_timer_s, mag_last_time_s, g_ref, accel_hold, rate_lp, ex, ey, ez, error_norm,
         fx, fy, fz, yaw_error_rad, recovery_count;
     char recovering, at_rest, mag_disturbed, heading_initialized, clipped, accel_used;
@@ -243,15 +245,23 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
     double spread = 1.0 / n + 1.0 / maxd(s->prev_n, 1.0);
     double dg = sqrt(pow(mgx - s->pgx, 2.0) + pow(mgy - s->pgy, 2.0) + pow(mgz - s->pgz, 2.0));
     double da = sqrt(pow(max_ - s->pax, 2.0) + pow(may - s->pay, 2.0) + pow(maz - s->paz, 2.0));
-    int still = has_prev &&
-                (dg < p->rest_gyro_threshold_rad_s + REST_NOISE_SIGMAS * sqrt(noise_g2 * spread)) &&
-                (da < p->rest_accel_threshold_m_s2 + REST_NOISE_SIGMAS * sqrt(noise_a2 * spread)) &&
-                (sqrt(mgx * mgx + mgy * mgy + mgz * mgz) <
-                 p->bias_limit_rad_s * 1.7320508075688772);
+    int steady = has_prev &&
+                 (dg < p->rest_gyro_threshold_rad_s + REST_NOISE_SIGMAS * sqrt(noise_g2 * spread)) &&
+                 (da < p->rest_accel_threshold_m_s2 + REST_NOISE_SIGMAS * sqrt(noise_a2 * spread)) &&
+                 (sqrt(mgx * mgx + mgy * mgy + mgz * mgz) <
+                  p->bias_limit_rad_s * 1.7320508075688772);
+    double r = maxd(noise_g2 / (3.0 * n), 1e-12);
+    double innovation = sqrt(pow(mgx - s->bx, 2.0) + pow(mgy - s->by, 2.0) + pow(mgz - s->bz, 2.0));
+    int consistent = innovation < p->rest_gyro_threshold_rad_s +
+                                      REST_GATE_SIGMAS * sqrt(3.0 * (s->bias_var + r));
+    int override = s->gate_timer_s >= REST_GATE_OVERRIDE_S;
+    int still = steady && (consistent || override);
+    if (done) s->gate_timer_s = (steady && !consistent) ? s->gate_timer_s + s->blk_t : 0.0;
+    if (done && steady && !consistent && override)
+        s->bias_var = pow(p->bias_prior_sigma_rad_s, 2.0);
     if (done) s->rest_timer_s = still ? s->rest_timer_s + s->blk_t : 0.0;
     s->at_rest = (char)(p->rest_bias_learning && (s->rest_timer_s >= p->rest_time_s));
     int measure = done && s->at_rest;
-    double r = maxd(noise_g2 / (3.0 * n), 1e-12);
     double k = measure ? s->bias_var / (s->bias_var + r) : 0.0;
     s->bx = s->bx + k * (mgx - s->bx);
     s->by = s->by + k * (mgy - s->by);
@@ -755,7 +765,7 @@ static PyMemberDef State_members[] = {
     SD(blk_n), SD(blk_t), SD(blk_gx), SD(blk_gy), SD(blk_gz), SD(blk_ax), SD(blk_ay),
     SD(blk_az), SD(blk_g2), SD(blk_a2), SD(prev_n), SD(pgx), SD(pgy), SD(pgz), SD(pax), SD(pay),
     SD(paz), SD(blk_d), SD(last_n), SD(lgx), SD(lgy), SD(lgz), SD(lax), SD(lay), SD(laz),
-    SD(noise_g2), SD(noise_a2), SD(bias_var), SB(at_rest), SD(mag_ref_norm),
+    SD(noise_g2), SD(noise_a2), SD(bias_var), SD(gate_timer_s), SB(at_rest), SD(mag_ref_norm),
     SD(mag_ref_dip), SD(mag_ref_count), SB(mag_disturbed), SD(mag_reject_timer_s),
     SD(mag_last_time_s), SB(heading_initialized), SD(g_ref), SD(accel_hold), SD(rate_lp),
     SD(ex), SD(ey), SD(ez), SD(error_norm), SD(fx), SD(fy), SD(fz), SB(clipped),
@@ -788,7 +798,9 @@ PyMODINIT_FUNC PyInit__kernel(void)
     }
     if (PyDict_SetItemString(StateType.tp_dict, "FIELDS", fields) < 0) return NULL;
     Py_DECREF(fields);
-    PyObject *consts = Py_BuildValue("{s:d,s:d,s:d,s:d,s:d,s:d,s:i,s:d,s:d,s:d,s:i}",
+    PyObject *consts = Py_BuildValue("{s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:i,s:d,s:d,s:d,s:i}",
+                                     "REST_GATE_SIGMAS", REST_GATE_SIGMAS,
+                                     "REST_GATE_OVERRIDE_S", REST_GATE_OVERRIDE_S,
                                      "QUICK_LAG_TIME_CONSTANT_S", QUICK_LAG_TIME_CONSTANT_S,
                                      "RATE_LOWPASS_TIME_CONSTANT_S", RATE_LOWPASS_TIME_CONSTANT_S,
                                      "REST_NOISE_SIGMAS", REST_NOISE_SIGMAS,

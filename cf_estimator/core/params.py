@@ -112,7 +112,7 @@ class FilterParams:
         group="error path",
     )
     aperiodic_prefilter: float = param(
-        0.3,
+        0.5,
         "1",
         "Share of each correction that also turns what the aperiodic unit holds. 1: the unit is "
         "a pre-filter of the measured specific force in the world frame (its memory always "

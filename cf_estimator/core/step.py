@@ -51,6 +51,11 @@ REST_NOISE_SIGMAS = 2.0
 #: A single sample this many noise standard deviations (plus the thresholds) away from the last
 #: block mean ends a still phase at once, without waiting for the block to end.
 REST_SAMPLE_SIGMAS = 8.0
+#: A steady block whose gyro mean is this many standard deviations from the bias estimate is a
+#: steady turn, not rest ...
+REST_GATE_SIGMAS = 5.0
+#: ... unless such blocks follow each other this long [s]: then the bias changed (re-learned).
+REST_GATE_OVERRIDE_S = 10.0
 #: Bias random walk [rad/s/sqrt(s)]: how fast the confidence in a learned bias fades.
 BIAS_RANDOM_WALK_RAD_S_SQRT_S = 2e-4
 #: The bias estimate counts as converged below this standard deviation [rad/s].
@@ -125,6 +130,7 @@ class StepState:
         "noise_g2",
         "noise_a2",
         "bias_var",
+        "gate_timer_s",
         "at_rest",
         "mag_ref_norm",
         "mag_ref_dip",
@@ -271,17 +277,29 @@ def _stillness(s: StepState, p: Any, gyro: tuple, accel: tuple, dt: Any, o: Any)
     spread = 1.0 / n + 1.0 / o.maximum(s.prev_n, 1.0)
     dg = o.sqrt((mgx - s.pgx) ** 2 + (mgy - s.pgy) ** 2 + (mgz - s.pgz) ** 2)
     da = o.sqrt((max_ - s.pax) ** 2 + (may - s.pay) ** 2 + (maz - s.paz) ** 2)
-    still = (
+    steady = (
         has_prev
         & (dg < p.rest_gyro_threshold_rad_s + REST_NOISE_SIGMAS * o.sqrt(noise_g2 * spread))
         & (da < p.rest_accel_threshold_m_s2 + REST_NOISE_SIGMAS * o.sqrt(noise_a2 * spread))
         & (o.sqrt(mgx * mgx + mgy * mgy + mgz * mgz) < p.bias_limit_rad_s * 1.7320508075688772)
     )
+    # a steady turn at a constant rate looks still; once the bias is known, a block whose gyro
+    # mean is far from it (beyond REST_GATE_SIGMAS of the estimate's and the block's spread) is
+    # motion — unless it stays so for REST_GATE_OVERRIDE_S: then the bias itself changed
+    r = o.maximum(noise_g2 / (3.0 * n), 1e-12)
+    innovation = o.sqrt((mgx - s.bx) ** 2 + (mgy - s.by) ** 2 + (mgz - s.bz) ** 2)
+    consistent = innovation < p.rest_gyro_threshold_rad_s + REST_GATE_SIGMAS * o.sqrt(
+        3.0 * (s.bias_var + r))
+    override = s.gate_timer_s >= REST_GATE_OVERRIDE_S
+    still = steady & (consistent | override)
+    s.gate_timer_s = o.where(done, o.where(steady & o.not_(consistent), s.gate_timer_s + s.blk_t,
+                                           0.0), s.gate_timer_s)
+    s.bias_var = o.where(done & steady & o.not_(consistent) & override,
+                         p.bias_prior_sigma_rad_s ** 2, s.bias_var)
     s.rest_timer_s = o.where(done, o.where(still, s.rest_timer_s + s.blk_t, 0.0), s.rest_timer_s)
     s.at_rest = p.rest_bias_learning & (s.rest_timer_s >= p.rest_time_s)
     # a still block at rest measures the bias: scalar Kalman update per axis
     measure = done & s.at_rest
-    r = o.maximum(noise_g2 / (3.0 * n), 1e-12)
     k = o.where(measure, s.bias_var / (s.bias_var + r), 0.0)
     s.bx, s.by, s.bz = s.bx + k * (mgx - s.bx), s.by + k * (mgy - s.by), s.bz + k * (mgz - s.bz)
     s.bias_var = s.bias_var - k * s.bias_var
