@@ -395,10 +395,11 @@ def test_publish_tf_broadcasts_the_orientation_between_the_world_and_the_imu_fra
                 t.transform.translation.z) == (0.0, 0.0, 0.0)
         # the parent frame is a live parameter
         assert h.node.set_parameters([Parameter("tf_parent_frame", value="earth")])[0].successful
-        n = len(tfs)
-        assert h.spin_until(lambda: len(tfs) > n, publish=lambda: h.imu_pub.publish(h.imu()))
-        assert "earth" in (tfs[-1].transforms[0].header.frame_id,
-                           tfs[-1].transforms[0].child_frame_id)
+        n = len(tfs)  # transforms already in flight still name "world": wait for "earth"
+        assert h.spin_until(
+            lambda: any("earth" in (m.transforms[0].header.frame_id, m.transforms[0].child_frame_id)
+                        for m in tfs[n:]),
+            publish=lambda: h.imu_pub.publish(h.imu()))
     finally:
         h.close()
 
