@@ -12,6 +12,16 @@ from glob import glob
 from setuptools import Extension, find_namespace_packages, setup
 
 PACKAGE = "cf_estimator"
+#: The node's ROS 2 runtime as PyPI wheels (extra "ros"; scripts/test.sh installs it when rclpy
+#: is not importable). rcl_interfaces, rosgraph_msgs, builtin_interfaces... come along.
+ROS_WHEELS = (
+    "ros-jazzy-rclpy", "ros-jazzy-sensor-msgs", "ros-jazzy-geometry-msgs",
+    "ros-jazzy-diagnostic-msgs", "ros-jazzy-rmw-fastrtps-cpp",
+)
+ROS_WHEEL_MARKER = (
+    'sys_platform == "linux" and platform_machine == "x86_64" and '
+    'platform_python_implementation == "CPython" and python_version < "3.14"'
+)
 
 setup(
     name=PACKAGE,
@@ -52,6 +62,9 @@ setup(
         "test": ["pytest", "hypothesis", "ruff"],
         # riann: RIANN on ONNX Runtime (~80 MB installed, no torch); its weights ship inside
         "bench": ["vqf", "imufusion", "ahrs", "riann"],
+        # ROS 2 Jazzy's rclpy and messages from PyPI, for running the node without a ROS install
+        # (x86_64 Linux, CPython 3.10-3.13). On a ROS install rclpy comes from apt: not this.
+        "ros": [f"{wheel}; {ROS_WHEEL_MARKER}" for wheel in ROS_WHEELS],
     },
     entry_points={
         "console_scripts": [

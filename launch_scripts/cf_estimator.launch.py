@@ -2,6 +2,10 @@
 
 Arguments: params_file (default: the installed config/cf_estimator.yaml), use_sim_time,
 namespace, node_name, imu_topic / mag_topic (input remaps), log_level.
+
+MAVROS (the autopilot's raw IMU and magnetometer, already in ROS frames):
+    ros2 launch cf_estimator cf_estimator.launch.py \
+        imu_topic:=/mavros/imu/data_raw mag_topic:=/mavros/imu/mag
 """
 
 from launch import LaunchDescription

@@ -20,8 +20,47 @@ then
     PYTHON=.venv/bin/python
 fi
 
+# The node tests need ROS 2 Jazzy's rclpy. A sourced ROS install provides it (used as it is);
+# without one, the Jazzy wheels from PyPI (extra "ros") provide it where they exist. Never both:
+# an installed but unsourced ROS gets a hint, not the wheels beside it.
+ros_state=$("$PYTHON" - <<'PY'
+import glob, importlib.util, platform, sys
+if importlib.util.find_spec("rclpy") is not None:
+    print("present")
+elif glob.glob("/opt/ros/*/setup.bash"):
+    print("unsourced " + " ".join(sorted(glob.glob("/opt/ros/*/setup.bash"))))
+elif (sys.platform == "linux" and platform.machine() == "x86_64"
+      and sys.implementation.name == "cpython" and (3, 10) <= sys.version_info[:2] <= (3, 13)):
+    print("wheels")
+else:
+    print(f"unsupported {sys.platform} {platform.machine()} {sys.implementation.name} "
+          f"{platform.python_version()}")
+PY
+)
+extras=test
+ros_note=""
+case "$ros_state" in
+    present) ;;
+    wheels) extras=test,ros ;;
+    unsourced*) ros_note="ROS 2 is installed but not sourced (source ${ros_state#unsourced }): \
+the node tests skip; the PyPI ROS wheels are not mixed into a ROS install" ;;
+    *) ros_note="rclpy is not importable and the ROS 2 Jazzy wheels do not exist for this \
+platform (${ros_state#unsupported }; they do for x86_64 Linux, CPython 3.10-3.13): the node tests skip" ;;
+esac
+
 # Editable, so the tests and the cf-estimator script both run this checkout's code.
-"$PYTHON" -m pip install -q -e '.[test]'
+"$PYTHON" -m pip install -q -e ".[$extras]"
+if [ "$ros_state" = wheels ]; then
+    # The wheels lack tf2_msgs (publish_tf): build it from its definition (a few seconds).
+    "$PYTHON" scripts/build_tf2_msgs.py || true
+    if command -v "${CXX:-c++}" >/dev/null 2>&1; then
+        export CF_ESTIMATOR_REQUIRE_TF2_MSGS=${CF_ESTIMATOR_REQUIRE_TF2_MSGS:-1}
+    fi
+fi
+# rclpy here: the node tests must run (a broken ROS environment fails them instead of skipping).
+if [ -z "$ros_note" ]; then
+    export CF_ESTIMATOR_REQUIRE_ROS=${CF_ESTIMATOR_REQUIRE_ROS:-1}
+fi
 # Put this interpreter's script dir first: new scripts are not always visible through
 # pyenv shims or an unactivated venv, and tests call `cf-estimator` by name.
 scripts_dir=$("$PYTHON" -c 'import sysconfig; print(sysconfig.get_path("scripts"))')
@@ -33,5 +72,16 @@ if command -v "${CC:-cc}" >/dev/null 2>&1; then
     export CF_ESTIMATOR_REQUIRE_KERNEL=${CF_ESTIMATOR_REQUIRE_KERNEL:-1}
 fi
 
+# launch_testing's pytest plugin (visible on a sourced ROS 2) does not load under pytest 9
+# (hook signature): this suite has no launch tests, so keep it and launch_pytest out.
+pytest_plugins=()
+if "$PYTHON" -c 'import importlib.util as u, sys; sys.exit(u.find_spec("launch_testing") is None)'
+then
+    pytest_plugins=(-p no:launch_testing -p no:launch_pytest)
+fi
+
 "$PYTHON" -m ruff check .
-"$PYTHON" -m pytest -q "$@"
+if [ -n "$ros_note" ]; then
+    echo "test.sh: $ros_note" >&2
+fi
+"$PYTHON" -m pytest -q "${pytest_plugins[@]}" "$@"

@@ -546,6 +546,8 @@ def valid_value(spec: ParamSpec) -> st.SearchStrategy:
         return st.booleans()
     if spec.choices:
         return st.sampled_from(list(spec.choices) + [c.upper() for c in spec.choices])
+    if spec.kind == "str":  # a free string (tf_parent_frame): a frame id
+        return st.sampled_from(["world", "map", "earth_ned", "uav1/world"])
     lo, hi = spec.minimum, spec.maximum
     assert lo is not None and hi is not None
     return st.one_of(
@@ -562,6 +564,8 @@ def invalid_value(spec: ParamSpec) -> st.SearchStrategy:
         return st.one_of(wrong_type, st.sampled_from([0, 1, 1.0, "true"]))
     if spec.choices:
         return st.one_of(st.sampled_from([None, 1, True, "", "north", "ENUx"]))
+    if spec.kind == "str":
+        return st.sampled_from([None, 1, True, "", " world", "/world"])
     lo, hi = spec.minimum, spec.maximum
     assert lo is not None and hi is not None
     out = [st.floats(max_value=lo, exclude_max=not spec.minimum_exclusive, allow_nan=False),

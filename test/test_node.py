@@ -1,7 +1,9 @@
 """The rclpy node, end to end: real topics, real parameter services, a real executor.
 
-Needs a sourced ROS 2 Jazzy environment (rclpy, sensor_msgs, diagnostic_msgs, rosgraph_msgs);
-skipped otherwise. Each test uses its own rclpy context.
+Runs on ROS 2 Jazzy's rclpy: a sourced ROS install, or the PyPI wheels that scripts/test.sh
+installs. Skipped without rclpy only when the test command could not provide it. Each test uses
+its own rclpy context and ROS domain (test/node_harness.py). More live-graph tests:
+test/test_node_live.py.
 """
 
 from __future__ import annotations
@@ -9,84 +11,24 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
-import time
 
 import pytest
+from live_graph import require
 
-rclpy = pytest.importorskip(
-    "rclpy", reason="rclpy not importable: the node tests need a sourced ROS 2 Jazzy environment"
-)
+rclpy = require("rclpy")
 
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from geometry_msgs.msg import Vector3Stamped  # noqa: E402
+from node_harness import Harness  # noqa: E402,I001
 from rcl_interfaces.srv import SetParameters  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
-from rclpy.qos import QoSProfile, qos_profile_sensor_data  # noqa: E402
+from rclpy.qos import QoSProfile  # noqa: E402
 from rosgraph_msgs.msg import Clock as ClockMsg  # noqa: E402
-from sensor_msgs.msg import Imu, MagneticField  # noqa: E402
+from sensor_msgs.msg import MagneticField  # noqa: E402
 
 from cf_estimator.core.params import FilterParams  # noqa: E402
-from cf_estimator.node.cf_estimator_node import CfEstimatorNode  # noqa: E402
 from cf_estimator.pipeline import PipelineParams  # noqa: E402
 
-G = 9.80665
 T0 = 1_700_000_000
-
-
-class Harness:
-    """The node under test, a helper node with publishers/subscribers, one executor."""
-
-    def __init__(self, **node_kwargs):
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = CfEstimatorNode(context=self.context, **node_kwargs)
-        self.helper = rclpy.create_node("cf_estimator_test_helper", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.executor.add_node(self.helper)
-        self.imu_pub = self.helper.create_publisher(Imu, "imu/data_raw", qos_profile_sensor_data)
-        self.mag_pub = self.helper.create_publisher(
-            MagneticField, "imu/mag", qos_profile_sensor_data
-        )
-        self.received: dict[str, list] = {"imu": [], "rpy": [], "diag": []}
-        self.helper.create_subscription(
-            Imu, "imu/data", self.received["imu"].append, QoSProfile(depth=50)
-        )
-        self.helper.create_subscription(
-            Vector3Stamped, "imu/rpy", self.received["rpy"].append, QoSProfile(depth=50)
-        )
-        self.helper.create_subscription(
-            DiagnosticArray, "/diagnostics", self.received["diag"].append, QoSProfile(depth=10)
-        )
-        self.k = 0
-
-    def imu(self, accel=(0.0, 0.0, G), gyro=(0.0, 0.0, 0.0), stamp_ns=None) -> Imu:
-        msg = Imu()
-        t = stamp_ns if stamp_ns is not None else T0 * 10**9 + self.k * 10_000_000
-        self.k += 1
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t, 10**9)
-        msg.header.frame_id = "imu_link"
-        msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z = gyro
-        msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z = accel
-        msg.linear_acceleration_covariance[0] = 0.5
-        return msg
-
-    def spin_until(self, predicate, timeout=10.0, publish=None) -> bool:
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            if publish is not None:
-                publish()
-            self.executor.spin_once(timeout_sec=0.02)
-            if predicate():
-                return True
-        return False
-
-    def close(self):
-        self.executor.shutdown()
-        self.helper.destroy_node()
-        self.node.destroy_node()
-        rclpy.shutdown(context=self.context)
+G = 9.80665
 
 
 @pytest.fixture
@@ -144,17 +86,17 @@ def test_live_parameter_change_is_applied_and_keeps_the_attitude(harness):
         lambda: len(harness.received["imu"]) >= 20,
         publish=lambda: harness.imu_pub.publish(harness.imu(gyro=(0.0, 0.0, 0.3))),
     )
-    before = harness.node._pipe.filter.orientation_tuple()  # noqa: SLF001
+    before = harness.pipe.filter.orientation_tuple()
     result = harness.node.set_parameters([Parameter("k1", value=0.7)])[0]
     assert result.successful, result.reason
-    assert harness.node._pipe.filter_params.k1 == 0.7  # noqa: SLF001
-    assert harness.node._pipe.filter.orientation_tuple() == before  # noqa: SLF001
+    assert harness.pipe.filter_params.k1 == 0.7
+    assert harness.pipe.filter.orientation_tuple() == before
 
 
 def test_invalid_parameters_are_rejected_with_a_reason_through_the_service(harness):
     client = harness.helper.create_client(SetParameters, "/cf_estimator/set_parameters")
     assert client.wait_for_service(timeout_sec=10.0)
-    pipe = harness.node._pipe  # noqa: SLF001
+    pipe = harness.pipe
     params_before = (pipe.filter_params, pipe.pipeline_params)
     for param, words in [
         (Parameter("saturation_limit_rad", value=0.0), "saturation_limit_rad"),
@@ -174,26 +116,31 @@ def test_invalid_parameters_are_rejected_with_a_reason_through_the_service(harne
 
 
 def test_bad_messages_are_counted_and_the_node_lives_on(harness):
-    def publish():
-        harness.imu_pub.publish(harness.imu(gyro=(float("nan"), 0.0, 0.0)))
-        harness.imu_pub.publish(harness.imu())
+    """NaN gyro, good, NaN magnetometer, in turn; each message is published only once the node
+    has counted the previous one, so no queue depth (or its parity) decides which arrive."""
+    assert harness.wait_connected()
+    pipe = harness.pipe
+    for _ in range(5):
+        assert harness.publish_one(harness.imu(gyro=(float("nan"), 0.0, 0.0)))
+        assert harness.publish_one(harness.imu())
         mag = MagneticField()
         mag.header.stamp.sec = T0
         mag.magnetic_field.x = float("nan")
+        before = pipe.counters["received_mag"]
         harness.mag_pub.publish(mag)
-
-    pipe = harness.node._pipe  # noqa: SLF001
-    assert harness.spin_until(lambda: pipe.counters["rejected"].get("nonfinite_gyro", 0) >= 5
-                              and len(harness.received["imu"]) >= 5, publish=publish)
+        assert harness.spin_until(lambda b=before: pipe.counters["received_mag"] > b)
     c = pipe.counters
-    assert c["received_imu"] == c["processed"] + sum(c["rejected"].values())
+    assert c["rejected"].get("nonfinite_gyro", 0) == 5
+    assert c["mag_invalid"] == 5
+    assert c["received_imu"] == c["processed"] + sum(c["rejected"].values()) == 10
+    assert harness.spin_until(lambda: len(harness.received["imu"]) >= 5)  # still publishing
 
 
 def test_sim_time_rewind_resets_the_filter():
     h = Harness(parameter_overrides=[Parameter("use_sim_time", value=True)])
     try:
         clock_pub = h.helper.create_publisher(ClockMsg, "/clock", QoSProfile(depth=10))
-        pipe = h.node._pipe  # noqa: SLF001
+        pipe = h.pipe
 
         def clock(sec):
             msg = ClockMsg()
@@ -209,12 +156,11 @@ def test_sim_time_rewind_resets_the_filter():
 
 
 def test_invalid_parameter_at_start_exits_with_one_line_error():
-    code = (
-        "import sys; from cf_estimator.node.cf_estimator_node import main; "
-        "sys.exit(main(['cf_estimator_node', '--ros-args', '-p', 'saturation_limit_rad:=0.0']))"
+    proc = subprocess.run(
+        [sys.executable, "-m", "cf_estimator.node.cf_estimator_node",
+         "--ros-args", "-p", "saturation_limit_rad:=0.0"],
+        capture_output=True, text=True, timeout=120,
     )
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          timeout=60)
     assert proc.returncode == 2
     assert "saturation_limit_rad" in proc.stderr + proc.stdout
     assert "Traceback" not in proc.stderr

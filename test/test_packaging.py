@@ -35,6 +35,7 @@ ROSDEP_KEY = {
     "geometry_msgs": "geometry_msgs",
     "std_msgs": "std_msgs",
     "diagnostic_msgs": "diagnostic_msgs",
+    "tf2_msgs": "tf2_msgs",
     "numpy": "python3-numpy",
     "scipy": "python3-scipy",
     "yaml": "python3-yaml",

@@ -1,276 +1,80 @@
-"""The rclpy node: a thin adapter around :class:`cf_estimator.pipeline.ImuPipeline`.
+"""Console script ``cf_estimator_node``: check what can be checked without ROS, then run the node.
 
-The only module of the package that imports rclpy. It converts messages and wires callbacks;
-every decision (validation, time guards, magnetometer freshness, covariances, diagnostics)
-is the pipeline's, so the bag replay behaves exactly like this node.
-
-Topics (relative: a namespace or a remap moves them): ``imu/data_raw`` (sensor_msgs/Imu) and
-``imu/mag`` (sensor_msgs/MagneticField) in, sensor-data QoS; ``imu/data`` (the input Imu with
-orientation and orientation_covariance filled), ``imu/rpy`` (geometry_msgs/Vector3Stamped,
-roll/pitch/yaw in rad) and ``/diagnostics`` out, reliable. QoS overrides are accepted for the
-four relative topics (``qos_overrides./<topic>.<publisher|subscription>.<policy>``).
-Run it single-threaded (``rclpy.spin``, as :func:`main` does): callbacks are not locked.
+Imports rclpy only inside :func:`main`, so a machine without ROS gets one line saying how to get
+it (instead of a traceback), and a params file that is missing or not YAML is reported in one
+line (the file, the line, what is wrong) before rclpy starts. Exit codes: 0 after Ctrl-C or a
+shutdown, 2 when the node cannot start. The node itself: :mod:`cf_estimator.node.node`.
 """
 
 from __future__ import annotations
 
 import sys
-from typing import Any
+from collections.abc import Mapping, Sequence
+from pathlib import Path
 
-import rclpy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Vector3Stamped
-from rcl_interfaces.msg import (
-    FloatingPointRange,
-    IntegerRange,
-    ParameterDescriptor,
-    SetParametersResult,
+import yaml
+
+PROGRAM = "cf_estimator_node"
+NO_ROS = (
+    "the ROS 2 Python packages are not importable ({missing}): source ROS 2 Jazzy "
+    "(source /opt/ros/jazzy/setup.bash), or without a ROS install: pip install 'cf_estimator[ros]'"
 )
-from rclpy.clock import Clock, ClockType, JumpThreshold
-from rclpy.duration import Duration
-from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
-from rclpy.executors import ExternalShutdownException
-from rclpy.logging import get_logger
-from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, qos_profile_sensor_data
-from rclpy.qos_overriding_options import QoSOverridingOptions
-from sensor_msgs.msg import Imu, MagneticField
-
-from cf_estimator.params_file import all_specs, build_params
-from cf_estimator.pipeline import ImuPipeline
-from cf_estimator.pipeline.checks import RESET_CLOCK_JUMP
-from cf_estimator.pipeline.diagnostics import LEVEL_NAMES
-from cf_estimator.schema import ParameterError, ParamSpec, as_dict
-
-NODE_NAME = "cf_estimator"
-IMU_IN = "imu/data_raw"
-MAG_IN = "imu/mag"
-IMU_OUT = "imu/data"
-RPY_OUT = "imu/rpy"
-DIAGNOSTICS_OUT = "/diagnostics"
-#: Depth of the reliable publishers' history.
-PUBLISHER_DEPTH = 10
-#: Seconds between repeats of the same warning in the log.
-LOG_THROTTLE_S = 5.0
 
 
-def descriptor_for(spec: ParamSpec) -> ParameterDescriptor:
-    """The ROS parameter descriptor of one schema entry (description, unit, range, read-only).
-
-    rclpy's ranges are inclusive: an exclusive bound is stated in ``additional_constraints``
-    and enforced by the node's on-set callback (the schema check).
-    """
-    d = ParameterDescriptor()
-    d.name = spec.name
-    d.description = (f"[{spec.unit}] " if spec.unit else "") + spec.description
-    d.read_only = spec.read_only
-    constraints = []
-    if spec.choices:
-        constraints.append("one of: " + ", ".join(spec.choices))
-    bounded = spec.minimum is not None or spec.maximum is not None
-    if bounded:
-        lo = spec.minimum if spec.minimum is not None else -sys.float_info.max
-        hi = spec.maximum if spec.maximum is not None else sys.float_info.max
-        if spec.kind == "float":
-            d.floating_point_range = [
-                FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)
-            ]
-        elif spec.kind == "int":
-            d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
-        if spec.minimum_exclusive or spec.maximum_exclusive:
-            constraints.append(f"range {spec.range_text()}")
-    d.additional_constraints = "; ".join(constraints)
-    return d
+def params_files(args: Sequence[str]) -> list[str]:
+    """The ``--params-file`` paths among the ROS arguments (after ``--ros-args``, up to ``--``)."""
+    files: list[str] = []
+    in_ros = False
+    it = iter(args)
+    for arg in it:
+        if arg == "--ros-args":
+            in_ros = True
+        elif arg == "--":
+            in_ros = False
+        elif in_ros and arg == "--params-file":
+            path = next(it, None)
+            if path is not None:
+                files.append(path)
+        elif in_ros and arg.startswith("--params-file="):
+            files.append(arg.partition("=")[2])
+    return files
 
 
-def _sensor_qos() -> QoSProfile:
-    """A fresh copy of the sensor-data profile (QoS overrides modify the profile they get)."""
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST,
-        depth=qos_profile_sensor_data.depth,
-        reliability=qos_profile_sensor_data.reliability,
-        durability=qos_profile_sensor_data.durability,
-    )
-
-
-class CfEstimatorNode(Node):
-    """Attitude estimation node (see the module docstring)."""
-
-    def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
-        super().__init__(node_name, **kwargs)
-        log = self.get_logger()
-        self._names = {s.name for s in all_specs()}
-        values = {
-            spec.name: self.declare_parameter(spec.name, spec.default, descriptor_for(spec)).value
-            for spec in all_specs()
-        }
-        filter_params, pipeline_params = build_params(values)  # ParameterError: main() reports
-        ns = self.get_namespace().rstrip("/")
-        self._pipe = ImuPipeline(
-            filter_params, pipeline_params, diagnostics_name=f"{ns}/{self.get_name()}: attitude"
-        )
-        self._last_level: int | None = None
-
-        overrides = QoSOverridingOptions.with_default_policies()
-        reliable = QoSProfile(depth=PUBLISHER_DEPTH)
-        self._pub_imu = self.create_publisher(
-            Imu, IMU_OUT, reliable, qos_overriding_options=overrides
-        )
-        self._pub_rpy = None
-        if pipeline_params.publish_rpy:
-            self._pub_rpy = self.create_publisher(
-                Vector3Stamped, RPY_OUT, QoSProfile(depth=PUBLISHER_DEPTH),
-                qos_overriding_options=overrides,
-            )
-        self._pub_diag = self.create_publisher(
-            DiagnosticArray, DIAGNOSTICS_OUT, QoSProfile(depth=PUBLISHER_DEPTH)
-        )
-        self._sub_imu = self.create_subscription(
-            Imu, IMU_IN, self._on_imu, _sensor_qos(), qos_overriding_options=overrides
-        )
-        self._sub_mag = self.create_subscription(
-            MagneticField, MAG_IN, self._on_mag, _sensor_qos(), qos_overriding_options=overrides
-        )
-        # Diagnostics on the steady clock: they keep coming when sim time stalls.
-        self._timer = self.create_timer(
-            pipeline_params.diagnostics_period_s, self._on_diagnostics,
-            clock=Clock(clock_type=ClockType.STEADY_TIME),
-        )
-        # Any backward jump of the node clock is reported; the callback applies the threshold.
-        self._jump_handle = self.get_clock().create_jump_callback(
-            JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1),
-                          on_clock_change=False),
-            post_callback=self._on_time_jump,
-        )
-        self.add_on_set_parameters_callback(self._validate_parameters)
-        self._post_set = hasattr(self, "add_post_set_parameters_callback")
-        if self._post_set:
-            self.add_post_set_parameters_callback(self._apply_parameters)
-
-        topics = {
-            "in": [self.resolve_topic_name(IMU_IN), self.resolve_topic_name(MAG_IN)],
-            "out": [self.resolve_topic_name(IMU_OUT)]
-            + ([self.resolve_topic_name(RPY_OUT)] if self._pub_rpy else [])
-            + [DIAGNOSTICS_OUT],
-        }
-        log.info(
-            f"subscribed (sensor-data QoS) to {', '.join(topics['in'])}; publishing "
-            f"{', '.join(topics['out'])}; world frame {filter_params.world_frame}"
-        )
-        effective = {**as_dict(filter_params), **as_dict(pipeline_params)}
-        log.info("parameters: " + ", ".join(f"{k}={v}" for k, v in effective.items()))
-
-    # -- messages ---------------------------------------------------------------------------
-    def _on_imu(self, msg: Imu) -> None:
-        out = self._pipe.on_imu(msg)
-        log = self.get_logger()
-        if out is None:
-            log.warning(
-                f"IMU message rejected: {self._pipe.last_reject_reason} (counted in /diagnostics)",
-                throttle_duration_sec=LOG_THROTTLE_S,
-            )
-            return
-        for text in out.warnings:
-            log.warning(text)
-        try:
-            # imu/data is the input message itself: header, vectors and covariances as received.
-            q = msg.orientation
-            q.x, q.y, q.z, q.w = out.orientation_xyzw
-            msg.orientation_covariance = out.orientation_covariance
-            self._pub_imu.publish(msg)
-            if self._pub_rpy is not None and out.rpy_rad is not None:
-                rpy = Vector3Stamped()
-                rpy.header = msg.header
-                rpy.vector.x, rpy.vector.y, rpy.vector.z = out.rpy_rad
-                self._pub_rpy.publish(rpy)
-        except Exception as exc:  # noqa: BLE001 - never die on one message
-            log.error(f"cannot publish the output: {exc}", throttle_duration_sec=LOG_THROTTLE_S)
-
-    def _on_mag(self, msg: MagneticField) -> None:
-        self._pipe.on_mag(msg)
-
-    def _on_diagnostics(self) -> None:
-        try:
-            self._publish_diagnostics()
-        except Exception as exc:  # noqa: BLE001 - a diagnostics bug must not stop the node
-            self.get_logger().error(
-                f"diagnostics failed: {exc}", throttle_duration_sec=LOG_THROTTLE_S
-            )
-
-    def _publish_diagnostics(self) -> None:
-        now = self.get_clock().now()
-        report = self._pipe.diagnostics(now.nanoseconds * 1e-9)
-        status = DiagnosticStatus()
-        status.level = bytes([report.level])  # 'byte' field: bytes of length 1 in rclpy
-        status.name = report.name
-        status.message = report.message
-        status.hardware_id = report.hardware_id
-        status.values = [KeyValue(key=k, value=v) for k, v in report.values]
-        array = DiagnosticArray()
-        array.header.stamp = now.to_msg()
-        array.status = [status]
-        self._pub_diag.publish(array)
-        if report.level != self._last_level:
-            text = f"status {LEVEL_NAMES.get(report.level, report.level)}: {report.message}"
-            if report.level == 0:
-                self.get_logger().info(text)
-            else:
-                self.get_logger().warning(text)
-            self._last_level = report.level
-
-    def _on_time_jump(self, jump: Any) -> None:
-        back_s = -jump.delta.nanoseconds * 1e-9
-        if back_s >= self._pipe.pipeline_params.time_jump_back_threshold_s:
-            self._pipe.reset(RESET_CLOCK_JUMP)
-            self.get_logger().warning(f"clock jumped back by {back_s:.3f} s: filter reset")
-
-    # -- parameters -------------------------------------------------------------------------------
-    def _changes(self, params: list[Any]) -> dict[str, Any]:
-        return {p.name: p.value for p in params if p.name in self._names}
-
-    def _validate_parameters(self, params: list[Any]) -> SetParametersResult:
-        changes = self._changes(params)
-        if not changes:  # use_sim_time, qos_overrides...: not ours to judge
-            return SetParametersResult(successful=True)
-        ok, reason = self._pipe.validate_changes(changes)
-        if ok and not self._post_set:  # rclpy without post-set callbacks: apply now
-            self._apply_parameters(params)
-        return SetParametersResult(successful=ok, reason=reason)
-
-    def _apply_parameters(self, params: list[Any]) -> None:
-        changes = self._changes(params)
-        if not changes:
-            return
-        ok, reason = self._pipe.apply_changes(changes)
-        log = self.get_logger()
-        if ok:
-            log.info("parameters changed: " + ", ".join(f"{k}={v}" for k, v in changes.items()))
-        else:  # validated a moment ago: only a concurrent change could get here
-            log.error(f"parameter change not applied: {reason}")
+def check_params_file(path: str) -> str | None:
+    """None if ``path`` is a readable YAML mapping (what rcl can load), else the problem."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        return f"{path}: cannot read the params file: {getattr(exc, 'strerror', None) or exc}"
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark else ""
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        return f"{path}: not valid YAML{where}: {problem}"
+    if not isinstance(doc, Mapping):
+        return (f"{path}: not a ROS 2 parameter file (expected '/**:' or '<node name>:' "
+                "then 'ros__parameters:')")
+    return None
 
 
 def main(args: list[str] | None = None) -> int:
-    """Console script ``cf_estimator_node``."""
-    rclpy.init(args=args)
-    node = None
-    code = 0
+    """Run the node; ``args`` as ``sys.argv`` (program name first, then ``--ros-args ...``)."""
+    argv = list(sys.argv if args is None else args)
+    for path in params_files(argv[1:]):
+        problem = check_params_file(path)
+        if problem:
+            print(f"{PROGRAM}: {problem}", file=sys.stderr)
+            return 2
     try:
-        node = CfEstimatorNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ParameterError, InvalidParameterValueException, InvalidParameterTypeException) as exc:
-        hint = ""
-        if isinstance(exc, InvalidParameterTypeException):
-            hint = " (float parameters need a decimal point in YAML, e.g. 1.0 not 1)"
-        text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        get_logger(NODE_NAME).fatal(f"invalid parameter: {text}{hint}")
-        code = 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+        from cf_estimator.node.node import run
+    except ModuleNotFoundError as exc:
+        if (exc.name or "").partition(".")[0] == "cf_estimator":
+            raise
+        print(f"{PROGRAM}: " + NO_ROS.format(missing=exc.name), file=sys.stderr)
+        return 2
+    return run(argv)
 
 
 if __name__ == "__main__":

@@ -24,7 +24,8 @@ MAG_REJECTED_WARN_FRACTION = 0.5
 
 @dataclass(frozen=True)
 class DiagnosticsReport:
-    """One diagnostic status: level 0/1/2 (OK/WARN/ERROR), texts, and string key-values."""
+    """One diagnostic status: level 0/1/2 (OK/WARN/ERROR), texts, and string key-values
+    (numeric figures always parse as floats; undefined ones are ``"nan"``)."""
 
     level: int
     name: str
@@ -68,8 +69,14 @@ class WindowStats:
         self.last_ns = -1
 
 
-def _f(x: float, digits: int = 6) -> str:
-    return f"{x:.{digits}g}"
+#: Value of a figure that is undefined in a period (no messages, not initialised, offline):
+#: still a number for any consumer that parses the values (``float("nan")``).
+UNDEFINED = "nan"
+
+
+def _f(x: float | None, digits: int = 6) -> str:
+    """A float as text; None (undefined) → ``"nan"``, so a figure is always a number."""
+    return UNDEFINED if x is None else f"{x:.{digits}g}"
 
 
 def _delta(now: Mapping[str, int], prev: Mapping[str, int]) -> dict[str, int]:
@@ -93,12 +100,15 @@ def compose_report(
     stamp_age_s: float | None,
     mag_age_s: float | None,
     mag_timeout_s: float,
+    filter_backend: str = "",
 ) -> DiagnosticsReport:
     """Build the report of one period from cumulative ``counters`` and their ``previous`` copy.
 
     ``status`` is the filter's :class:`~cf_estimator.core.filter.FilterStatus` (None before
     initialisation); ``mag_age_s`` the stamp difference between the last processed IMU message
-    and the last magnetometer sample the filter used.
+    and the last magnetometer sample the filter used; ``filter_backend`` which implementation
+    runs the filter step ('compiled' or 'python', see :mod:`cf_estimator.core.kernel`).
+    Undefined figures are ``"nan"``, never empty.
     """
     errors: list[str] = []
     warns: list[str] = []
@@ -161,6 +171,7 @@ def compose_report(
 
     values: list[tuple[str, str]] = [
         ("world_frame", world_frame),
+        ("filter_backend", filter_backend or "unknown"),
         ("initialized", str(initialized).lower()),
         ("phase", status.phase if initialized else "uninitialized"),
         ("imu_received", str(counters["received_imu"])),
@@ -175,14 +186,14 @@ def compose_report(
     span_s = (w.last_ns - w.first_ns) * 1e-9
     rate = (w.n - 1) / span_s if w.n >= 2 and span_s > 0.0 else 0.0
     values += [
-        ("period_s", _f(period_s) if period_s else ""),
+        ("period_s", _f(period_s if period_s else None)),
         ("input_rate_hz", _f(rate, 5)),
-        ("dt_min_s", _f(w.dt_min) if w.n_dt else ""),
-        ("dt_mean_s", _f(w.dt_sum / w.n_dt) if w.n_dt else ""),
-        ("dt_max_s", _f(w.dt_max) if w.n_dt else ""),
-        ("error_norm_mean_rad", _f(w.err_sum / w.n_err) if w.n_err else ""),
-        ("error_norm_max_rad", _f(w.err_max) if w.n_err else ""),
-        ("clipped_fraction", _f(w.n_clipped / w.n_err, 4) if w.n_err else ""),
+        ("dt_min_s", _f(w.dt_min if w.n_dt else None)),
+        ("dt_mean_s", _f(w.dt_sum / w.n_dt if w.n_dt else None)),
+        ("dt_max_s", _f(w.dt_max if w.n_dt else None)),
+        ("error_norm_mean_rad", _f(w.err_sum / w.n_err if w.n_err else None)),
+        ("error_norm_max_rad", _f(w.err_max if w.n_err else None)),
+        ("clipped_fraction", _f(w.n_clipped / w.n_err if w.n_err else None, 4)),
     ]
     bias = status.gyro_bias_rad_s if initialized else (0.0, 0.0, 0.0)
     values += [
@@ -192,11 +203,11 @@ def compose_report(
         ("at_rest", str(bool(initialized and status.at_rest)).lower()),
         ("recovery_count", str(status.recovery_count if initialized else 0)),
     ]
-    r = rpy_rad if rpy_rad is not None else None
+    r = rpy_rad if rpy_rad is not None else (None, None, None)
     values += [
-        ("roll_rad", _f(r[0]) if r else ""),
-        ("pitch_rad", _f(r[1]) if r else ""),
-        ("yaw_rad", _f(r[2]) if r else ""),
+        ("roll_rad", _f(r[0])),
+        ("pitch_rad", _f(r[1])),
+        ("yaw_rad", _f(r[2])),
         ("use_mag", str(use_mag).lower()),
         ("heading_referenced", str(bool(initialized and status.heading_initialized)).lower()),
         ("mag_received", str(counters["received_mag"])),
@@ -206,10 +217,10 @@ def compose_report(
         ("mag_invalid", str(counters["mag_invalid"])),
         ("mag_dropped", str(counters["mag_dropped"])),
         ("mag_disabled", str(counters["mag_disabled"])),
-        ("mag_age_s", _f(mag_age_s) if mag_age_s is not None else ""),
-        ("processing_time_mean_us", _f(1e6 * w.proc_sum / w.n, 4) if w.n else ""),
-        ("processing_time_max_us", _f(1e6 * w.proc_max, 4) if w.n else ""),
-        ("stamp_age_s", _f(stamp_age_s) if stamp_age_s is not None else ""),
+        ("mag_age_s", _f(mag_age_s)),
+        ("processing_time_mean_us", _f(1e6 * w.proc_sum / w.n if w.n else None, 4)),
+        ("processing_time_max_us", _f(1e6 * w.proc_max if w.n else None, 4)),
+        ("stamp_age_s", _f(stamp_age_s)),
     ]
     values += [(f"input_warning.{tag}", text) for tag, text in input_warnings.items()]
     return DiagnosticsReport(level, name, message, hardware_id, values)

@@ -66,6 +66,23 @@ class PipelineParams:
         "message (false: reject messages until their stamps pass the last processed one).",
         group="time",
     )
+    publish_tf: bool = param(
+        False, "", "Broadcast the orientation on /tf (tf2_msgs/TFMessage, as imu_filter_madgwick "
+        "does): the transform tf_parent_frame -> the IMU message's frame_id, zero translation, "
+        "stamped with the IMU message. Off by default: a robot description usually owns that "
+        "frame already.",
+        read_only=True, group="tf",
+    )
+    tf_parent_frame: str = param(
+        "world", "", "Parent frame of the broadcast transform: the world frame the orientation "
+        "refers to (ENU or NED by world_frame).",
+        group="tf",
+    )
+    reverse_tf: bool = param(
+        False, "", "Broadcast the inverse transform instead: IMU frame -> tf_parent_frame (for a "
+        "tree whose root is the robot, e.g. base_link -> imu_link already published).",
+        group="tf",
+    )
     diagnostics_period_s: float = param(
         1.0, "s", "Period of the /diagnostics report (the node's timer; steady clock).",
         minimum=0.05, maximum=60.0, read_only=True, group="diagnostics",
@@ -73,6 +90,12 @@ class PipelineParams:
 
     def __post_init__(self) -> None:
         validate_fields(self)
+        frame = self.tf_parent_frame
+        if not frame or frame != frame.strip() or frame.startswith("/"):
+            raise ParameterError(
+                f"tf_parent_frame: {frame!r} is not a frame id (non-empty, no spaces around it, "
+                "no leading '/')"
+            )
         if 0.0 < self.reset_after_gap_s < self.max_dt_s:
             raise ParameterError(
                 f"reset_after_gap_s: {self.reset_after_gap_s:g} s must be 0 (never) or at least "

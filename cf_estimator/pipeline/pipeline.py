@@ -516,6 +516,7 @@ class ImuPipeline:
             stamp_age_s=stamp_age,
             mag_age_s=mag_age,
             mag_timeout_s=self._pp.mag_timeout_s,
+            filter_backend=self._filter.backend,
         )
         self._previous_counters = counters
         self._previous_now_s = now_s

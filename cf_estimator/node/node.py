@@ -1,0 +1,350 @@
+"""The rclpy node class: a thin adapter around :class:`cf_estimator.pipeline.ImuPipeline`.
+
+With :mod:`cf_estimator.node.cf_estimator_node` (the console script, which imports this module
+only once it knows rclpy is there) the only code of the package that imports rclpy. It converts
+messages and wires callbacks; every decision (validation, time guards, magnetometer freshness,
+covariances, diagnostics) is the pipeline's, so the bag replay behaves exactly like this node.
+
+Topics (relative: a namespace or a remap moves them): ``imu/data_raw`` (sensor_msgs/Imu) and
+``imu/mag`` (sensor_msgs/MagneticField) in, sensor-data QoS (best effort; the IMU queue
+:data:`IMU_QUEUE_DEPTH` deep); ``imu/data`` (the input Imu with orientation and
+orientation_covariance filled), ``imu/rpy`` (geometry_msgs/Vector3Stamped, roll/pitch/yaw in
+rad) and ``/diagnostics`` out, reliable; ``/tf`` (tf2_msgs/TFMessage) when ``publish_tf``.
+QoS overrides are accepted for the four relative topics
+(``qos_overrides./<resolved topic>.<publisher|subscription>.<policy>``).
+Run it single-threaded (``rclpy.spin``, as ``main`` does): callbacks are not locked.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Any
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import TransformStamped, Vector3Stamped
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
+from rclpy.clock import Clock, ClockType, JumpThreshold
+from rclpy.duration import Duration
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.executors import ExternalShutdownException
+from rclpy.logging import get_logger
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, qos_profile_sensor_data
+from rclpy.qos_overriding_options import QoSOverridingOptions
+from sensor_msgs.msg import Imu, MagneticField
+
+from cf_estimator.params_file import all_specs, build_params
+from cf_estimator.pipeline import ImuPipeline
+from cf_estimator.pipeline.checks import RESET_CLOCK_JUMP
+from cf_estimator.pipeline.diagnostics import LEVEL_NAMES
+from cf_estimator.schema import ParameterError, ParamSpec, as_dict
+
+NODE_NAME = "cf_estimator"
+IMU_IN = "imu/data_raw"
+MAG_IN = "imu/mag"
+IMU_OUT = "imu/data"
+RPY_OUT = "imu/rpy"
+DIAGNOSTICS_OUT = "/diagnostics"
+TF_OUT = "/tf"
+#: Depth of the reliable publishers' history.
+PUBLISHER_DEPTH = 10
+#: Depth of the IMU subscription's queue (best effort, keep last). Chosen by measurement
+#: (scripts/bench_node_load.py, 1 kHz IMU on a loaded 2-core machine: see docs/ros_interface.md):
+#: deep enough to ride out a few tens of ms without the executor, and it costs no latency while
+#: the node keeps up. Override: ``qos_overrides./imu/data_raw.subscription.depth``.
+IMU_QUEUE_DEPTH = 50
+#: Depth of /tf's history (tf2_ros' TransformBroadcaster uses 100).
+TF_DEPTH = 100
+#: Seconds between repeats of the same warning in the log.
+LOG_THROTTLE_S = 5.0
+
+
+def descriptor_for(spec: ParamSpec) -> ParameterDescriptor:
+    """The ROS parameter descriptor of one schema entry (description, unit, range, read-only).
+
+    rclpy's ranges are inclusive: an exclusive bound is stated in ``additional_constraints``
+    and enforced by the node's on-set callback (the schema check).
+    """
+    d = ParameterDescriptor()
+    d.name = spec.name
+    d.description = (f"[{spec.unit}] " if spec.unit else "") + spec.description
+    d.read_only = spec.read_only
+    constraints = []
+    if spec.choices:
+        constraints.append("one of: " + ", ".join(spec.choices))
+    bounded = spec.minimum is not None or spec.maximum is not None
+    if bounded:
+        lo = spec.minimum if spec.minimum is not None else -sys.float_info.max
+        hi = spec.maximum if spec.maximum is not None else sys.float_info.max
+        if spec.kind == "float":
+            d.floating_point_range = [
+                FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)
+            ]
+        elif spec.kind == "int":
+            d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
+        if spec.minimum_exclusive or spec.maximum_exclusive:
+            constraints.append(f"range {spec.range_text()}")
+    d.additional_constraints = "; ".join(constraints)
+    return d
+
+
+class StartError(RuntimeError):
+    """The node cannot start as configured (one line; ``main`` exits with code 2)."""
+
+
+def _type_hint(spec: ParamSpec, text: str) -> str:
+    """What to write for ``spec`` after rclpy refused a value of the wrong type."""
+    if spec.kind == "float" and "'INTEGER'" in text:
+        return " (float parameters need a decimal point in YAML, e.g. 1.0 not 1)"
+    return {
+        "bool": " (write true or false)",
+        "int": " (write an integer)",
+        "float": " (write a number with a decimal point, e.g. 1.0)",
+        "str": " (write a string)",
+    }[spec.kind]
+
+
+def _sensor_qos(depth: int = qos_profile_sensor_data.depth) -> QoSProfile:
+    """A fresh sensor-data profile (QoS overrides modify the profile they get)."""
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=depth,
+        reliability=qos_profile_sensor_data.reliability,
+        durability=qos_profile_sensor_data.durability,
+    )
+
+
+class CfEstimatorNode(Node):
+    """Attitude estimation node (see the module docstring)."""
+
+    def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        log = self.get_logger()
+        self._names = {s.name for s in all_specs()}
+        values = {spec.name: self._declare(spec) for spec in all_specs()}
+        filter_params, pipeline_params = build_params(values)  # ParameterError: main() reports
+        ns = self.get_namespace().rstrip("/")
+        self._pipe = ImuPipeline(
+            filter_params, pipeline_params, diagnostics_name=f"{ns}/{self.get_name()}: attitude"
+        )
+        self._last_level: int | None = None
+
+        overrides = QoSOverridingOptions.with_default_policies()
+        reliable = QoSProfile(depth=PUBLISHER_DEPTH)
+        self._pub_imu = self.create_publisher(
+            Imu, IMU_OUT, reliable, qos_overriding_options=overrides
+        )
+        self._pub_rpy = None
+        if pipeline_params.publish_rpy:
+            self._pub_rpy = self.create_publisher(
+                Vector3Stamped, RPY_OUT, QoSProfile(depth=PUBLISHER_DEPTH),
+                qos_overriding_options=overrides,
+            )
+        self._pub_diag = self.create_publisher(
+            DiagnosticArray, DIAGNOSTICS_OUT, QoSProfile(depth=PUBLISHER_DEPTH)
+        )
+        self._pub_tf = None
+        if pipeline_params.publish_tf:
+            try:
+                from tf2_msgs.msg import TFMessage
+            except ImportError:
+                raise StartError(
+                    "publish_tf needs the tf2_msgs package (ROS: apt install ros-jazzy-tf2-msgs; "
+                    "PyPI wheels: python3 scripts/build_tf2_msgs.py)"
+                ) from None
+            self._pub_tf = self.create_publisher(TFMessage, TF_OUT, QoSProfile(depth=TF_DEPTH))
+            self._tf_msg = TFMessage(transforms=[TransformStamped()])
+        self._sub_imu = self.create_subscription(
+            Imu, IMU_IN, self._on_imu, _sensor_qos(IMU_QUEUE_DEPTH),
+            qos_overriding_options=overrides,
+        )
+        self._sub_mag = self.create_subscription(
+            MagneticField, MAG_IN, self._on_mag, _sensor_qos(), qos_overriding_options=overrides
+        )
+        # Diagnostics on the steady clock: they keep coming when sim time stalls.
+        self._timer = self.create_timer(
+            pipeline_params.diagnostics_period_s, self._on_diagnostics,
+            clock=Clock(clock_type=ClockType.STEADY_TIME),
+        )
+        # Any backward jump of the node clock is reported; the callback applies the threshold.
+        self._jump_handle = self.get_clock().create_jump_callback(
+            JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1),
+                          on_clock_change=False),
+            post_callback=self._on_time_jump,
+        )
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self._post_set = hasattr(self, "add_post_set_parameters_callback")
+        if self._post_set:
+            self.add_post_set_parameters_callback(self._apply_parameters)
+
+        topics = {
+            "in": [self.resolve_topic_name(IMU_IN), self.resolve_topic_name(MAG_IN)],
+            "out": [self.resolve_topic_name(IMU_OUT)]
+            + ([self.resolve_topic_name(RPY_OUT)] if self._pub_rpy else [])
+            + [DIAGNOSTICS_OUT]
+            + ([TF_OUT] if self._pub_tf else []),
+        }
+        backend = self._pipe.filter.backend
+        log.info(
+            f"subscribed (sensor-data QoS) to {', '.join(topics['in'])}; publishing "
+            f"{', '.join(topics['out'])}; world frame {filter_params.world_frame}; filter step: "
+            + ("compiled kernel" if backend == "compiled"
+               else "Python reference (no compiled kernel: slower)")
+        )
+        effective = {**as_dict(filter_params), **as_dict(pipeline_params)}
+        log.info("parameters: " + ", ".join(f"{k}={v}" for k, v in effective.items()))
+
+    def _declare(self, spec: ParamSpec) -> Any:
+        """Declare one schema parameter; a value of the wrong type → ParameterError, one line."""
+        try:
+            return self.declare_parameter(spec.name, spec.default, descriptor_for(spec)).value
+        except InvalidParameterTypeException as exc:
+            text = str(exc).splitlines()[0]
+            raise ParameterError(f"{text}{_type_hint(spec, text)}") from None
+
+    # -- messages ---------------------------------------------------------------------------
+    def _on_imu(self, msg: Imu) -> None:
+        out = self._pipe.on_imu(msg)
+        log = self.get_logger()
+        if out is None:
+            log.warning(
+                f"IMU message rejected: {self._pipe.last_reject_reason} (counted in /diagnostics)",
+                throttle_duration_sec=LOG_THROTTLE_S,
+            )
+            return
+        for text in out.warnings:
+            log.warning(text)
+        try:
+            # imu/data is the input message itself: header, vectors and covariances as received.
+            q = msg.orientation
+            q.x, q.y, q.z, q.w = out.orientation_xyzw
+            msg.orientation_covariance = out.orientation_covariance
+            self._pub_imu.publish(msg)
+            if self._pub_rpy is not None and out.rpy_rad is not None:
+                rpy = Vector3Stamped()
+                rpy.header = msg.header
+                rpy.vector.x, rpy.vector.y, rpy.vector.z = out.rpy_rad
+                self._pub_rpy.publish(rpy)
+            if self._pub_tf is not None:
+                self._publish_tf(msg)
+        except Exception as exc:  # noqa: BLE001 - never die on one message
+            log.error(f"cannot publish the output: {exc}", throttle_duration_sec=LOG_THROTTLE_S)
+
+    def _publish_tf(self, msg: Imu) -> None:
+        """/tf: tf_parent_frame → the IMU frame (or the reverse), rotation = the orientation."""
+        child = msg.header.frame_id.lstrip("/")
+        if not child:  # no frame to attach (the pipeline warns about the empty frame_id once)
+            return
+        pp = self._pipe.pipeline_params
+        t = self._tf_msg.transforms[0]
+        t.header.stamp = msg.header.stamp
+        q = msg.orientation  # q_world_from_sensor: world = parent, sensor = child
+        r = t.transform.rotation
+        if pp.reverse_tf:  # parent = sensor, child = world: the inverse rotation
+            t.header.frame_id, t.child_frame_id = child, pp.tf_parent_frame
+            r.x, r.y, r.z, r.w = -q.x, -q.y, -q.z, q.w
+        else:
+            t.header.frame_id, t.child_frame_id = pp.tf_parent_frame, child
+            r.x, r.y, r.z, r.w = q.x, q.y, q.z, q.w
+        self._pub_tf.publish(self._tf_msg)
+
+    def _on_mag(self, msg: MagneticField) -> None:
+        self._pipe.on_mag(msg)
+
+    def _on_diagnostics(self) -> None:
+        try:
+            self._publish_diagnostics()
+        except Exception as exc:  # noqa: BLE001 - a diagnostics bug must not stop the node
+            self.get_logger().error(
+                f"diagnostics failed: {exc}", throttle_duration_sec=LOG_THROTTLE_S
+            )
+
+    def _publish_diagnostics(self) -> None:
+        now = self.get_clock().now()
+        report = self._pipe.diagnostics(now.nanoseconds * 1e-9)
+        status = DiagnosticStatus()
+        status.level = bytes([report.level])  # 'byte' field: bytes of length 1 in rclpy
+        status.name = report.name
+        status.message = report.message
+        status.hardware_id = report.hardware_id
+        status.values = [KeyValue(key=k, value=v) for k, v in report.values]
+        array = DiagnosticArray()
+        array.header.stamp = now.to_msg()
+        array.status = [status]
+        self._pub_diag.publish(array)
+        if report.level != self._last_level:
+            text = f"status {LEVEL_NAMES.get(report.level, report.level)}: {report.message}"
+            if report.level == 0:
+                self.get_logger().info(text)
+            else:
+                self.get_logger().warning(text)
+            self._last_level = report.level
+
+    def _on_time_jump(self, jump: Any) -> None:
+        back_s = -jump.delta.nanoseconds * 1e-9
+        if back_s >= self._pipe.pipeline_params.time_jump_back_threshold_s:
+            self._pipe.reset(RESET_CLOCK_JUMP)
+            self.get_logger().warning(f"clock jumped back by {back_s:.3f} s: filter reset")
+
+    # -- parameters -------------------------------------------------------------------------------
+    def _changes(self, params: list[Any]) -> dict[str, Any]:
+        return {p.name: p.value for p in params if p.name in self._names}
+
+    def _validate_parameters(self, params: list[Any]) -> SetParametersResult:
+        changes = self._changes(params)
+        if not changes:  # use_sim_time, qos_overrides...: not ours to judge
+            return SetParametersResult(successful=True)
+        ok, reason = self._pipe.validate_changes(changes)
+        if ok and not self._post_set:  # rclpy without post-set callbacks: apply now
+            self._apply_parameters(params)
+        return SetParametersResult(successful=ok, reason=reason)
+
+    def _apply_parameters(self, params: list[Any]) -> None:
+        changes = self._changes(params)
+        if not changes:
+            return
+        ok, reason = self._pipe.apply_changes(changes)
+        log = self.get_logger()
+        if ok:
+            log.info("parameters changed: " + ", ".join(f"{k}={v}" for k, v in changes.items()))
+        else:  # validated a moment ago: only a concurrent change could get here
+            log.error(f"parameter change not applied: {reason}")
+
+
+def run(args: list[str]) -> int:
+    """Start rclpy with ``args`` (``--ros-args ...``), spin the node until shutdown.
+
+    Returns the exit code: 0 after Ctrl-C / shutdown, 2 when the node cannot start (rclpy
+    refuses the arguments or a params file, or a parameter is invalid): one line, no traceback.
+    """
+    try:
+        rclpy.init(args=args)
+    except Exception as exc:  # noqa: BLE001 - rclpy raises its C layer's RCLError here
+        text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        print(f"{NODE_NAME}: cannot start: {text}", file=sys.stderr)
+        return 2
+    node = None
+    code = 0
+    try:
+        node = CfEstimatorNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (
+        ParameterError, InvalidParameterValueException, InvalidParameterTypeException, StartError
+    ) as exc:
+        text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        kind = "cannot start" if isinstance(exc, StartError) else "invalid parameter"
+        get_logger(NODE_NAME).fatal(f"{kind}: {text}")
+        code = 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
