@@ -171,6 +171,7 @@ def run_broad(args: Any) -> int:
 
     if args.jobs < 1:
         raise CliError("--jobs must be >= 1", 2)
+    peers = _available_peers(args)
     check_input_path(args.data, "BROAD data")
     _check_outputs(args, "json", "plot")
     params = _load_params(args.params, args.node_name)
@@ -178,7 +179,6 @@ def run_broad(args: Any) -> int:
         paths, info = broad.resolve_trials(args.data, _csv(args.trials) if args.trials else None)
     except broad.BroadDataError as exc:
         raise CliError(str(exc), 2) from None
-    peers = _available_peers(args)
     start = time.monotonic()
 
     def progress(name: str, i: int, n: int) -> None:
@@ -216,9 +216,9 @@ def run_broad(args: Any) -> int:
 def run_scenarios(args: Any) -> int:
     """``bench scenarios``."""
     from cf_estimator.bench import scenarios as sc
+    peers = _available_peers(args)
     _check_outputs(args, "json")
     params = _load_params(args.params, args.node_name)
-    peers = _available_peers(args)
     names = _csv(args.scenarios)
     try:
         rows = sc.run_scenarios(names, params, peers, seed=args.seed, duration_s=args.duration,
@@ -241,10 +241,10 @@ def run_scenarios(args: Any) -> int:
 def run_speed(args: Any) -> int:
     """``bench speed``."""
     from cf_estimator.bench import speed
+    peers = _available_peers(args)
     _check_outputs(args, "json")
     if args.bag is not None:
         check_input_path(args.bag, "bag")
-    peers = _available_peers(args)
     if args.samples < 100:
         raise CliError("--samples must be >= 100", 2)
     try:

@@ -71,10 +71,10 @@ def load_params(
 # -- inputs ------------------------------------------------------------------------------------
 def check_input_path(path: str | os.PathLike[str], what: str, *, want_file: bool = False,
                      want_dir: bool = False) -> Path:
-    """A missing input is CliError(2) in every command: ``PATH: <what> not found``."""
+    """A missing input is CliError(2) in every command: ``PATH: no such file or directory``."""
     p = Path(path)
     if not p.exists():
-        raise CliError(f"{p}: {what} not found", 2)
+        raise CliError(f"{p}: no such file or directory ({what})", 2)
     if want_file and not p.is_file():
         raise CliError(f"{p}: {what} is not a file", 2)
     if want_dir and not p.is_dir():
