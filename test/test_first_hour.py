@@ -358,3 +358,22 @@ def test_estimate_warns_about_deg_s_and_g():
     spin[:, 2] += math.radians(90.0)  # 90 deg/s, given in deg/s
     with pytest.warns(InputUnitsWarning, match="deg/s"):
         estimate(np.degrees(spin), acc, rate_hz=100.0)
+
+
+def test_real_bags_report_the_magnetometer_and_warn_when_heading_was_unreferenced(
+        tmp_path, capsys):
+    """ardrone: 1859 of 4308 samples rejected, used above half; SparkFun: most rejected."""
+    bags = REPO.parent / "shared" / "data" / "bags"
+    if not (bags / "sparkfun_razor.bag").is_file():
+        pytest.skip(f"real recordings not available in {bags}")
+    rc, out, err = run(capsys, "replay", bags / "sparkfun_razor.bag", "--json", tmp_path / "s.json",
+                       "--no-progress")
+    assert rc == 0
+    c = json.loads((tmp_path / "s.json").read_text())["counters"]
+    assert c["mag_used"] < 0.5 * c["received_mag"]
+    assert f"rejected {c['mag_rejected']} (disturbed field)" in out
+    assert "heading was mostly unreferenced" in err
+    rc, out, err = run(capsys, "replay", bags / "ardrone_imu.bag", "--json", tmp_path / "a.json",
+                       "--no-progress")
+    assert rc == 0 and "rejected 1859 (disturbed field)" in out
+    assert "mostly unreferenced" not in err
