@@ -212,10 +212,10 @@ def _guidance(args: argparse.Namespace, k1: float, k2: float) -> dict[str, Any]:
     if args.bias is not None:
         g["bias_rad_s"] = args.bias
         g["min_saturation_rad"] = design.min_saturation_limit_rad(k1, k2, args.bias)
-        if args.saturation:
-            g["saturation_ok_for_bias"] = args.saturation >= g["min_saturation_rad"]
-    if args.saturation:
-        lim = args.saturation
+    lim = _saturation(args)  # the clip in force: --saturation, else the shipped one
+    if args.bias is not None and lim is not None:
+        g["saturation_ok_for_bias"] = lim >= g["min_saturation_rad"]
+    if lim is not None:
         g["saturation_rad"] = lim
         g["initial_error_rad"] = args.initial_error
         g["recovery_time_k1_s"] = design.clipped_recovery_time_s(k1, lim, args.initial_error)
