@@ -7,9 +7,12 @@ The ``data_files`` below are what colcon (and pip) install under ``share/cf_esti
 the ament index marker, package.xml, the launch files and the parameter YAML.
 """
 
+import os
 from glob import glob
+from pathlib import Path
 
 from setuptools import Extension, find_namespace_packages, setup
+from setuptools.command.build_ext import build_ext
 
 PACKAGE = "cf_estimator"
 #: The node's ROS 2 runtime as PyPI wheels (extra "ros"; scripts/test.sh installs it when rclpy
@@ -22,6 +25,31 @@ ROS_WHEEL_MARKER = (
     'sys_platform == "linux" and platform_machine == "x86_64" and '
     'platform_python_implementation == "CPython" and python_version < "3.14"'
 )
+#: ``CF_ESTIMATOR_NO_EXTENSION=1 pip install .`` (or colcon build): no compiled step, the Python
+#: reference runs everything (what a machine without a C compiler gets).
+NO_EXTENSION_ENV = "CF_ESTIMATOR_NO_EXTENSION"
+
+
+class BuildKernel(build_ext):
+    """The optional C twin of the filter step, built fresh every time or not at all.
+
+    An earlier build's ``_kernel*.so`` (in ``build/`` or in place) is removed first, so the
+    result always reflects this build: ``$CF_ESTIMATOR_NO_EXTENSION`` set to 1/true/yes skips the
+    extension, and a compiler that fails (``CC=/bin/false``, or none installed) gives the
+    pure-Python install instead of silently reusing a stale binary.
+    """
+
+    def run(self) -> None:
+        for ext in self.extensions:
+            for stale in {Path(self.get_ext_fullpath(ext.name)),
+                          Path(self.get_ext_fullpath(ext.name)).resolve()}:
+                stale.unlink(missing_ok=True)
+        if os.environ.get(NO_EXTENSION_ENV, "").strip().lower() in ("1", "true", "yes"):
+            print(f"{NO_EXTENSION_ENV} is set: not building the compiled filter step "
+                  "(the Python reference runs)")
+            return
+        super().run()
+
 
 setup(
     name=PACKAGE,
@@ -34,7 +62,9 @@ setup(
         include=[PACKAGE, f"{PACKAGE}.*"], exclude=["*.__pycache__", "*.__pycache__.*"]
     ),
     # The compiled twin of core/step.py (see core/kernel.py). optional=True: without a C compiler
-    # the build goes on and the Python reference runs everything, only slower.
+    # (or with $CF_ESTIMATOR_NO_EXTENSION=1, see BuildKernel) the build goes on and the Python
+    # reference runs everything, only slower.
+    cmdclass={"build_ext": BuildKernel},
     ext_modules=[
         Extension(
             f"{PACKAGE}.core._kernel",

@@ -15,11 +15,12 @@ to regenerate the shipped file (a test checks it matches).
 
 from __future__ import annotations
 
-import fnmatch
+import difflib
 import math
+import re
 import sys
 import textwrap
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -64,75 +65,156 @@ def _flatten(prefix: str, value: Any, out: dict[str, Any]) -> None:
         out[prefix] = value
 
 
-def _node_key_matches(key: str, node_name: str | None) -> bool:
-    if key in ("/**", "**"):
-        return True
-    if node_name is None:
-        return True
-    last = key.rstrip("/").rsplit("/", 1)[-1]
-    return fnmatch.fnmatchcase(node_name, last)
+def fully_qualified_node_name(node_name: str) -> str:
+    """``cf_estimator`` → ``/cf_estimator`` (root namespace); ``/ns/name`` stays as it is."""
+    name = node_name.strip()
+    if not name or name.endswith("/") or "//" in name:
+        raise ParameterError(f"not a node name: {node_name!r} (e.g. cf_estimator or /ns/name)")
+    return name if name.startswith("/") else "/" + name
 
 
-def load_params_file(
-    path: str | Path, node_name: str | None = None
-) -> tuple[FilterParams, PipelineParams, list[str]]:
-    """Read a ROS 2 parameter file → ``(FilterParams, PipelineParams, warnings)``.
+def node_key_matches(key: str, node_name: str = DEFAULT_NODE_NAME) -> bool:
+    """Whether a parameter file's top-level ``key`` applies to the node ``node_name``.
 
-    Sections are top-level keys holding ``ros__parameters``: ``/**`` always applies; a
-    node-name key (``cf_estimator``, ``/ns/cf_estimator``, wildcards allowed) applies when it
-    matches ``node_name``, or always when ``node_name`` is None. Later sections override
-    earlier ones, as in ROS. Warnings: unknown keys (ignored), sections for other nodes, a file
-    with no applicable section (ROS would silently ignore it). Invalid values, and integers
-    written for float parameters (ROS 2 rejects them), raise :class:`ParameterError`.
+    ROS 2's rule (rclcpp ``parameter_map_from``, the same for rclpy): a key without a leading
+    ``/`` is relative to the root namespace; ``/**`` matches any number of namespace levels and
+    ``/*`` exactly one, so ``/**`` applies to every node, ``cf_estimator`` and
+    ``/**/cf_estimator`` to ``/cf_estimator``, ``/robot/cf_estimator`` only to that name.
     """
-    path = Path(path)
+    fqn = fully_qualified_node_name(node_name)
+    pattern = key if key.startswith("/") else "/" + key
+    regex = ""
+    i = 0
+    while i < len(pattern):
+        if pattern.startswith("/**", i):
+            regex += r"(/[^/]+)*"
+            i += 3
+        elif pattern.startswith("/*", i):
+            regex += r"/[^/]+"
+            i += 2
+        else:
+            regex += re.escape(pattern[i])
+            i += 1
+    return re.fullmatch(regex, fqn) is not None
+
+
+def suggest_name(name: str) -> str | None:
+    """The nearest parameter name to a misspelt ``name`` (None when nothing is close)."""
+    known = [s.name for s in all_specs()]
+    last = name.rsplit(".", 1)[-1]
+    close = difflib.get_close_matches(last, known, n=1, cutoff=0.6)
+    return close[0] if close else None
+
+
+def unknown_names(names: Iterable[str]) -> list[str]:
+    """The parameter names in ``names`` that the node does not declare (sorted).
+
+    ROS's own parameters (``use_sim_time``, ``qos_overrides.*``, ...) are not unknown. The node
+    calls this at start-up with the overrides rclpy resolved for it and warns once.
+    """
+    known = {s.name for s in all_specs()}
+    return sorted(
+        n for n in set(names)
+        if n not in known and n not in ROS_STANDARD_PARAMETERS
+        and not n.startswith(ROS_STANDARD_PREFIXES)
+    )
+
+
+def describe_unknown(names: Sequence[str]) -> str:
+    """``'k_1' (did you mean 'k1'?), 'foo'``: the unknown names with the nearest valid ones."""
+    parts = []
+    for n in names:
+        near = suggest_name(n)
+        parts.append(f"'{n}'" + (f" (did you mean '{near}'?)" if near else ""))
+    return ", ".join(parts)
+
+
+def _read_doc(path: Path) -> Mapping:
     try:
         doc = yaml.safe_load(path.read_text(encoding="utf-8"))
     except (OSError, yaml.YAMLError) as exc:
         raise ParameterError(f"{path}: cannot read parameter file: {exc}".splitlines()[0]) from None
-    warnings: list[str] = []
     if doc is None:
-        doc = {}
+        raise ParameterError(f"{path}: empty parameter file")
     if not isinstance(doc, Mapping):
         raise ParameterError(f"{path}: not a ROS 2 parameter file (top level is not a mapping)")
+    return doc
+
+
+def _applicable_values(
+    path: Path, doc: Mapping, node_name: str
+) -> tuple[dict[str, Any], list[str]]:
+    """(flat name → value of every section that applies, warnings about the others)."""
     values: dict[str, Any] = {}
+    warnings: list[str] = []
+    flat_keys = [str(k) for k, v in doc.items()
+                 if not (isinstance(v, Mapping) and "ros__parameters" in v)]
+    if flat_keys:
+        raise ParameterError(
+            f"{path}: top-level key '{flat_keys[0]}' has no 'ros__parameters': not a ROS 2 "
+            "parameter file (write '/**:' or '<node name>:', then 'ros__parameters:', then the "
+            "parameters)"
+        )
     applied = 0
+    ignored = []
     for key, section in doc.items():
         key = str(key)
-        if not isinstance(section, Mapping) or "ros__parameters" not in section:
+        if not node_key_matches(key, node_name):
+            ignored.append(key)
             warnings.append(
-                f"{path}: top-level key '{key}' has no 'ros__parameters' (ignored; ROS 2 expects "
-                f"'/**:' or '<node name>:' then 'ros__parameters:')"
+                f"{path}: section '{key}' is not for node "
+                f"'{fully_qualified_node_name(node_name)}' (ignored, as the node ignores it)"
             )
             continue
-        if not _node_key_matches(key, node_name):
-            warnings.append(f"{path}: section '{key}' is for another node (ignored)")
-            continue
         applied += 1
-        flat: dict[str, Any] = {}
-        _flatten("", section["ros__parameters"] or {}, flat)
-        values.update(flat)
+        _flatten("", section["ros__parameters"] or {}, values)
     if applied == 0:
-        target = f"'{node_name}'" if node_name else "this node"
-        warnings.append(
-            f"{path}: no section applies to {target} (use '/**:' or the node name): "
-            "nothing loaded, defaults in force"
+        raise ParameterError(
+            f"{path}: no section applies to node '{fully_qualified_node_name(node_name)}' "
+            f"(sections: {', '.join(ignored)}); use '/**:' or the node name, or --node-name"
         )
+    return values, warnings
+
+
+def unknown_keys(path: str | Path, node_name: str = DEFAULT_NODE_NAME) -> list[str]:
+    """The parameter names in the sections of ``path`` that apply to ``node_name`` and that
+    the node does not know (sorted); ParameterError when the file is not a parameter file."""
+    path = Path(path)
+    values, _ = _applicable_values(path, _read_doc(path), node_name)
+    return unknown_names(values)
+
+
+def load_params_file(
+    path: str | Path, node_name: str = DEFAULT_NODE_NAME
+) -> tuple[FilterParams, PipelineParams, list[str]]:
+    """Read a ROS 2 parameter file as the node ``node_name`` would → ``(FilterParams,
+    PipelineParams, warnings)``.
+
+    Sections are top-level keys holding ``ros__parameters``; those matching the node name
+    (:func:`node_key_matches`: ``/**``, the name, wildcards) apply, later ones overriding
+    earlier ones as in ROS; the others are ignored with a warning. Refused with
+    :class:`ParameterError` (one line): a file that is not a parameter file (no
+    ``ros__parameters`` under a top-level key, empty), a file with no section for this node,
+    unknown parameter names (the nearest valid name suggested), invalid values, and integers
+    written for float parameters (ROS 2 rejects them).
+    """
+    path = Path(path)
+    values, warnings = _applicable_values(path, _read_doc(path), node_name)
+    unknown = unknown_names(values)
+    if unknown:
+        raise ParameterError(f"{path}: unknown parameter {describe_unknown(unknown)}")
     specs = {s.name: s for s in all_specs()}
     known: dict[str, Any] = {}
     for name, value in values.items():
-        if name in specs:
-            spec = specs[name]
-            if spec.kind == "float" and isinstance(value, int) and not isinstance(value, bool):
-                raise ParameterError(
-                    f"{path}: {name}: {value} is an integer; write {float(value)!r} (ROS 2 "
-                    "rejects an integer for a double parameter)"
-                )
-            known[name] = value
-        elif name in ROS_STANDARD_PARAMETERS or name.startswith(ROS_STANDARD_PREFIXES):
-            continue
-        else:
-            warnings.append(f"{path}: unknown parameter '{name}' (ignored)")
+        spec = specs.get(name)
+        if spec is None:
+            continue  # a ROS standard parameter
+        if spec.kind == "float" and isinstance(value, int) and not isinstance(value, bool):
+            raise ParameterError(
+                f"{path}: {name}: {value} is an integer; write {float(value)!r} (ROS 2 "
+                "rejects an integer for a double parameter)"
+            )
+        known[name] = value
     try:
         fp, pp = build_params(known)
     except ParameterError as exc:

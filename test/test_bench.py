@@ -166,13 +166,14 @@ def test_written_yaml_loads_into_schema(tmp_path):
 
 # -- CLI smoke ---------------------------------------------------------------------------------
 def test_cli_bench_broad_smoke(broad_dir, tmp_path, capsys):
-    assert main(["bench", "broad", "--data", str(broad_dir), "--jobs", "1", "--quiet"]) == 0
+    assert main(["bench", "broad", "--data", str(broad_dir), "--jobs", "1", "--quiet",
+                 "--peers", "none"]) == 0
     out = capsys.readouterr().out
     for g in ("all (2 trials)", "undisturbed (1 trial)", "disturbed (1 trial)", "tiny (2 trials)"):
         assert g in out
     js = tmp_path / "out.json"
     assert main(["bench", "broad", "--data", str(broad_dir), "--json", str(js), "--jobs", "2",
-                 "--quiet", "--trials", "01"]) == 0
+                 "--quiet", "--trials", "01", "--peers", "none"]) == 0
     doc = json.loads(js.read_text())
     entry = doc["trials"]["01_undisturbed_tiny_A"]
     assert set(entry) == {"cf_estimator_9d", "cf_estimator_6d"}
@@ -180,13 +181,13 @@ def test_cli_bench_broad_smoke(broad_dir, tmp_path, capsys):
     assert entry["cf_estimator_9d"]["total_rmse_deg"] < 2.0
     png = tmp_path / "per_trial.png"
     assert main(["bench", "broad", "--data", str(broad_dir), "--plot", str(png), "--jobs", "1",
-                 "--quiet"]) == 0
+                 "--quiet", "--peers", "none"]) == 0
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
 
 
 def test_cli_bench_broad_errors(tmp_path, capsys):
-    assert main(["bench", "broad", "--data", str(tmp_path / "none")]) == 1
-    assert "data directory not found" in capsys.readouterr().err
+    assert main(["bench", "broad", "--data", str(tmp_path / "none"), "--peers", "none"]) == 2
+    assert "no such file or directory" in capsys.readouterr().err
     assert main(["bench", "broad", "--data", str(tmp_path), "--peers", "kalman"]) == 2
     assert "unknown peer 'kalman'" in capsys.readouterr().err
 

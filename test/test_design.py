@@ -20,6 +20,7 @@ import pytest
 from cf_estimator.cli.main import main
 from cf_estimator.core import design
 from cf_estimator.core.axis import AxisFilter, AxisParams
+from cf_estimator.core.params import FilterParams
 
 K1, K2 = 0.03, 0.001  # seed 000's gains
 DRIFT = 5e-4  # seed 000's drift angular velocity [rad/s]
@@ -379,8 +380,8 @@ def test_thesis_impacts_rejects_unknown_shape():
 
 
 def test_cli_json_seed_numbers(capsys):
-    code = main(["design", "--k1", "0.03", "--k2", "0.001", "--drift", "5e-4", "--accel-g", "0.2",
-                 "--accel-duration", "5", "--json"])
+    code = main(["design", "--k1", "0.03", "--k2", "0.001", "--aperiodic", "0", "--drift", "5e-4",
+                 "--accel-g", "0.2", "--accel-duration", "5", "--json"])
     assert code == 0
     out = json.loads(capsys.readouterr().out)
     for key in ("n", "xi", "zeta", "period_s", "settling_time_s", "k1", "k2",
@@ -401,7 +402,11 @@ def test_cli_json_omits_unrequested(capsys):
     assert main(["design", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert "drift_peak_error_deg" not in out and "accel_peak_error_deg" not in out
-    assert out["k1"] == 0.03 and out["k2"] == 0.001
+    shipped = FilterParams()  # issue 13.8: every value defaults to the shipped parameters
+    assert out["k1"] == shipped.k1 and out["k2"] == shipped.k2
+    assert out["aperiodic_time_constant_s"] == shipped.aperiodic_time_constant_s
+    assert out["saturation_rad"] == shipped.saturation_limit_rad
+    assert out["gains_from"] == "shipped parameters"
 
 
 def test_cli_inverse(capsys):
@@ -409,7 +414,7 @@ def test_cli_inverse(capsys):
     out = json.loads(capsys.readouterr().out)
     assert out["k1"] == pytest.approx(0.1) and out["k2"] == pytest.approx(0.0025)
     assert out["zeta"] == pytest.approx(1.0)
-    assert main(["design", "--period", "198.6918", "--json"]) == 0  # xi defaults to the seed's 1
+    assert main(["design", "--period", "198.6918", "--json"]) == 0  # xi defaults to the paper's 1
     out = json.loads(capsys.readouterr().out)
     assert out["k2"] == pytest.approx(0.001, rel=1e-5) and out["xi"] == pytest.approx(1.0)
     assert main(["design", "--n", "0.05"]) == 0
@@ -418,7 +423,8 @@ def test_cli_inverse(capsys):
 
 
 def test_cli_text_table_with_guidance_and_thesis(capsys):
-    assert main(["design", "--drift", "5e-4", "--accel-g", "0.2", "--accel-duration", "5",
+    assert main(["design", "--k1", "0.03", "--k2", "0.001", "--aperiodic", "0", "--drift", "5e-4",
+                 "--accel-g", "0.2", "--accel-duration", "5",
                  "--vib-amplitude-g", "0.1", "--vib-frequency", "10", "--bias", "1e-3",
                  "--saturation", "0.02", "--thesis"]) == 0
     text = capsys.readouterr().out
@@ -429,9 +435,17 @@ def test_cli_text_table_with_guidance_and_thesis(capsys):
 
 
 def test_cli_thesis_json(capsys):
+    """Issue 13.8: bare ``design --thesis`` checks the shipped filter (clip and lag included),
+    which meets the thesis requirement; the papers' bare loop does not."""
     assert main(["design", "--thesis", "--json"]) == 0
     th = json.loads(capsys.readouterr().out)["thesis"]
-    assert th["passed"] is False
+    assert th["saturation_rad"] == FilterParams().saturation_limit_rad
+    assert th["aperiodic_time_constant_s"] == FilterParams().aperiodic_time_constant_s
+    assert th["passed"] is True
+    assert main(["design", "--k1", "0.03", "--k2", "0.001", "--saturation", "0", "--aperiodic",
+                 "0", "--thesis", "--json"]) == 0
+    th = json.loads(capsys.readouterr().out)["thesis"]
+    assert th["passed"] is False and th["saturation_rad"] is None
     assert {c["name"]: c["passed"] for c in th["checks"]}["manoeuvre"] is False
 
 
@@ -442,7 +456,8 @@ def test_cli_thesis_json(capsys):
     (["--n", "0.05", "--xi", "0"], "--xi"),
     (["--period", "-3"], "--period"),
     (["--k1", "0.03", "--n", "0.1"], "either"),
-    (["--aperiodic", "40"], "unstable"),
+    (["--aperiodic", "400"], "unstable"),
+    (["--k1", "0.001", "--k2", "0.001"], "the shipped value"),
     (["--vib-frequency", "20"], "--vib-amplitude-g"),
 ])
 def test_cli_bad_arguments_exit_2_one_line(capsys, argv, needle):
@@ -469,7 +484,8 @@ def _env() -> dict[str, str]:
 
 
 def test_console_module_runs():
-    proc = subprocess.run([sys.executable, "-m", "cf_estimator.cli.main", "design", "--json"],
+    proc = subprocess.run([sys.executable, "-m", "cf_estimator.cli.main", "design", "--k1",
+                           "0.03", "--k2", "0.001", "--json"],
                           capture_output=True, text=True, env=_env(), timeout=60, check=False)
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout)

@@ -13,9 +13,13 @@ from cf_estimator.core.params import FilterParams
 from cf_estimator.params_file import (
     all_specs,
     build_params,
+    describe_unknown,
     format_value,
     load_params_file,
+    node_key_matches,
     render_params_yaml,
+    unknown_keys,
+    unknown_names,
 )
 from cf_estimator.pipeline.params import PipelineParams
 from cf_estimator.schema import ParameterError, as_dict, specs_of
@@ -99,6 +103,7 @@ def test_round_trip_of_non_default_values(tmp_path):
 
 
 def test_node_name_sections_apply_and_others_are_reported(tmp_path):
+    """Issue 13.1: only the sections the node of that name reads apply (ROS's rule)."""
     path = tmp_path / "p.yaml"
     path.write_text(
         "/**:\n  ros__parameters:\n    k1: 0.6\n    use_sim_time: true\n"
@@ -106,28 +111,67 @@ def test_node_name_sections_apply_and_others_are_reported(tmp_path):
         "imu_filter_madgwick:\n  ros__parameters:\n    gain: 0.1\n",
         encoding="utf-8",
     )
-    fp, _, warnings = load_params_file(path, "cf_estimator")
-    assert fp.k1 == 0.8  # later, node-specific section overrides the wildcard
+    fp, _, warnings = load_params_file(path, "cf_estimator")  # /cf_estimator: root namespace
+    assert fp.k1 == 0.6
+    assert len(warnings) == 2 and "imu_filter_madgwick" in warnings[1]
+    assert "/robot/cf_estimator" in warnings[0] and "ignored" in warnings[0]
+    fp, _, warnings = load_params_file(path, "/robot/cf_estimator")
+    assert fp.k1 == 0.8  # the later, node-specific section overrides the wildcard
     assert len(warnings) == 1 and "imu_filter_madgwick" in warnings[0]
-    fp_any, _, warnings_any = load_params_file(path)  # no node name: every section applies
-    assert any("gain" in w for w in warnings_any)
-    assert fp_any.k1 == 0.8
 
 
-def test_unknown_keys_and_missing_section_are_warned(tmp_path):
+def test_a_section_for_another_node_does_not_change_the_parameters(tmp_path):
+    """Issue 13.1: ``imu_filter: ros__parameters: k1: 0.7`` changed the replay; the node
+    ignores it."""
     path = tmp_path / "p.yaml"
-    path.write_text("cf_estimator:\n  ros__parameters:\n    k1: 0.6\n    gian: 2.0\n"
+    path.write_text("/**:\n  ros__parameters:\n    k2: 0.004\n"
+                    "imu_filter:\n  ros__parameters:\n    k1: 0.7\n", encoding="utf-8")
+    fp, _, warnings = load_params_file(path)
+    assert fp.k1 == FilterParams().k1 and fp.k2 == 0.004
+    assert warnings and "imu_filter" in warnings[0]
+    fp, _, _ = load_params_file(path, "imu_filter")  # a node of that name reads both
+    assert fp.k1 == 0.7
+
+
+@pytest.mark.parametrize(("key", "name", "applies"), [
+    ("/**", "cf_estimator", True), ("/**", "/a/b/c", True), ("cf_estimator", "cf_estimator", True),
+    ("/cf_estimator", "cf_estimator", True), ("/**/cf_estimator", "/robot/cf_estimator", True),
+    ("/**/cf_estimator", "cf_estimator", True), ("/*/cf_estimator", "/robot/cf_estimator", True),
+    ("/*/cf_estimator", "cf_estimator", False), ("/robot/cf_estimator", "cf_estimator", False),
+    ("imu_filter", "cf_estimator", False), ("/robot/*", "/robot/cf_estimator", True),
+    ("cf_est", "cf_estimator", False),
+])
+def test_node_key_matching_follows_ros(key, name, applies):
+    assert node_key_matches(key, name) is applies
+
+
+def test_unknown_keys_are_refused_with_the_nearest_name(tmp_path):
+    """Issue 13.2: ``k_1: 0.5`` ran the whole replay on defaults."""
+    path = tmp_path / "p.yaml"
+    path.write_text("cf_estimator:\n  ros__parameters:\n    k_1: 0.5\n    gian: 2.0\n"
                     "    qos_overrides:\n      /imu/data_raw:\n        subscription:\n"
                     "          depth: 20\n", encoding="utf-8")
-    fp, _, warnings = load_params_file(path, "cf_estimator")
-    assert fp.k1 == 0.6
-    assert warnings == [f"{path}: unknown parameter 'gian' (ignored)"]
-    flat = tmp_path / "flat.yaml"
-    flat.write_text("k1: 0.6\n", encoding="utf-8")
-    fp, pp, warnings = load_params_file(flat, "cf_estimator")
-    assert fp == FilterParams() and pp == PipelineParams()
-    assert any("no section applies" in w for w in warnings)
-    assert any("ros__parameters" in w for w in warnings)
+    with pytest.raises(ParameterError) as info:
+        load_params_file(path, "cf_estimator")
+    text = str(info.value)
+    assert "'k_1' (did you mean 'k1'?)" in text and "'gian'" in text and "\n" not in text
+    assert unknown_keys(path) == ["gian", "k_1"]  # qos_overrides.* is ROS's own
+
+
+def test_flat_and_empty_files_and_files_for_no_section_are_refused(tmp_path):
+    """Issue 13.2: a flat file without ros__parameters ran on defaults."""
+    for body, words in [("k1: 0.6\n", "ros__parameters"), ("", "empty"),
+                        ("imu_filter:\n  ros__parameters:\n    k1: 0.6\n", "no section applies")]:
+        path = tmp_path / "p.yaml"
+        path.write_text(body, encoding="utf-8")
+        with pytest.raises(ParameterError, match=words):
+            load_params_file(path)
+
+
+def test_unknown_names_for_the_node_skip_ros_parameters():
+    assert unknown_names(["k1", "use_sim_time", "qos_overrides./x.depth", "k_1"]) == ["k_1"]
+    assert describe_unknown(["saturation_limit"]) == (
+        "'saturation_limit' (did you mean 'saturation_limit_rad'?)")
 
 
 def test_invalid_values_raise_one_line_errors(tmp_path):

@@ -29,11 +29,13 @@ from typing import Any
 
 import numpy as np
 
-from cf_estimator import metrics
+from cf_estimator import __version__, metrics
 from cf_estimator.bag import io
 from cf_estimator.core import quaternion as quat
+from cf_estimator.core.kernel import resolve_backend
 from cf_estimator.core.params import FilterParams
 from cf_estimator.pipeline import ImuPipeline, PipelineParams
+from cf_estimator.schema import as_dict
 
 OUT_IMU_TOPIC = "/imu/data"
 OUT_RPY_TOPIC = "/imu/rpy"
@@ -90,7 +92,12 @@ class ReplayError(Exception):
 
 
 def _reference_quaternion(msgtype: str, msg: Any) -> tuple[float, float, float, float]:
-    if msgtype == io.QUATERNION_STAMPED_TYPE:
+    """(w, x, y, z) of a reference message as recorded (all zero: no orientation)."""
+    if msgtype == io.IMU_TYPE:  # an Imu's orientation; REP-145: covariance[0] = -1 = unknown
+        if float(msg.orientation_covariance[0]) < 0.0:
+            return 0.0, 0.0, 0.0, 0.0
+        q = msg.orientation
+    elif msgtype == io.QUATERNION_STAMPED_TYPE:
         q = msg.quaternion
     elif msgtype == io.POSE_STAMPED_TYPE:
         q = msg.pose.orientation
@@ -402,10 +409,12 @@ def replay_variants(
                                          required=False, option="--mag-topic")
         ref_topic = None
         if opts.reference_topic is not None:
-            ref_topic = bag.select_topic("reference", opts.reference_topic, io.REFERENCE_TYPES,
-                                         required=True, option="--reference-topic")
+            ref_topic = bag.select_topic("reference", opts.reference_topic,
+                                         (*io.REFERENCE_TYPES, io.IMU_TYPE), required=True,
+                                         option="--reference-topic")
         ref_type = bag.msgtype_of(ref_topic) if ref_topic else None
-        topics = [t for t in (imu_topic, mag_topic, ref_topic) if t is not None]
+        # the reference may be the input IMU topic itself (its orientation, e.g. the driver's)
+        topics = list(dict.fromkeys(t for t in (imu_topic, mag_topic, ref_topic) if t))
         types = {t: bag.msgtype_of(t) for t in topics}
         total = bag.count(topics)
         in_format = bag.format
@@ -441,8 +450,9 @@ def replay_variants(
                     n_mag += 1
                     for r in runs:
                         r.pipe.on_mag(m.msg)
-                else:
-                    n_ref += 1
+                if m.topic == ref_topic:
+                    if m.topic != imu_topic:
+                        n_ref += 1
                     h = m.msg.header.stamp
                     q = _reference_quaternion(ref_type or "", m.msg)
                     nq = math.sqrt(sum(c * c for c in q))
@@ -506,6 +516,10 @@ def replay_variants(
             "final_gyro_bias_rad_s": final_bias,
             "counters": counters,
             "warnings": r.warnings,
+            # what reproduces the run: the effective parameters, the version, the backend
+            "parameters": {"filter": as_dict(r.fparams), "pipeline": as_dict(r.pparams)},
+            "version": __version__,
+            "filter_backend": resolve_backend(),
             "wall_time_s": wall,
             "messages_per_s": (n_imu + n_mag + n_ref) / wall if wall > 0 else None,
         }

@@ -153,6 +153,21 @@ def list_trials(data_dir: str | os.PathLike, select: Sequence[str] | None = None
     return sorted(chosen)
 
 
+def resolve_trials(data: str | os.PathLike, select: Sequence[str] | None = None
+                   ) -> tuple[list[Path], dict]:
+    """(trial files, trials.json) for ``--data``: a directory of trials (see
+    :func:`list_trials`) or a single trial file (its directory's trials.json, if any)."""
+    path = Path(data)
+    if path.is_file():
+        if path.suffix.lower() not in HDF5_SUFFIXES:
+            raise BroadDataError(f"{path}: not a BROAD trial file (*.hdf5)")
+        if select:
+            raise BroadDataError("--trials selects among the files of a directory; --data "
+                                 f"{path} is a single file")
+        return [path], read_trial_info(path.parent)
+    return list_trials(path, select), read_trial_info(path)
+
+
 def load_trial(path: str | os.PathLike, info: Mapping | None = None) -> Trial:
     """Read one trial file (h5py); raises :class:`BroadDataError` for a wrong layout."""
     import h5py  # local: only the bench needs it

@@ -52,6 +52,41 @@ def _require(peer: str):
         ) from None
 
 
+def parse_peers(text: str) -> list[str]:
+    """``all`` (every peer), ``none`` (no peer) or a comma-separated list → peer names.
+
+    Unknown names raise ValueError naming the valid ones. The one rule of every bench command.
+    """
+    words = [t.strip() for t in text.split(",") if t.strip()]
+    if words in ([], ["none"]):
+        return []
+    if words == ["all"]:
+        return list(PEERS)
+    bad = [p for p in words if p not in PEERS]
+    if bad:
+        raise ValueError(f"unknown peer {bad[0]!r}; valid: {', '.join(PEERS)}, all, none")
+    return list(dict.fromkeys(words))
+
+
+def split_available(peers: list[str]) -> tuple[list[str], list[str]]:
+    """(installed peers, peers whose PyPI package is missing), order kept."""
+    have, missing = [], []
+    for p in peers:
+        try:
+            _require(p)
+        except PeerUnavailable:
+            missing.append(p)
+        else:
+            have.append(p)
+    return have, missing
+
+
+def missing_note(missing: list[str]) -> str:
+    """One line naming the skipped peers and how to install them."""
+    names = ", ".join(f"{p} (PyPI {PEER_PACKAGES[p]})" for p in missing)
+    return f"peers not installed, skipped: {names}; pip install '.[bench]' adds them"
+
+
 def check_available(peers: list[str]) -> None:
     """Raise :class:`PeerUnavailable` for the first peer whose package is missing."""
     for p in peers:

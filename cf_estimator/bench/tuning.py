@@ -79,7 +79,8 @@ SEARCHABLE: tuple[Dim, ...] = (
     Dim("aperiodic_time_constant_s", 0.2, 10.0, zero_prob=0.1),
     Dim("r1", 0.005, 2.0),
     Dim("r2", 1e-5, 0.05, zero_prob=0.3),
-    Dim("recovery_trigger_s", 10.0, 600.0, zero_prob=0.3),
+    # never 0 (= never recover): recovering from a real attitude error is a promise
+    Dim("recovery_trigger_s", 10.0, 600.0),
     # clip selection: the tight clip (saturation_limit_rad) applies only while a linear
     # acceleration is detected and the low-passed rotation rate is below the threshold
     Dim("wide_saturation_limit_rad", 0.03, 10.0),  # 10 rad = effectively no clip

@@ -13,8 +13,16 @@ import json
 import os
 import sys
 import time
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from cf_estimator.cli.common import (
+    add_params_options,
+    check_input_path,
+    check_output_file,
+    load_params,
+    note,
+)
 from cf_estimator.cli.main import CliError, finite_float
 
 if TYPE_CHECKING:
@@ -43,16 +51,17 @@ def register(subparsers: Any) -> None:
             "directly inside --data are read."
         ),
     )
-    b.add_argument("--data", required=True, metavar="DIR", help="directory of BROAD *.hdf5 files")
-    b.add_argument("--peers", default="", metavar="LIST",
-                   help="comma-separated peers at their defaults: vqf,fusion,madgwick (or 'all')")
-    b.add_argument("--params", metavar="YAML", help="ROS 2 parameter file for our filter "
-                   "(default: the shipped defaults, FilterParams())")
+    b.add_argument("--data", required=True, metavar="PATH",
+                   help="directory of BROAD *.hdf5 files, or one trial file")
+    _add_peers_option(b)
+    add_params_options(b, "for our filter")
     b.add_argument("--trials", metavar="LIST", help="comma-separated trial names, prefixes "
                    "(e.g. 07) or patterns (e.g. '*magnet*'); default: all files")
     b.add_argument("--json", metavar="OUT", help="write per-trial and per-group results as JSON")
     b.add_argument("--plot", metavar="PNG", help="bar chart per trial: 9-D total and 6-D "
                    "inclination RMSE of every algorithm")
+    b.add_argument("--overwrite", action="store_true",
+                   help="replace existing --json/--plot files")
     b.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
                    help="worker processes, one trial each (default %(default)s)")
     b.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
@@ -94,14 +103,18 @@ def register(subparsers: Any) -> None:
             "filter (shipped defaults; clip off; clip and aperiodic unit off) and the peers."
         ),
     )
-    s.add_argument("--peers", default="all", metavar="LIST", help="peers (default all)")
-    s.add_argument("--params", metavar="YAML", help="parameter file for our filter")
-    s.add_argument("--scenarios", default="impacts,vibration,acceleration", metavar="LIST")
-    s.add_argument("--seed", type=int, default=0)
+    _add_peers_option(s)
+    add_params_options(s, "for our filter")
+    s.add_argument("--scenarios", default="impacts,vibration,acceleration", metavar="LIST",
+                   help="comma-separated thesis scenarios (default %(default)s)")
+    s.add_argument("--seed", type=int, default=0,
+                   help="simulation seed of the sensor noise and disturbances (default 0)")
     s.add_argument("--duration", type=float, metavar="S",
                    help="scenario duration [s] (default: each scenario's own)")
-    s.add_argument("--json", metavar="OUT")
-    s.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N")
+    s.add_argument("--json", metavar="OUT", help="write the table's rows as JSON")
+    s.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
+    s.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
+                   help="worker processes (default %(default)s)")
     s.set_defaults(run=run_scenarios)
 
     sp = sub.add_parser(
@@ -117,9 +130,11 @@ def register(subparsers: Any) -> None:
             "compare ratios."
         ),
     )
-    sp.add_argument("--peers", default="all", metavar="LIST", help="peers (default all)")
-    sp.add_argument("--samples", type=int, default=20000, metavar="N")
-    sp.add_argument("--batch-sizes", default="64,256", metavar="LIST")
+    _add_peers_option(sp)
+    sp.add_argument("--samples", type=int, default=20000, metavar="N",
+                    help="samples per timed run (default %(default)s, >= 100)")
+    sp.add_argument("--batch-sizes", default="64,256", metavar="LIST",
+                    help="parameter sets per batched run, comma-separated (default %(default)s)")
     sp.add_argument("--bag", metavar="PATH", help="bag for the replay throughput (ROS 1 .bag or "
                     "ROS 2 directory; default: simulated, removed afterwards)")
     sp.add_argument("--bag-repeats", type=int, default=3, metavar="N",
@@ -127,56 +142,53 @@ def register(subparsers: Any) -> None:
     sp.add_argument("--imu-topic", metavar="TOPIC", help="IMU topic of --bag (default: detect)")
     sp.add_argument("--mag-topic", metavar="TOPIC",
                     help="magnetometer topic of --bag, or 'none' (default: detect)")
-    sp.add_argument("--json", metavar="OUT")
+    sp.add_argument("--json", metavar="OUT", help="write every figure as JSON")
+    sp.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
     sp.set_defaults(run=run_speed)
 
 
-def _peers(text: str) -> list[str]:
-    from cf_estimator.bench.peers import PEERS
-
-    items = list(PEERS) if text.strip() == "all" else _csv(text)
-    bad = [p for p in items if p not in PEERS]
-    if bad:
-        raise CliError(f"unknown peer {bad[0]!r}; valid: {', '.join(PEERS)}, all", 2)
-    return items
+def _add_peers_option(parser: Any) -> None:
+    """``--peers``, the same in every bench command."""
+    parser.add_argument("--peers", default="all", metavar="LIST",
+                        help="peers at their defaults: comma-separated vqf,fusion,madgwick, "
+                        "'all' or 'none' (default all; peers not installed are skipped with a "
+                        "note: pip install '.[bench]')")
 
 
-def _load_params(path: str | None):
-    from cf_estimator.bench.paramio import load_filter_params
-    from cf_estimator.core.params import FilterParams
+def _load_params(path: str | None, node_name: str | None = None):
+    """FilterParams from a parameter file (as the node reads it); CliError(2) when bad."""
+    return load_params(path, node_name)[0]
 
-    if not path:
-        return FilterParams()
-    try:
-        params, warnings = load_filter_params(path)
-    except OSError as exc:
-        raise CliError(f"cannot read parameter file {path}: {exc.strerror or exc}") from None
-    except ValueError as exc:
-        raise CliError(f"parameter file {path}: {exc}") from None
-    for w in warnings:
-        print(f"cf-estimator: warning: {w}", file=sys.stderr)
-    return params
+
+def _check_outputs(args: Any, *names: str) -> None:
+    """--json/--plot files: checked before the work starts (exist → --overwrite)."""
+    for name in names:
+        check_output_file(getattr(args, name, None), overwrite=args.overwrite,
+                          option=f"--{name}")
 
 
 def _write_json(path: str, doc: dict) -> None:
+    from cf_estimator.bag.io import write_atomic_text
+
     try:
-        with open(path, "w", encoding="utf-8") as fh:
-            json.dump(doc, fh, indent=2, allow_nan=False)
-            fh.write("\n")
+        write_atomic_text(Path(path), json.dumps(doc, indent=2, allow_nan=False) + "\n")
     except OSError as exc:
-        raise CliError(f"cannot write {path}: {exc.strerror or exc}") from None
+        raise CliError(f"cannot write {path}: {exc.strerror or exc}", 2) from None
 
 
 def _available_peers(args: Any) -> list[str]:
-    """The peers named by ``--peers`` (none if absent); CliError if one is not installed."""
-    from cf_estimator.bench.peers import PeerUnavailable, check_available
+    """The installed peers among ``--peers`` (one rule for every bench command): unknown
+    names are CliError(2); peers whose package is missing are skipped with one note."""
+    from cf_estimator.bench.peers import missing_note, parse_peers, split_available
 
-    peers = _peers(args.peers) if args.peers else []
     try:
-        check_available(peers)
-    except PeerUnavailable as exc:
-        raise CliError(str(exc)) from None
-    return peers
+        wanted = parse_peers(args.peers)
+    except ValueError as exc:
+        raise CliError(str(exc), 2) from None
+    have, missing = split_available(wanted)
+    if missing:
+        note(missing_note(missing))
+    return have
 
 
 def run_broad(args: Any) -> int:
@@ -185,15 +197,16 @@ def run_broad(args: Any) -> int:
     from cf_estimator.bench.evaluate import run_broad as evaluate_all
     from cf_estimator.schema import as_dict
 
-    peers = _available_peers(args)
-    params = _load_params(args.params)
-    try:
-        paths = broad.list_trials(args.data, _csv(args.trials) if args.trials else None)
-        info = broad.read_trial_info(args.data)
-    except broad.BroadDataError as exc:
-        raise CliError(str(exc)) from None
     if args.jobs < 1:
         raise CliError("--jobs must be >= 1", 2)
+    peers = _available_peers(args)
+    check_input_path(args.data, "BROAD data")
+    _check_outputs(args, "json", "plot")
+    params = _load_params(args.params, args.node_name)
+    try:
+        paths, info = broad.resolve_trials(args.data, _csv(args.trials) if args.trials else None)
+    except broad.BroadDataError as exc:
+        raise CliError(str(exc), 2) from None
     start = time.monotonic()
 
     def progress(name: str, i: int, n: int) -> None:
@@ -216,7 +229,7 @@ def run_broad(args: Any) -> int:
         try:
             plot_broad_per_trial(result.to_json(), args.plot)
         except OSError as exc:
-            raise CliError(f"cannot write {args.plot}: {exc.strerror or exc}") from None
+            raise CliError(f"cannot write {args.plot}: {exc.strerror or exc}", 2) from None
     if args.json:
         doc = result.to_json()
         doc["meta"] = {
@@ -285,16 +298,24 @@ def run_scenarios(args: Any) -> int:
     """``bench scenarios``."""
     from cf_estimator.bench import scenarios as sc
     peers = _available_peers(args)
-    params = _load_params(args.params)
+    _check_outputs(args, "json")
+    params = _load_params(args.params, args.node_name)
     names = _csv(args.scenarios)
     try:
         rows = sc.run_scenarios(names, params, peers, seed=args.seed, duration_s=args.duration,
                                 jobs=args.jobs)
     except ValueError as exc:
-        raise CliError(str(exc)) from None
+        raise CliError(str(exc), 2) from None
     print(sc.format_table(rows), end="")
     if args.json:
-        _write_json(args.json, {"scenarios": rows, "limit_arcmin": sc.THESIS_LIMIT_ARCMIN})
+        from cf_estimator import __version__
+        from cf_estimator.core.kernel import resolve_backend
+        from cf_estimator.schema import as_dict
+
+        _write_json(args.json, {"scenarios": rows, "limit_arcmin": sc.THESIS_LIMIT_ARCMIN,
+                                "cf_estimator_params": as_dict(params), "peers": peers,
+                                "seed": args.seed, "version": __version__,
+                                "filter_backend": resolve_backend()})
     return 0
 
 
@@ -302,6 +323,9 @@ def run_speed(args: Any) -> int:
     """``bench speed``."""
     from cf_estimator.bench import speed
     peers = _available_peers(args)
+    _check_outputs(args, "json")
+    if args.bag is not None:
+        check_input_path(args.bag, "bag")
     if args.samples < 100:
         raise CliError("--samples must be >= 100", 2)
     try:

@@ -27,6 +27,7 @@ import numpy as np
 from cf_estimator.bag import io
 from cf_estimator.bag.replay import ReplayOptions, ReplayVariant, replay_variants
 from cf_estimator.bag.simulate import TRUTH_TOPIC, write_scenario_bag
+from cf_estimator.cli.common import check_output_dir
 from cf_estimator.cli.main import CliError
 from cf_estimator.core.params import FilterParams
 from cf_estimator.pipeline import PipelineParams
@@ -120,8 +121,7 @@ def _plot(path: Path, results: dict[str, Any], windows: list[tuple[float, float,
 def run(args: argparse.Namespace) -> int:
     t_start = time.perf_counter()
     out_dir = Path(args.out)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise CliError(f"{out_dir}: exists and is not a directory", 2)
+    check_output_dir(args.out, overwrite=None, option="--out")  # the demo replaces its own files
     out_dir.mkdir(parents=True, exist_ok=True)
     bag_path = out_dir / BAG_NAME
 

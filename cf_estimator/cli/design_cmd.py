@@ -1,9 +1,11 @@
 """``cf-estimator design``: loop parameters, exact peak errors and the thesis check for k1, k2.
 
-Gains come from ``--k1/--k2`` (defaults: the seed's 0.03 1/s and 0.001 1/s²) or from the inverse
-``--n N [--xi XI]`` / ``--period S [--xi XI]`` (ξ is the seed's k1/n; default 1, the seed's
-choice). Accelerations are given in g and converted with the seeds' small-angle convention
-(a/g of 0.2 is an accelerometer angle error of 0.2 rad); the thesis check uses atan(a/g).
+Every design parameter defaults to the shipped one (``FilterParams()``: k1, k2, the saturation
+level and the aperiodic time constant), so a bare ``design --thesis`` checks the filter as it
+ships. Gains come from ``--k1/--k2`` or from the inverse ``--n N [--xi XI]`` / ``--period S
+[--xi XI]`` (ξ = k1/n as in Ryzhkov & Karpenko; default 1, their choice). Accelerations are given
+in g and converted with the papers' small-angle convention (a/g of 0.2 is an accelerometer angle
+error of 0.2 rad); the thesis check uses atan(a/g). References: docs/references.md.
 All formulas live in :mod:`cf_estimator.core.design`.
 """
 
@@ -16,10 +18,11 @@ from typing import Any
 
 from cf_estimator.cli.main import CliError, finite_float
 from cf_estimator.core import design
+from cf_estimator.core.params import FilterParams
 
-SEED_K1 = 0.03
-SEED_K2 = 0.001
-SEED_INITIAL_ERROR_RAD = 0.1
+#: Ryzhkov & Karpenko's example initial error [rad] for the clipped recovery time.
+PAPER_INITIAL_ERROR_RAD = 0.1
+SHIPPED = FilterParams()
 
 
 def register(subparsers: Any) -> None:
@@ -28,22 +31,26 @@ def register(subparsers: Any) -> None:
         "design",
         help="loop parameters, exact peak errors and the thesis check for gains k1, k2",
         description=(
-            "Design formulas of the compensation scheme W(s) = k1 + k2/s (seed 000): natural "
-            "frequency n = sqrt(k2), damping xi = k1/n (seed) and zeta = k1/(2n), period, settling "
-            "time, exact peak errors next to the seed's rough formulas, saturation guidance and "
-            "the thesis requirement check (seed 003)."
+            "Design formulas of the compensation scheme W(s) = k1 + k2/s (Ryzhkov & Karpenko): "
+            "natural frequency n = sqrt(k2), damping xi = k1/n (theirs) and zeta = k1/(2n), "
+            "period, settling time, exact peak errors next to the paper's rough formulas, "
+            "saturation guidance and the requirement check of Habliuk's thesis (2023). Every "
+            "value defaults to the shipped parameters."
         ),
     )
     f = finite_float
     gains = p.add_argument_group("gains (either k1/k2, or n or period with xi)")
-    gains.add_argument("--k1", type=f, metavar="K1", help="proportional gain [1/s] (default 0.03)")
-    gains.add_argument("--k2", type=f, metavar="K2", help="integral gain [1/s^2] (default 0.001)")
+    gains.add_argument("--k1", type=f, metavar="K1",
+                       help=f"proportional gain [1/s] (default {SHIPPED.k1:g}, shipped)")
+    gains.add_argument("--k2", type=f, metavar="K2",
+                       help=f"integral gain [1/s^2] (default {SHIPPED.k2:g}, shipped)")
     inverse = gains.add_mutually_exclusive_group()
     inverse.add_argument("--n", type=f, metavar="N", help="natural frequency n [rad/s] -> k2 = n^2")
     inverse.add_argument("--period", type=f, metavar="S", help="natural period 2*pi/n [s]")
     gains.add_argument("--xi", type=f, metavar="XI",
-                       help="seed damping xi = k1/n, with --n/--period (default 1) -> k1 = xi*n")
-    ev = p.add_argument_group("disturbances (errors: exact vs the seed's rough formula)")
+                       help="damping xi = k1/n (Ryzhkov & Karpenko's), with --n/--period "
+                       "(default 1) -> k1 = xi*n")
+    ev = p.add_argument_group("disturbances (errors: exact vs the paper's rough formula)")
     ev.add_argument("--drift", type=f, metavar="RAD_PER_S", help="gyro drift step [rad/s]")
     ev.add_argument("--accel-g", type=f, metavar="G", help="linear acceleration a/g of an event")
     ev.add_argument("--accel-duration", type=f, metavar="S", help="duration of that event [s]")
@@ -52,11 +59,16 @@ def register(subparsers: Any) -> None:
     err = p.add_argument_group("error path (thesis: saturation, then aperiodic unit)")
     err.add_argument("--bias", type=f, metavar="RAD_PER_S",
                      help="largest gyro bias to track: minimum saturation level guidance")
-    err.add_argument("--saturation", type=f, metavar="RAD", help="saturation (clip) level [rad]")
-    err.add_argument("--aperiodic", type=f, metavar="S", default=0.0,
-                     help="aperiodic unit time constant T [s] (0 = off; needs T < k1/k2)")
-    err.add_argument("--initial-error", type=f, metavar="RAD", default=SEED_INITIAL_ERROR_RAD,
-                     help="initial error for the clipped recovery time (default 0.1, the seed's)")
+    err.add_argument("--saturation", type=f, metavar="RAD",
+                     help="saturation (clip) level [rad] (0 = no clip; default "
+                     f"{SHIPPED.saturation_limit_rad:g}, shipped; with it or --bias the "
+                     "saturation guidance is printed)")
+    err.add_argument("--aperiodic", type=f, metavar="S",
+                     help="aperiodic unit time constant T [s] (0 = off; needs T < k1/k2; "
+                     f"default {SHIPPED.aperiodic_time_constant_s:g}, shipped)")
+    err.add_argument("--initial-error", type=f, metavar="RAD", default=PAPER_INITIAL_ERROR_RAD,
+                     help="initial error for the clipped recovery time (default 0.1, Ryzhkov & "
+                     "Karpenko's)")
     p.add_argument("--thesis", action="store_true",
                    help="run the thesis requirement check (fixed base 28.8', disturbed 90')")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
@@ -83,8 +95,8 @@ def _gains(args: argparse.Namespace) -> tuple[float, float, str]:
             raise CliError(f"--period must be > 0 s (got {args.period:g})", 2)
         k1, k2 = design.gains_from_period(args.period, xi)
         return k1, k2, f"period = {args.period:g} s, xi = {xi:g}"
-    k1 = SEED_K1 if args.k1 is None else args.k1
-    k2 = SEED_K2 if args.k2 is None else args.k2
+    k1 = SHIPPED.k1 if args.k1 is None else args.k1
+    k2 = SHIPPED.k2 if args.k2 is None else args.k2
     if k1 < 0.0 or k2 < 0.0:
         raise CliError(f"gains must not be negative (k1 = {k1:g} 1/s, k2 = {k2:g} 1/s^2)", 2)
     if k1 == 0.0:
@@ -92,9 +104,10 @@ def _gains(args: argparse.Namespace) -> tuple[float, float, str]:
     if k2 == 0.0:
         raise CliError(
             "--k2 0: the natural frequency n = sqrt(k2) is 0, so xi = k1/n, the period 2*pi/n and "
-            "the seed's rough omega/n are undefined; use k2 > 0 (k2 = 0 is the first-order "
+            "the paper's rough omega/n are undefined; use k2 > 0 (k2 = 0 is the first-order "
             "filter, whose drift error is the static omega/k1)", 2)
-    return k1, k2, "k1/k2"
+    given = args.k1 is not None or args.k2 is not None
+    return k1, k2, "k1/k2" if given else "shipped parameters"
 
 
 def _validate(args: argparse.Namespace, k1: float, k2: float) -> None:
@@ -107,14 +120,29 @@ def _validate(args: argparse.Namespace, k1: float, k2: float) -> None:
         raise CliError("--vib-amplitude-g and --vib-frequency go together (both or neither)", 2)
     if args.vib_frequency is not None and args.vib_frequency <= 0.0:
         raise CliError(f"--vib-frequency must be > 0 Hz (got {args.vib_frequency:g})", 2)
-    if args.saturation is not None and args.saturation <= 0.0:
-        raise CliError(f"--saturation must be > 0 rad (got {args.saturation:g})", 2)
-    if args.aperiodic < 0.0:
-        raise CliError(f"--aperiodic must be >= 0 s (got {args.aperiodic:g})", 2)
-    if args.aperiodic > 0.0 and args.aperiodic >= k1 / k2:
+    if args.saturation is not None and args.saturation < 0.0:
+        raise CliError(f"--saturation must be >= 0 rad (got {args.saturation:g})", 2)
+    t_ap = _aperiodic(args)
+    if t_ap < 0.0:
+        raise CliError(f"--aperiodic must be >= 0 s (got {t_ap:g})", 2)
+    if t_ap > 0.0 and t_ap >= k1 / k2:
+        shipped = " (the shipped value; give --aperiodic 0 or a smaller T)" \
+            if args.aperiodic is None else ""
         raise CliError(
-            f"--aperiodic {args.aperiodic:g} s makes the loop unstable: need T < k1/k2 = "
+            f"--aperiodic {t_ap:g} s{shipped} makes the loop unstable: need T < k1/k2 = "
             f"{k1 / k2:.4g} s", 2)
+
+
+def _aperiodic(args: argparse.Namespace) -> float:
+    """The aperiodic time constant [s]: --aperiodic, else the shipped one."""
+    return SHIPPED.aperiodic_time_constant_s if args.aperiodic is None else args.aperiodic
+
+
+def _saturation(args: argparse.Namespace) -> float | None:
+    """The clip level [rad] (None = no clip): --saturation (0 = none), else the shipped one."""
+    if args.saturation is None:
+        return SHIPPED.saturation_limit_rad if SHIPPED.use_saturation else None
+    return args.saturation or None
 
 
 def _angle(prefix: str, rad: float) -> dict[str, float]:
@@ -126,7 +154,8 @@ def compute(args: argparse.Namespace) -> dict[str, Any]:
     """All requested results as a JSON-ready dict (validated arguments)."""
     k1, k2, source = _gains(args)
     _validate(args, k1, k2)
-    t_ap = args.aperiodic
+    t_ap = _aperiodic(args)
+    saturation = _saturation(args)
     hmax, t_hmax = design.impulse_response_peak(k1, k2)
     out: dict[str, Any] = {
         "k1": k1, "k2": k2, "gains_from": source,
@@ -138,6 +167,7 @@ def compute(args: argparse.Namespace) -> dict[str, Any]:
         "settling_time_envelope_s": design.envelope_settling_time_s(k1, k2),
         "impulse_peak_s": hmax, "impulse_peak_time_s": t_hmax,
         "aperiodic_time_constant_s": t_ap,
+        "saturation_rad": saturation,
     }
     if args.drift is not None:
         peak = design.drift_peak(k1, k2, args.drift, t_ap)
@@ -164,10 +194,10 @@ def compute(args: argparse.Namespace) -> dict[str, Any]:
     if args.bias is not None or args.saturation is not None:
         out["saturation_guidance"] = _guidance(args, k1, k2)
     if args.thesis:
-        rows = design.thesis_check(k1, k2, args.saturation, t_ap)
+        rows = design.thesis_check(k1, k2, saturation, t_ap)
         out["thesis"] = {
             "limits_arcmin": dict(design.THESIS_LIMITS_ARCMIN),
-            "saturation_rad": args.saturation,
+            "saturation_rad": saturation,
             "aperiodic_time_constant_s": t_ap,
             "checks": [{"name": r.name, "description": r.description,
                         "peak_arcmin": r.peak_arcmin, "limit_arcmin": r.limit_arcmin,
@@ -182,10 +212,10 @@ def _guidance(args: argparse.Namespace, k1: float, k2: float) -> dict[str, Any]:
     if args.bias is not None:
         g["bias_rad_s"] = args.bias
         g["min_saturation_rad"] = design.min_saturation_limit_rad(k1, k2, args.bias)
-        if args.saturation is not None:
-            g["saturation_ok_for_bias"] = args.saturation >= g["min_saturation_rad"]
-    if args.saturation is not None:
-        lim = args.saturation
+    lim = _saturation(args)  # the clip in force: --saturation, else the shipped one
+    if args.bias is not None and lim is not None:
+        g["saturation_ok_for_bias"] = lim >= g["min_saturation_rad"]
+    if lim is not None:
         g["saturation_rad"] = lim
         g["initial_error_rad"] = args.initial_error
         g["recovery_time_k1_s"] = design.clipped_recovery_time_s(k1, lim, args.initial_error)
@@ -205,12 +235,12 @@ def render(out: dict[str, Any]) -> str:
     zeta = out["zeta"]
     kind = "oscillating" if zeta < 1.0 else ("critical" if zeta == 1.0 else "overdamped")
     lines = [
-        "compensation scheme W(s) = k1 + k2/s (seed 000)"
+        "compensation scheme W(s) = k1 + k2/s (Ryzhkov & Karpenko)"
         + ("" if out["gains_from"] == "k1/k2" else f", gains from {out['gains_from']}"),
         f"  k1                         {out['k1']:.6g} 1/s",
         f"  k2                         {out['k2']:.6g} 1/s^2",
         f"  n = sqrt(k2)               {out['n']:.6g} rad/s",
-        f"  xi = k1/n (seed)           {out['xi']:.6g}",
+        f"  xi = k1/n (paper)          {out['xi']:.6g}",
         f"  zeta = k1/(2n)             {zeta:.6g} ({kind})",
         f"  period 2*pi/n              {out['period_s']:.2f} s",
         f"  settling time (2 %)        {out['settling_time_s']:.1f} s exact (initial-error "
@@ -236,7 +266,7 @@ def render(out: dict[str, Any]) -> str:
                      f"{out['vibration_frequency_hz']:g} Hz", out["vibration_peak_error_rad"],
                      f"{'A*k1/(2 pi f)':16}{_fmt_angle(out['vibration_approx_rad'])}"))
     if rows:
-        lines += ["", f"{'peak errors':29}{'exact':27}seed's rough formula"]
+        lines += ["", f"{'peak errors':29}{'exact':27}paper's rough formula"]
         lines += [f"  {name:27}{_fmt_angle(rad)}   {rough}".rstrip() for name, rad, rough in rows]
     g = out.get("saturation_guidance")
     if g:
@@ -257,7 +287,7 @@ def render(out: dict[str, Any]) -> str:
     th = out.get("thesis")
     if th:
         sat = "none" if th["saturation_rad"] is None else f"{th['saturation_rad']:g} rad"
-        lines += ["", f"thesis requirements (seed 003): saturation {sat}, aperiodic "
+        lines += ["", f"thesis requirements (Habliuk 2023): saturation {sat}, aperiodic "
                       f"{th['aperiodic_time_constant_s']:g} s"]
         for c in th["checks"]:
             verdict = "PASS" if c["passed"] else "FAIL"

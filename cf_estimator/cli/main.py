@@ -43,6 +43,10 @@ def build_parser() -> argparse.ArgumentParser:
         prog="cf-estimator",
         description="Complementary-filter attitude estimation: design, simulate, replay, tune.",
     )
+    from cf_estimator.cli.common import VersionAction
+
+    parser.add_argument("--version", action=VersionAction,
+                        help="print the package version and the filter-step backend, and exit")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMANDS:
         importlib.import_module(f"cf_estimator.cli.{name}_cmd").register(sub)

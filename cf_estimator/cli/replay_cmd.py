@@ -16,10 +16,15 @@ from typing import Any
 
 from cf_estimator.bag import io
 from cf_estimator.bag.replay import HEADING_ALIGNMENTS, ReplayError, ReplayOptions, replay_bag
+from cf_estimator.cli.common import (
+    add_params_options,
+    check_input_path,
+    check_output_dir,
+    check_output_file,
+    load_params,
+    warn,
+)
 from cf_estimator.cli.main import CliError
-from cf_estimator.core.params import FilterParams
-from cf_estimator.pipeline import PipelineParams
-from cf_estimator.schema import ParameterError
 
 
 def register(subparsers: Any) -> None:
@@ -38,14 +43,14 @@ def register(subparsers: Any) -> None:
     p.add_argument("bag", metavar="BAG", help="input bag: ROS 1 .bag file or ROS 2 bag directory")
     p.add_argument("-o", "--output", metavar="OUT",
                    help="output ROS 2 bag directory (written atomically; see --overwrite)")
-    p.add_argument("--params", metavar="YAML",
-                   help="ROS 2 parameter file, the same the node reads (--params-file)")
+    add_params_options(p, "the one the node reads with --params-file")
     p.add_argument("--imu-topic", metavar="TOPIC", help="sensor_msgs/Imu input (default: detect)")
     p.add_argument("--mag-topic", metavar="TOPIC",
                    help="sensor_msgs/MagneticField input (default: detect; 'none' = without)")
     p.add_argument("--reference-topic", metavar="TOPIC",
-                   help="orientation reference (geometry_msgs/PoseStamped, QuaternionStamped or "
-                        "nav_msgs/Odometry): adds error statistics")
+                   help="orientation reference (geometry_msgs/PoseStamped, QuaternionStamped, "
+                        "nav_msgs/Odometry, or a sensor_msgs/Imu's orientation): adds error "
+                        "statistics")
     p.add_argument("--heading-alignment", choices=HEADING_ALIGNMENTS, default="auto",
                    help="unknown constant heading offset of the reference: none, first (match the "
                         "first scored sample), mean (circular mean); auto = none with a "
@@ -54,48 +59,18 @@ def register(subparsers: Any) -> None:
                    help="output storage plugin (default mcap)")
     p.add_argument("--copy-inputs", action="store_true",
                    help="also write the input topics used (IMU, magnetometer, reference)")
-    p.add_argument("--plot", metavar="DIR", help="write PNG plots into DIR")
+    p.add_argument("--plot", metavar="DIR",
+                   help="write PNG plots into DIR (created; an existing DIR needs --overwrite)")
     p.add_argument("--json", metavar="FILE", help="write the JSON summary to FILE ('-' = stdout)")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing output bag")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an existing output bag and JSON file, write into an existing "
+                   "plot directory")
     prog = p.add_mutually_exclusive_group()
     prog.add_argument("--progress", dest="progress", action="store_true", default=None,
                       help="always show a progress bar on stderr")
     prog.add_argument("--no-progress", dest="progress", action="store_false",
                       help="never show a progress bar (default: only when stderr is a terminal)")
     p.set_defaults(run=run)
-
-
-def load_params(path: str | None) -> tuple[FilterParams, PipelineParams, list[str]]:
-    """Parameters from a ROS 2 parameter file (defaults without one); CliError(2) when bad."""
-    if path is None:
-        return FilterParams(), PipelineParams(), []
-    if not Path(path).is_file():
-        raise CliError(f"{path}: parameter file not found", 2)
-    from cf_estimator.params_file import load_params_file
-
-    try:
-        return load_params_file(path)
-    except ParameterError as exc:
-        text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise CliError(text if text.startswith(str(path)) else f"{path}: {text}", 2) from None
-
-
-def warn(text: str) -> None:
-    """One warning line on stderr."""
-    print(f"cf-estimator: warning: {text}", file=sys.stderr)
-
-
-def check_json_target(target: str | None, overwrite: bool) -> None:
-    """A --json FILE must not exist without --overwrite and must be in an existing directory."""
-    if target is None or target == "-":
-        return
-    path = Path(target)
-    if path.exists() and not overwrite:
-        raise CliError(f"{path}: exists (use --overwrite to replace it)", 2)
-    if path.is_dir():
-        raise CliError(f"{path}: is a directory", 2)
-    if not path.parent.is_dir():
-        raise CliError(f"{path}: directory {path.parent} does not exist", 2)
 
 
 def write_json(target: str, data: dict[str, Any]) -> None:
@@ -108,6 +83,40 @@ def write_json(target: str, data: dict[str, Any]) -> None:
 
 def _format_counts(d: dict[str, int]) -> str:
     return ", ".join(f"{k} {v}" for k, v in d.items()) if d else "none"
+
+
+def mag_line(s: dict[str, Any]) -> str:
+    """``mag     N received: used U, rejected R (disturbed field), stale S, ...``."""
+    c = s.get("counters") or {}
+    if not s["topics"].get("mag"):
+        return "mag     none: heading from the gyro alone (6-D; yaw drifts)"
+    if c.get("mag_disabled", 0) and not c.get("mag_used", 0):
+        return (f"mag     {c.get('received_mag', 0)} received, not used (use_mag false): "
+                "heading from the gyro alone")
+    return (f"mag     {c.get('received_mag', 0)} received: used {c.get('mag_used', 0)}, "
+            f"rejected {c.get('mag_rejected', 0)} (disturbed field), stale "
+            f"{c.get('mag_stale', 0)}, invalid {c.get('mag_invalid', 0)}, superseded "
+            f"{c.get('mag_dropped', 0)}")
+
+
+#: Below this share of magnetometer samples used, the replay warns that heading was mostly
+#: unreferenced (it followed the gyro).
+MAG_USED_WARN_FRACTION = 0.5
+
+
+def heading_warning(s: dict[str, Any]) -> str | None:
+    """A warning when the magnetometer referenced heading for less than half its samples."""
+    c = s.get("counters") or {}
+    received = int(c.get("received_mag", 0))
+    used = int(c.get("mag_used", 0))
+    if not s["topics"].get("mag") or received == 0 or c.get("mag_disabled", 0) >= received:
+        return None
+    if used >= MAG_USED_WARN_FRACTION * received:
+        return None
+    return (f"heading was mostly unreferenced: the magnetometer corrected it with only {used} "
+            f"of {received} samples ({100.0 * used / received:.0f} %; rejected "
+            f"{c.get('mag_rejected', 0)}, stale {c.get('mag_stale', 0)}); in between yaw "
+            "follows the gyro (see mag_rejection, mag_norm_tolerance, mag_dip_tolerance_rad)")
 
 
 def print_summary(s: dict[str, Any], out: Any = None) -> None:
@@ -124,6 +133,7 @@ def print_summary(s: dict[str, Any], out: Any = None) -> None:
           f"{sum(rej.values())} ({_format_counts(rej)}), gaps {s.get('gaps')}, resets "
           f"{_format_counts(s.get('resets') or {})}, clipped "
           f"{100.0 * (s['clipped_fraction'] or 0.0):.1f}% of samples", file=out)
+    print(mag_line(s), file=out)
     bias = s.get("final_gyro_bias_rad_s")
     if bias:
         print("bias    final gyro-bias estimate [rad/s]: "
@@ -148,14 +158,16 @@ def print_summary(s: dict[str, Any], out: Any = None) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.output is None and args.json is None and args.plot is None:
         raise CliError("nothing to write: give -o OUT, --json FILE or --plot DIR", 2)
-    if not Path(args.bag).exists():
-        raise CliError(f"{args.bag}: no such file or directory", 2)
-    check_json_target(args.json, args.overwrite)
-    if args.plot is not None and Path(args.plot).exists() and not Path(args.plot).is_dir():
-        raise CliError(f"{args.plot}: exists and is not a directory", 2)
-    fparams, pparams, param_warnings = load_params(args.params)
-    for text in param_warnings:
-        warn(text)
+    check_input_path(args.bag, "input bag")
+    check_output_file(args.json, overwrite=args.overwrite, option="--json")
+    check_output_dir(args.plot, overwrite=args.overwrite, option="--plot")
+    if args.output is not None:
+        try:
+            io.check_output_path(Path(args.output), overwrite=args.overwrite,
+                                 inputs=[Path(args.bag)])
+        except io.BagError as exc:
+            raise CliError(str(exc), exc.code) from None
+    fparams, pparams = load_params(args.params, args.node_name)
     opts = ReplayOptions(
         imu_topic=args.imu_topic, mag_topic=args.mag_topic, reference_topic=args.reference_topic,
         storage=args.storage, copy_inputs=args.copy_inputs, overwrite=args.overwrite,
@@ -168,6 +180,11 @@ def run(args: argparse.Namespace) -> int:
     except ReplayError as exc:
         raise CliError(str(exc), 2) from None
     summary = result.summary
+    summary["params_file"] = args.params
+    summary["node_name"] = args.node_name
+    mag_warning = heading_warning(summary)
+    if mag_warning:
+        summary["warnings"].append(mag_warning)
     for text in summary["warnings"]:
         warn(text)
     if args.plot is not None:

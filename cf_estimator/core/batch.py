@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike
 from cf_estimator.core import quaternion as quat
 from cf_estimator.core.batched import BatchedFilter
 from cf_estimator.core.filter import EXTRA_COLUMNS, ComplementaryFilter, state_extras
+from cf_estimator.core.input_checks import warn_units
 from cf_estimator.core.kernel import resolve_backend
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import BIAS_CONVERGED_SIGMA_RAD_S
@@ -144,6 +145,7 @@ def estimate(
     n = gyro.shape[0]
     t = sample_times(n, rate_hz, timestamps_s)
     f = ComplementaryFilter(params, initial_orientation=initial_orientation, backend=backend)
+    warn_units(gyro, acc, f.params.gravity_m_s2)  # deg/s or g: warned once per call site
     out_q = np.full((n, 4), np.nan)
     extra = np.zeros((n, EXTRA_COLUMNS))
     _run_filter(f, gyro, acc, mg, t, out_q, extra)

@@ -39,7 +39,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import Imu, MagneticField
 
-from cf_estimator.params_file import all_specs, build_params
+from cf_estimator.params_file import all_specs, build_params, describe_unknown, unknown_names
 from cf_estimator.pipeline import ImuPipeline
 from cf_estimator.pipeline.checks import RESET_CLOCK_JUMP
 from cf_estimator.pipeline.diagnostics import LEVEL_NAMES
@@ -129,6 +129,9 @@ class CfEstimatorNode(Node):
         self._names = {s.name for s in all_specs()}
         values = {spec.name: self._declare(spec) for spec in all_specs()}
         filter_params, pipeline_params = build_params(values)  # ParameterError: main() reports
+        unknown = unknown_names(getattr(self, "_parameter_overrides", {}))  # this node's overrides
+        if unknown:  # once, at start-up: a misspelt key would otherwise be silently ignored
+            log.warning(f"unknown parameter(s), ignored: {describe_unknown(unknown)}")
         ns = self.get_namespace().rstrip("/")
         self._pipe = ImuPipeline(
             filter_params, pipeline_params, diagnostics_name=f"{ns}/{self.get_name()}: attitude"
