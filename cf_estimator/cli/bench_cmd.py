@@ -278,8 +278,8 @@ def run_euroc(args: Any) -> int:
           f"[deg] vs ground truth after the first {args.settle:g} s: RMS / max")
     print(f"cf_estimator parameters: {args.params or 'shipped defaults'}")
     for name, info in result.info.items():
-        for note in info["notes"]:
-            print(f"  note: {name}: {note}")
+        for line in info["notes"]:
+            print(f"  note: {name}: {line}")
     print()
     print(ev.format_table(result), end="")
     if args.json:
