@@ -320,7 +320,7 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
         stillness(s, p, g, acc, dt);
         double steady_g = sqrt(s->pax * s->pax + s->pay * s->pay + s->paz * s->paz);
         int quick = fast || (s->at_rest && (maxd(steady_g - s->g_ref, s->g_ref - steady_g) <
-                                            p->rest_accel_threshold_m_s2));
+                                            p->acceleration_threshold_m_s2));
         double decayed =
             s->accel_hold * (p->acceleration_hold_s / (p->acceleration_hold_s + dt));
         s->accel_hold = maxd(deviation, decayed);
@@ -377,7 +377,7 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
         double gain = k1 * dt / (1.0 + k1 * dt);
         expmap(gain * f[0], gain * f[1], gain * f[2], d);
         mul_into(s, d);
-        double dec = quick ? 0.0 : gain * p->prefilter;
+        double dec = gain * (quick ? 1.0 : p->prefilter);
         s->lx = s->lx - dec * s->lx;
         s->ly = s->ly - dec * s->ly;
         s->lz = s->lz - dec * s->lz;

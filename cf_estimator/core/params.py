@@ -86,7 +86,8 @@ class FilterParams:
         0.5,
         "m/s^2",
         "Linear acceleration is present while | |a| - g_ref | exceeds this (g_ref: |a| learned "
-        "during start-up and rest); then the clip is saturation_limit_rad.",
+        "during start-up and rest); then the clip is saturation_limit_rad. At rest the error "
+        "path is quick only while the block mean's |a| is within this of g_ref.",
         minimum=0.0,
         maximum=100.0,
         minimum_exclusive=True,
@@ -234,7 +235,8 @@ class FilterParams:
         0.01,
         "rad/s",
         "Stillness detection: the gyro block mean may change by this much from one block to "
-        "the next, plus 4 standard deviations of the observed noise floor (vibration).",
+        "the next, plus 2 standard deviations of the noise measured in the block (sensor noise "
+        "and vibration, from sample-to-sample differences).",
         minimum=0.0,
         maximum=10.0,
         minimum_exclusive=True,
@@ -243,9 +245,8 @@ class FilterParams:
     rest_accel_threshold_m_s2: float = param(
         0.2,
         "m/s^2",
-        "Stillness detection: the accelerometer block mean may change by this much, plus 4 "
-        "standard deviations of the observed noise floor; at rest the error path is quick only "
-        "while the block mean's norm is within this of ‖g‖.",
+        "Stillness detection: the accelerometer block mean may change by this much, plus 2 "
+        "standard deviations of the noise measured in the block.",
         minimum=0.0,
         maximum=100.0,
         minimum_exclusive=True,

@@ -10,19 +10,33 @@ One sample, in the order the code runs (world frame ENU inside; q = q_world_from
                   L = saturation_limit_rad while a linear acceleration is present and the gyro
                   is still (impacts, vibration, manoeuvres), else wide_saturation_limit_rad
     4. aperiodic  l ← l + dt/(T+dt)·(R⁻·e_s − l);  f = R⁻ᵀ·l  (1/(T s+1) in the world frame)
-    5. regulator  c ← c + k3·dt·f;  b ← b − dt·(k2·f + c);  q ← q⁻ ⊗ Exp(g(k1)·f)
+    5. regulator  c ← c + k3·dt·f;  b ← b − dt·(k2'·f + c);  q ← q⁻ ⊗ Exp(g(k1')·f)
                   (W1 = k1 + k2/s + k3/s²; g(k) = k·dt/(1+k·dt), the backward-Euler gain;
-                  b, the integral state, is the gyro-bias estimate)
+                  b, the integral state, is the gyro-bias estimate; k2' = max(k2,
+                  bias_learning_k2·σ_b²/σ_0²) and k1' = max(k1, 2√k2') while the bias is
+                  uncertain); then l ← l − p·g(k1')·l with p = aperiodic_prefilter: the
+                  correction also turns the unit's memory (p = 1: a pre-filter of the specific
+                  force in the world frame, as VQF's; p = 0: the thesis's unit on the error)
     6. magnetom.  'yaw':  e_ψ = atan2(m_E, m_N) of the measured field in the world frame,
                   saturated; q ← Exp_z(g(r1)·e_ψ) ⊗ q; z_m ← z_m + r2·dt_m·e_ψ (heading only:
                   a rotation about the world vertical never changes roll/pitch)
                   'full': e_m = m̂ × (R⁻ᵀ·m_ref) through W2 = r1 + r2/s on all axes (seed 004)
 
-Phases: STARTUP (after initialisation, for startup_duration_s: gain startup_k1, no clip, no lag,
-no bias learning) → RUNNING → RECOVERING (error clipped without a break for recovery_trigger_s:
-a real attitude error, e.g. after gyro over-range; same as STARTUP until |e| < L/2) → RUNNING.
-While at rest (gyro and accelerometer steady for rest_time_s) the bias also follows the gyro, and
-the error path runs as in STARTUP (nothing to reject: an error left by motion is removed fast).
+Stillness and bias (``_stillness``): on blocks of rest_window_s, a block whose gyro and
+accelerometer means did not change from the previous block (beyond the thresholds plus the
+noise measured from sample-to-sample differences: vibration-robust; a constant bias cancels) is
+still; rest_time_s of still blocks is rest. At rest each still block's gyro mean is a bias
+measurement, fused by variance (scalar Kalman update; σ_b = √bias_var starts at
+bias_prior_sigma_rad_s, grows by a random walk, shrinks with each measurement and, in motion,
+with the integral's learning). A steady block far from a known bias is a constant-rate turn,
+not rest (unless it stays so for REST_GATE_OVERRIDE_S).
+
+Phases: STARTUP (after initialisation, for startup_duration_s: gain startup_k1, no clip, the
+unit bypassed, no integral learning) → RUNNING → RECOVERING (error clipped without a break for
+recovery_trigger_s: a real attitude error, e.g. after gyro over-range; same as STARTUP until
+|e| < L/2) → RUNNING. At rest the error path also runs as in STARTUP while the block's |a| is
+within acceleration_threshold_m_s2 of ‖g‖ (nothing to reject: an error left by motion is removed
+fast). While bypassed the unit follows the error with a 0.2 s lag, turned by each correction.
 """
 
 from __future__ import annotations
@@ -362,7 +376,7 @@ def step(
         # acceleration (constant accelerometer, still gyro: the 25 m/s manoeuvre) is not gravity
         steady_g = o.sqrt(s.pax * s.pax + s.pay * s.pay + s.paz * s.paz)  # last block's |a|
         quick = fast | (s.at_rest & (o.maximum(steady_g - s.g_ref, s.g_ref - steady_g)
-                                     < p.rest_accel_threshold_m_s2))
+                                     < p.acceleration_threshold_m_s2))
         # linear-acceleration detector: peak hold of | |a| - ‖g‖ |
         decayed = s.accel_hold * (p.acceleration_hold_s / (p.acceleration_hold_s + dt))
         s.accel_hold = o.maximum(deviation, decayed)
@@ -393,8 +407,9 @@ def step(
         s.ly = s.ly + weight * (wy - s.ly)
         s.lz = s.lz + weight * (wz - s.lz)
         # quick (start-up, recovery, rest): the error bypasses the unit, which follows it with a
-        # short lag, so that it holds the recent mean error, not the last noisy sample (nor a
-        # long memory of errors the quick loop has already removed), when the bypass ends
+        # short lag and is turned by every quick correction (below), so that when the bypass
+        # ends it holds the recent error as the current estimate sees it: not the last noisy
+        # sample, nor a memory of errors the quick loop has already removed
         lx, ly, lz = o.where(quick, wx, s.lx), o.where(quick, wy, s.ly), o.where(quick, wz, s.lz)
         fx, fy, fz = _rotate(s.qw, -s.qx, -s.qy, -s.qz, lx, ly, lz)
         s.fx, s.fy, s.fz = fx, fy, fz
@@ -416,10 +431,10 @@ def step(
         gain = k1 * dt / (1.0 + k1 * dt)
         dw, dx, dy, dz = _exp(gain * fx, gain * fy, gain * fz, o)
         s.qw, s.qx, s.qy, s.qz = _mul(s.qw, s.qx, s.qy, s.qz, dw, dx, dy, dz)
-        # the correction (world frame: gain * (lx, ly, lz)) also turns, by the share
-        # aperiodic_prefilter, the filtered error the unit holds (1: a pre-filter of the specific
-        # force whose memory matches the current estimate)
-        dec = o.where(quick, 0.0, gain * p.prefilter)
+        # the correction also turns, by the share aperiodic_prefilter (quick: fully), the
+        # filtered error the unit holds (1: a pre-filter of the specific force whose memory
+        # matches the current estimate, as VQF's; 0: the thesis's unit on the error)
+        dec = gain * o.where(quick, 1.0, p.prefilter)
         s.lx, s.ly, s.lz = s.lx - dec * s.lx, s.ly - dec * s.ly, s.lz - dec * s.lz
         # recovery: a long unbroken clip is a real attitude error, not a disturbance
         s.clip_timer_s = o.where(clipped, s.clip_timer_s + dt, 0.0)
