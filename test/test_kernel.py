@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 
 from cf_estimator.core import kernel, ops, step
 from cf_estimator.core.batch import estimate, estimate_many
-from cf_estimator.core.filter import ComplementaryFilter
+from cf_estimator.core.filter import EXTRA_COLUMNS, ComplementaryFilter
 from cf_estimator.core.params import FilterParams
 
 if not kernel.compiled_available():
@@ -75,12 +75,12 @@ PARAM_SETS = {
 def test_state_fields_and_constants_are_those_of_the_reference():
     assert list(kernel.compiled_kernel.State.FIELDS) == step.StepState.FIELDS
     c = kernel.compiled_kernel.CONSTANTS
-    for name in ("REST_GATE_SIGMAS", "REST_GATE_OVERRIDE_S", "RATE_LOWPASS_TIME_CONSTANT_S",
-                 "QUICK_LAG_TIME_CONSTANT_S", "REST_NOISE_SIGMAS", "REST_SAMPLE_SIGMAS",
-                 "BIAS_RANDOM_WALK_RAD_S_SQRT_S", "GRAVITY_TIME_CONSTANT_S",
-                 "MAG_REFERENCE_SAMPLES", "MAG_RELEARN_AFTER_S", "MAG_MAX_DT_S"):
+    shared = set(c) - {"SMALL_ANGLE_RAD", "EXTRA_COLUMNS"}
+    assert shared >= {"REST_NOISE_SIGMAS", "ACCEL_SPIKE_SIGMAS", "BIAS_RANDOM_WALK_RAD_S_SQRT_S"}
+    for name in sorted(shared):
         assert c[name] == getattr(step, name), name
     assert c["SMALL_ANGLE_RAD"] == ops.SMALL_ANGLE_RAD
+    assert c["EXTRA_COLUMNS"] == EXTRA_COLUMNS
 
 
 @pytest.mark.parametrize("name", list(PARAM_SETS))

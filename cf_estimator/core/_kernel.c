@@ -33,6 +33,8 @@
 /* constants of step.py (test_kernel.py checks they agree) */
 #define RATE_LOWPASS_TIME_CONSTANT_S 0.5
 #define REST_NOISE_SIGMAS 2.0
+#define ACCEL_LOWPASS_TIME_CONSTANT_S 0.05
+#define ACCEL_SPIKE_SIGMAS 4.0
 #define QUICK_LAG_TIME_CONSTANT_S 0.2
 #define REST_SAMPLE_SIGMAS 8.0
 #define REST_GATE_SIGMAS 5.0
@@ -63,7 +65,8 @@ typedef struct {
         rest_timer_s, blk_n, blk_t, blk_gx, blk_gy, blk_gz, blk_ax, blk_ay, blk_az, blk_g2, blk_a2,
         prev_n, pgx, pgy, pgz, pax, pay, paz, blk_d, last_n, lgx, lgy, lgz, lax, lay, laz,
         noise_g2, noise_a2, bias_var, gate_timer_s, mag_ref_norm, mag_ref_dip, mag_ref_count,
-        mag_reject_timer_s, mag_last_time_s, g_ref, accel_hold, rate_lp, ex, ey, ez, error_norm,
+        mag_reject_timer_s, mag_last_time_s, g_ref, accel_hold, acx, acy, acz, rate_lp, ex, ey,
+        ez, error_norm,
         fx, fy, fz, yaw_error_rad, recovery_count;
     char recovering, at_rest, mag_disturbed, heading_initialized, clipped, accel_used;
     int mag_status, phase;
@@ -321,9 +324,19 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
         double steady_g = sqrt(s->pax * s->pax + s->pay * s->pay + s->paz * s->paz);
         int quick = fast || (s->at_rest && (maxd(steady_g - s->g_ref, s->g_ref - steady_g) <
                                             p->acceleration_threshold_m_s2));
+        double aw = s->last_n <= 1.0 ? 1.0 : dt / (ACCEL_LOWPASS_TIME_CONSTANT_S + dt);
+        double acx = s->acx + aw * (ax - s->acx), acy = s->acy + aw * (ay - s->acy),
+               acz = s->acz + aw * (az - s->acz);
+        s->acx = acx;
+        s->acy = acy;
+        s->acz = acz;
+        double an_lp = sqrt(s->acx * s->acx + s->acy * s->acy + s->acz * s->acz);
+        int spike = deviation > p->acceleration_threshold_m_s2 +
+                                    ACCEL_SPIKE_SIGMAS * sqrt(s->noise_a2);
+        double level = spike ? deviation : maxd(an_lp - s->g_ref, s->g_ref - an_lp);
         double decayed =
             s->accel_hold * (p->acceleration_hold_s / (p->acceleration_hold_s + dt));
-        s->accel_hold = maxd(deviation, decayed);
+        s->accel_hold = maxd(level, decayed);
         int accelerating = s->accel_hold > p->acceleration_threshold_m_s2;
         double rate =
             sqrt(pow(gx - s->bx, 2.0) + pow(gy - s->by, 2.0) + pow(gz - s->bz, 2.0));
@@ -767,7 +780,7 @@ static PyMemberDef State_members[] = {
     SD(paz), SD(blk_d), SD(last_n), SD(lgx), SD(lgy), SD(lgz), SD(lax), SD(lay), SD(laz),
     SD(noise_g2), SD(noise_a2), SD(bias_var), SD(gate_timer_s), SB(at_rest), SD(mag_ref_norm),
     SD(mag_ref_dip), SD(mag_ref_count), SB(mag_disturbed), SD(mag_reject_timer_s),
-    SD(mag_last_time_s), SB(heading_initialized), SD(g_ref), SD(accel_hold), SD(rate_lp),
+    SD(mag_last_time_s), SB(heading_initialized), SD(g_ref), SD(accel_hold), SD(acx), SD(acy), SD(acz), SD(rate_lp),
     SD(ex), SD(ey), SD(ez), SD(error_norm), SD(fx), SD(fy), SD(fz), SB(clipped),
     SB(accel_used), SI(mag_status), SD(yaw_error_rad), SI(phase), SD(recovery_count),
     {NULL, 0, 0, 0, NULL}};
@@ -798,7 +811,9 @@ PyMODINIT_FUNC PyInit__kernel(void)
     }
     if (PyDict_SetItemString(StateType.tp_dict, "FIELDS", fields) < 0) return NULL;
     Py_DECREF(fields);
-    PyObject *consts = Py_BuildValue("{s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:i,s:d,s:d,s:d,s:i}",
+    PyObject *consts = Py_BuildValue("{s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:i,s:d,s:d,s:d,s:i}",
+                                     "ACCEL_LOWPASS_TIME_CONSTANT_S", ACCEL_LOWPASS_TIME_CONSTANT_S,
+                                     "ACCEL_SPIKE_SIGMAS", ACCEL_SPIKE_SIGMAS,
                                      "REST_GATE_SIGMAS", REST_GATE_SIGMAS,
                                      "REST_GATE_OVERRIDE_S", REST_GATE_OVERRIDE_S,
                                      "QUICK_LAG_TIME_CONSTANT_S", QUICK_LAG_TIME_CONSTANT_S,

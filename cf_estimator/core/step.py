@@ -57,6 +57,12 @@ MAG_STATUS_NAMES = {0: "none", 1: "used", 2: "rejected", 3: "disabled"}
 
 #: Low-pass time constant of the rotation rate that selects the clip level [s].
 RATE_LOWPASS_TIME_CONSTANT_S = 0.5
+#: Low-pass time constant [s] of the accelerometer for the linear-acceleration detector:
+#: rotor vibration (50-200 Hz) averages out, a manoeuvre does not.
+ACCEL_LOWPASS_TIME_CONSTANT_S = 0.05
+#: A single accelerometer sample this many noise standard deviations (measured by the stillness
+#: blocks) off ‖g‖ is an impact: the detector takes it at once, unfiltered.
+ACCEL_SPIKE_SIGMAS = 4.0
 #: Time constant [s] of the aperiodic unit while the error bypasses it (start-up, rest, recovery).
 QUICK_LAG_TIME_CONSTANT_S = 0.2
 #: Stillness: a change of the block means within this many standard deviations of the observed
@@ -155,6 +161,9 @@ class StepState:
         "heading_initialized",
         "g_ref",
         "accel_hold",
+        "acx",
+        "acy",
+        "acz",
         "rate_lp",
         "ex",
         "ey",
@@ -378,8 +387,18 @@ def step(
         quick = fast | (s.at_rest & (o.maximum(steady_g - s.g_ref, s.g_ref - steady_g)
                                      < p.acceleration_threshold_m_s2))
         # linear-acceleration detector: peak hold of | |a| - ‖g‖ |
+        # linear-acceleration detector, blind to vibration: | |a| - ‖g‖ | of the accelerometer
+        # low-passed over ACCEL_LOWPASS_TIME_CONSTANT_S, or of this very sample when it is a
+        # spike far above the noise measured by the stillness blocks (an impact)
+        aw = o.where(s.last_n <= 1.0, 1.0, dt / (ACCEL_LOWPASS_TIME_CONSTANT_S + dt))
+        s.acx, s.acy, s.acz = (s.acx + aw * (ax - s.acx), s.acy + aw * (ay - s.acy),
+                               s.acz + aw * (az - s.acz))
+        an_lp = o.sqrt(s.acx * s.acx + s.acy * s.acy + s.acz * s.acz)
+        spike = deviation > p.acceleration_threshold_m_s2 + ACCEL_SPIKE_SIGMAS * o.sqrt(
+            s.noise_a2)
+        level = o.where(spike, deviation, o.maximum(an_lp - s.g_ref, s.g_ref - an_lp))
         decayed = s.accel_hold * (p.acceleration_hold_s / (p.acceleration_hold_s + dt))
-        s.accel_hold = o.maximum(deviation, decayed)
+        s.accel_hold = o.maximum(level, decayed)
         accelerating = s.accel_hold > p.acceleration_threshold_m_s2
         rate = o.sqrt((gx - s.bx) ** 2 + (gy - s.by) ** 2 + (gz - s.bz) ** 2)
         lw = dt / (RATE_LOWPASS_TIME_CONSTANT_S + dt)
