@@ -4,7 +4,8 @@
 * ``error.png`` — total / inclination / heading error [deg] against the reference (with one);
 * ``clipping.png`` — saturation (clip) activity: the accelerometer error |e| and the fraction of
   samples clipped per second;
-* ``bias.png`` — the gyro-bias estimate [deg/s] per sensor axis.
+* ``bias.png`` — the gyro-bias estimate ± its standard deviation [deg/s] per sensor axis, and
+  the filter's still phases (where the bias is measured from the gyro).
 
 Time axes are seconds since the first output's header stamp. Files are written through a
 temporary sibling and renamed, so a failure never leaves a half-written PNG.
@@ -140,10 +141,20 @@ def plot_replay(
 
     if s.gyro_bias_rad_s.shape[0] > 0:
         fig, ax = plt.subplots(figsize=(10, 3.5))
+        bt = s.bias_t_s - t0
+        sigma = np.degrees(s.gyro_bias_sigma_rad_s)
         for i, axis in enumerate("xyz"):
-            ax.plot(s.bias_t_s - t0, np.degrees(s.gyro_bias_rad_s[:, i]), lw=0.9,
-                    label=f"b_{axis}")
-        ax.set_ylabel("gyro bias [deg/s]")
+            b = np.degrees(s.gyro_bias_rad_s[:, i])
+            ax.plot(bt, b, lw=0.9, label=f"b_{axis}")
+            ax.fill_between(bt, b - sigma, b + sigma, alpha=0.15, lw=0)
+        still = s.at_rest.astype(float)
+        if still.any():  # the filter's still phases, where the bias is measured from the gyro
+            ax.fill_between(s.t_s - t0, 0, 1, where=still > 0, color="0.6", alpha=0.25, lw=0,
+                            step="post", transform=ax.get_xaxis_transform(), label="still")
+        b_all = np.degrees(s.gyro_bias_rad_s)
+        pad = max(0.1, 0.25 * float(np.ptp(b_all)))  # the prior's wide band would hide the bias
+        ax.set_ylim(float(b_all.min()) - pad, float(b_all.max()) + pad)
+        ax.set_ylabel("gyro bias ± 1σ [deg/s]")
         ax.set_xlabel("time [s]")
         ax.grid(alpha=0.3)
         ax.legend(loc="upper right", fontsize=8)

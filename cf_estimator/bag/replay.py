@@ -32,8 +32,10 @@ import numpy as np
 from cf_estimator import __version__, metrics
 from cf_estimator.bag import io
 from cf_estimator.core import quaternion as quat
+from cf_estimator.core.filter import bias_sigma
 from cf_estimator.core.kernel import resolve_backend
 from cf_estimator.core.params import FilterParams
+from cf_estimator.core.step import BIAS_CONVERGED_SIGMA_RAD_S
 from cf_estimator.pipeline import ImuPipeline, PipelineParams
 from cf_estimator.schema import as_dict
 
@@ -71,6 +73,8 @@ class ReplaySeries:
     error_norm_rad: np.ndarray  #: (N,) |e| of the accelerometer channel
     bias_t_s: np.ndarray  #: stamps of the bias samples (decimated to <= 50 Hz) [s]
     gyro_bias_rad_s: np.ndarray  #: (M, 3) gyro-bias estimate at bias_t_s [rad/s, sensor frame]
+    gyro_bias_sigma_rad_s: np.ndarray  #: (M,) its standard deviation [rad/s]
+    at_rest: np.ndarray  #: (N,) bool per IMU sample: the filter's still phase
     ref_t_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     ref_q_wxyz: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
 
@@ -295,6 +299,8 @@ class _Run:
         self.enorm: list[float] = []
         self.bias_t: list[float] = []
         self.bias: list[tuple[float, float, float]] = []
+        self.bias_sigma: list[float] = []
+        self.rest: list[bool] = []
         self.next_bias_t = -math.inf
         self.warnings: list[str] = []
         self._seen: set[str] = set()
@@ -347,9 +353,11 @@ class _Run:
         s = flt._state  # noqa: SLF001 - read-only
         self.clipped.append(bool(s.clipped) and out.initialized)
         self.enorm.append(float(s.error_norm))
+        self.rest.append(bool(s.at_rest) and out.initialized)
         if t >= self.next_bias_t and out.initialized:
             self.bias_t.append(t)
             self.bias.append(tuple(float(c) for c in flt.gyro_bias_rad_s))
+            self.bias_sigma.append(bias_sigma(s))
             self.next_bias_t = t + _BIAS_SAMPLE_PERIOD_S
         if out.warnings:
             for text in out.warnings:
@@ -492,6 +500,8 @@ def replay_variants(
         final_bias = (
             [float(c) for c in r.pipe.filter.gyro_bias_rad_s] if r.pipe.initialized else None
         )
+        status = r.pipe.filter.status() if r.pipe.initialized else None
+        converged = np.asarray(r.bias_sigma) < BIAS_CONVERGED_SIGMA_RAD_S
         mag_in_use = mag_topic is not None and r.fparams.use_mag
         summary: dict[str, Any] = {
             "variant": r.variant.name,
@@ -514,6 +524,12 @@ def replay_variants(
             "imu_rate_hz": (stamps.size - 1) / duration if duration > 0 else None,
             "clipped_fraction": clip_frac,
             "final_gyro_bias_rad_s": final_bias,
+            "final_gyro_bias_sigma_rad_s": status.gyro_bias_sigma_rad_s if status else None,
+            "gyro_bias_converged": status.gyro_bias_converged if status else False,
+            "gyro_bias_converged_after_s": (
+                float(r.bias_t[int(np.argmax(converged))] - r.bias_t[0])
+                if converged.any() else None),
+            "still_fraction": float(np.mean(series.at_rest[init])) if init.any() else None,
             "counters": counters,
             "warnings": r.warnings,
             # what reproduces the run: the effective parameters, the version, the backend
@@ -552,6 +568,8 @@ def _series(r: _Run, ref_t: Sequence[float], ref_q: Sequence[Any]) -> ReplaySeri
         error_norm_rad=np.asarray(r.enorm, dtype=float),
         bias_t_s=np.asarray(r.bias_t, dtype=float),
         gyro_bias_rad_s=np.asarray(r.bias, dtype=float).reshape(-1, 3),
+        gyro_bias_sigma_rad_s=np.asarray(r.bias_sigma, dtype=float),
+        at_rest=np.asarray(r.rest, dtype=bool),
         ref_t_s=np.asarray(ref_t, dtype=float),
         ref_q_wxyz=np.asarray(ref_q, dtype=float).reshape(-1, 4),
     )

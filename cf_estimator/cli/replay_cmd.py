@@ -136,8 +136,13 @@ def print_summary(s: dict[str, Any], out: Any = None) -> None:
     print(mag_line(s), file=out)
     bias = s.get("final_gyro_bias_rad_s")
     if bias:
+        after = s.get("gyro_bias_converged_after_s")
+        learned = (f"converged {after:.1f} s after start" if after is not None
+                   else "not converged")
         print("bias    final gyro-bias estimate [rad/s]: "
-              + " ".join(f"{b:+.5f}" for b in bias), file=out)
+              + " ".join(f"{b:+.5f}" for b in bias)
+              + f" ± {s['final_gyro_bias_sigma_rad_s']:.5f} ({learned}); still "
+              f"{100.0 * (s.get('still_fraction') or 0.0):.0f}% of samples", file=out)
     if s.get("output"):
         print(f"output  {s['output']} ({s['storage']}): {_format_counts(s['outputs_written'])}",
               file=out)

@@ -200,6 +200,8 @@ def compose_report(
         ("gyro_bias_x_rad_s", _f(bias[0])),
         ("gyro_bias_y_rad_s", _f(bias[1])),
         ("gyro_bias_z_rad_s", _f(bias[2])),
+        ("gyro_bias_sigma_rad_s", _f(status.gyro_bias_sigma_rad_s if initialized else None)),
+        ("gyro_bias_converged", str(bool(initialized and status.gyro_bias_converged)).lower()),
         ("at_rest", str(bool(initialized and status.at_rest)).lower()),
         ("recovery_count", str(status.recovery_count if initialized else 0)),
     ]
