@@ -69,6 +69,11 @@ PARAM_SETS = {
     "no_rest_no_clip": FilterParams(rest_bias_learning=False, use_saturation=False,
                                     aperiodic_time_constant_s=0.0, mag_rejection=False),
     "no_mag": FilterParams(use_mag=False, startup_duration_s=0.0),
+    # the error-path unit without and with the full pre-filter turn, no in-motion boost,
+    # short stillness blocks
+    "thesis_unit": FilterParams(aperiodic_prefilter=0.0, bias_learning_k2=0.0),
+    "prefilter_short_blocks": FilterParams(aperiodic_prefilter=1.0, rest_window_s=0.13,
+                                           rest_time_s=0.3, bias_learning_k2=0.2),
 }
 
 
@@ -99,6 +104,32 @@ def test_whole_recording_agrees_with_the_reference(name):
         assert ref.at_rest.any() and ref.clipped.any() and (ref.mag_status == 2).any()
     if name == "tight_clip_recovery":
         assert (ref.phase == 3).any()
+    assert np.array_equal(np.isnan(ref.gyro_bias_sigma_rad_s), np.isnan(out.gyro_bias_sigma_rad_s))
+    ok = ~np.isnan(ref.gyro_bias_sigma_rad_s)
+    assert np.max(np.abs(ref.gyro_bias_sigma_rad_s[ok] - out.gyro_bias_sigma_rad_s[ok])) < 1e-12
+
+
+def test_a_steady_turn_is_not_rest_until_it_lasts_then_the_bias_is_relearned():
+    """Still with bias b, then the gyro reads b + 0.1 rad/s on z for 20 s with a constant
+    accelerometer (a constant-rate turn, or the bias changed): gated out as motion for
+    REST_GATE_OVERRIDE_S, then taken as the new bias. Both backends, bit for bit."""
+    rate, b = 200.0, np.array([0.01, -0.02, 0.03])
+    n1, n2 = int(5 * rate), int(20 * rate)
+    rng = np.random.default_rng(0)
+    gyro = np.vstack([np.tile(b, (n1, 1)), np.tile(b + [0.0, 0.0, 0.1], (n2, 1))])
+    gyro += rng.normal(0.0, 0.002, gyro.shape)
+    acc = np.array([0.0, 0.0, G]) + rng.normal(0.0, 0.02, (n1 + n2, 3))
+    p = FilterParams(use_mag=False)
+    res = {be: estimate(gyro, acc, rate_hz=rate, params=p, backend=be)
+           for be in ("python", "compiled")}
+    assert np.max(np.abs(res["python"].quaternion - res["compiled"].quaternion)) < 1e-12
+    assert np.array_equal(res["python"].at_rest, res["compiled"].at_rest)
+    r = res["compiled"]
+    assert np.allclose(r.gyro_bias_rad_s[n1 - 1], b, atol=0.002)
+    turn = slice(n1 + int(1 * rate), n1 + int((step.REST_GATE_OVERRIDE_S - 0.5) * rate))
+    assert not r.at_rest[turn].any(), "a steady turn away from a known bias is not rest"
+    assert np.allclose(r.gyro_bias_rad_s[turn.stop], b, atol=0.005)
+    assert r.at_rest[-1] and abs(r.gyro_bias_rad_s[-1, 2] - (b[2] + 0.1)) < 0.003
 
 
 def test_states_agree_field_by_field_after_a_recording():

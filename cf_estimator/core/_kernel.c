@@ -320,6 +320,8 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
         double an = sqrt(ax * ax + ay * ay + az * az);
         s->g_ref = s->g_ref > 0.0 ? s->g_ref : p->gravity_m_s2;
         double deviation = maxd(an - s->g_ref, s->g_ref - an);
+        int spike = deviation > p->acceleration_threshold_m_s2 +
+                                    ACCEL_SPIKE_SIGMAS * sqrt(s->noise_a2);
         stillness(s, p, g, acc, dt);
         double steady_g = sqrt(s->pax * s->pax + s->pay * s->pay + s->paz * s->paz);
         int quick = fast || (s->at_rest && (maxd(steady_g - s->g_ref, s->g_ref - steady_g) <
@@ -331,8 +333,6 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
         s->acy = acy;
         s->acz = acz;
         double an_lp = sqrt(s->acx * s->acx + s->acy * s->acy + s->acz * s->acz);
-        int spike = deviation > p->acceleration_threshold_m_s2 +
-                                    ACCEL_SPIKE_SIGMAS * sqrt(s->noise_a2);
         double level = spike ? deviation : maxd(an_lp - s->g_ref, s->g_ref - an_lp);
         double decayed =
             s->accel_hold * (p->acceleration_hold_s / (p->acceleration_hold_s + dt));

@@ -379,6 +379,9 @@ def step(
         an = o.sqrt(ax * ax + ay * ay + az * az)
         s.g_ref = o.where(s.g_ref > 0.0, s.g_ref, p.gravity_m_s2)  # ‖g‖: prior, learned below
         deviation = o.maximum(an - s.g_ref, s.g_ref - an)  # | |a| - ‖g‖ |
+        # an impact: a single sample far above the noise of the last block (see the detector)
+        spike = deviation > p.acceleration_threshold_m_s2 + ACCEL_SPIKE_SIGMAS * o.sqrt(
+            s.noise_a2)
         _stillness(s, p, gyro, accel, dt, o)
         # at rest the block mean of the gyro is the bias, whatever the accelerometer says; but
         # the error path trusts the accelerometer only if |a| = ‖g‖: a steady linear
@@ -394,8 +397,6 @@ def step(
         s.acx, s.acy, s.acz = (s.acx + aw * (ax - s.acx), s.acy + aw * (ay - s.acy),
                                s.acz + aw * (az - s.acz))
         an_lp = o.sqrt(s.acx * s.acx + s.acy * s.acy + s.acz * s.acz)
-        spike = deviation > p.acceleration_threshold_m_s2 + ACCEL_SPIKE_SIGMAS * o.sqrt(
-            s.noise_a2)
         level = o.where(spike, deviation, o.maximum(an_lp - s.g_ref, s.g_ref - an_lp))
         decayed = s.accel_hold * (p.acceleration_hold_s / (p.acceleration_hold_s + dt))
         s.accel_hold = o.maximum(level, decayed)
