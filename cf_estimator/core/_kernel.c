@@ -324,8 +324,10 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
                                     ACCEL_SPIKE_SIGMAS * sqrt(s->noise_a2);
         stillness(s, p, g, acc, dt);
         double steady_g = sqrt(s->pax * s->pax + s->pay * s->pay + s->paz * s->paz);
-        int quick = fast || (s->at_rest && (maxd(steady_g - s->g_ref, s->g_ref - steady_g) <
-                                            p->acceleration_threshold_m_s2));
+        int quick = fast || (s->at_rest &&
+                             (maxd(steady_g - s->g_ref, s->g_ref - steady_g) <
+                              p->acceleration_threshold_m_s2) &&
+                             (s->noise_a2 < pow(p->acceleration_threshold_m_s2, 2.0)));
         double aw = s->last_n <= 1.0 ? 1.0 : dt / (ACCEL_LOWPASS_TIME_CONSTANT_S + dt);
         double acx = s->acx + aw * (ax - s->acx), acy = s->acy + aw * (ay - s->acy),
                acz = s->acz + aw * (az - s->acz);

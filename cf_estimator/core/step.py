@@ -387,8 +387,10 @@ def step(
         # the error path trusts the accelerometer only if |a| = ‖g‖: a steady linear
         # acceleration (constant accelerometer, still gyro: the 25 m/s manoeuvre) is not gravity
         steady_g = o.sqrt(s.pax * s.pax + s.pay * s.pay + s.paz * s.paz)  # last block's |a|
+        # ... and only without strong vibration: at startup_k1 it would pass into the attitude
         quick = fast | (s.at_rest & (o.maximum(steady_g - s.g_ref, s.g_ref - steady_g)
-                                     < p.acceleration_threshold_m_s2))
+                                     < p.acceleration_threshold_m_s2)
+                        & (s.noise_a2 < p.acceleration_threshold_m_s2 ** 2))
         # linear-acceleration detector: peak hold of | |a| - ‖g‖ |
         # linear-acceleration detector, blind to vibration: | |a| - ‖g‖ | of the accelerometer
         # low-passed over ACCEL_LOWPASS_TIME_CONSTANT_S, or of this very sample when it is a
