@@ -36,7 +36,6 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from cf_estimator.core import quaternion as quat
 from cf_estimator.core.filter import EXTRA_COLUMNS, ComplementaryFilter, state_extras
 from cf_estimator.core.params import FilterParams
 
