@@ -176,8 +176,10 @@ def test_cli_bench_broad_smoke(broad_dir, tmp_path, capsys):
                  "--quiet", "--trials", "01", "--peers", "none"]) == 0
     doc = json.loads(js.read_text())
     entry = doc["trials"]["01_undisturbed_tiny_A"]
-    assert set(entry) == {"cf_estimator_9d", "cf_estimator_6d"}
+    assert set(entry) == {"cf_estimator_9d", "cf_estimator_6d", "cf_estimator_offline_9d",
+                          "cf_estimator_offline_6d"}
     assert set(entry["cf_estimator_9d"]) == set(broad.METRICS)
+    assert set(entry["cf_estimator_offline_9d"]) == set(broad.METRICS)
     assert entry["cf_estimator_9d"]["total_rmse_deg"] < 2.0
     png = tmp_path / "per_trial.png"
     assert main(["bench", "broad", "--data", str(broad_dir), "--plot", str(png), "--jobs", "1",

@@ -341,3 +341,47 @@ def test_demo_prints_the_table_and_writes_its_files(tmp_path, capsys, monkeypatc
     s = json.loads((out / "demo_summary.json").read_text())
     assert set(s["errors"]) == {"shipped", "no_clip"}
     assert s["errors"]["shipped"]["roll"]["peak_arcmin"] > 0
+
+
+# -- offline ---------------------------------------------------------------------------------------
+
+
+def test_replay_offline_json_metadata_and_accuracy(bags, replayed, tmp_path, capsys):
+    import yaml
+
+    out, js = tmp_path / "out_offline", tmp_path / "offline.json"
+    assert main(["replay", str(bags["mcap"]), "-o", str(out), "--offline", "--json", str(js),
+                 "--reference-topic", TRUTH_TOPIC, "--no-progress"]) == 0
+    assert "mode    offline" in capsys.readouterr().out
+    s = json.loads(js.read_text())
+    assert s["mode"] == "offline" and s["offline"]["segments"] == 1
+    meta = yaml.safe_load((out / "metadata.yaml").read_text())
+    assert meta["rosbag2_bagfile_information"]["custom_data"]["cf_estimator.mode"] == "offline"
+    online = replayed["mcap"].summary
+    assert online["mode"] == "online"
+    # same topics and counts as the online replay; the estimate is at least as good
+    assert s["outputs_written"] == online["outputs_written"]
+    assert s["rmse_deg"]["inclination"] <= online["rmse_deg"]["inclination"]
+    imu = read_topics(out)["/imu/data"]
+    stamps = [m.msg.header.stamp.sec * 10**9 + m.msg.header.stamp.nanosec for m in imu]
+    assert stamps == sorted(stamps) and len(stamps) == online["messages_processed"]
+
+
+def test_replay_offline_splits_at_resets(tmp_path):
+    sc = make_scenario("flight", rate_hz=RATE_HZ, duration_s=DURATION_S, seed=SEED)
+    src = tmp_path / "gap_mcap"
+    write_scenario_bag(sc, src, storage="mcap")
+    # the same recording with a 10 s stamp gap in the middle: the pipeline resets there
+    from rosbags.highlevel import AnyReader
+
+    gapped = tmp_path / "gapped"
+    with AnyReader([src]) as reader, io.OutputBag(gapped) as bag:
+        for conn, t, raw in reader.messages():
+            msg = reader.deserialize(raw, conn.msgtype)
+            if t > reader.start_time + 10 * 10**9:  # every topic, stamps and log times
+                msg.header.stamp.sec += 10
+                t += 10 * 10**9
+            bag.write(conn.topic, conn.msgtype, t, msg)
+    r = replay_bag(gapped, None, options=ReplayOptions(offline=True, progress=False))
+    assert r.summary["resets"] and r.summary["offline"]["segments"] == 2
+    assert np.all(np.isfinite(r.series.q_wxyz))

@@ -460,6 +460,10 @@ class OutputBag:
             )
             self.counts.setdefault(topic, 0)
 
+    def set_custom_data(self, key: str, value: str) -> None:
+        """A ``custom_data`` entry of the bag's metadata.yaml (e.g. ``cf_estimator.mode``)."""
+        self._writer.set_custom_data(key, value)
+
     def write(self, topic: str, msgtype: str, log_time_ns: int, msg: Any) -> None:
         """Serialize (CDR, Jazzy) and write one message at ``log_time_ns``."""
         key = (topic, msgtype)

@@ -18,6 +18,7 @@ With a reference topic the estimate is scored against it (see :func:`error_stati
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import sys
@@ -32,7 +33,7 @@ import numpy as np
 from cf_estimator import __version__, metrics
 from cf_estimator.bag import io
 from cf_estimator.core import quaternion as quat
-from cf_estimator.core.filter import bias_sigma
+from cf_estimator.core.filter import ComplementaryFilter, bias_sigma
 from cf_estimator.core.kernel import resolve_backend
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import BIAS_CONVERGED_SIGMA_RAD_S
@@ -60,6 +61,7 @@ class ReplayOptions:
     overwrite: bool = False
     heading_alignment: str = "auto"
     progress: bool | None = None  #: None: a tqdm bar on stderr only when stderr is a terminal
+    offline: bool = False  #: write the offline (acausal) estimate (_offline_orientations)
 
 
 @dataclass
@@ -279,6 +281,60 @@ class ReplayVariant:
 _BIAS_SAMPLE_PERIOD_S = 0.02
 
 
+class _RecordingFilter(ComplementaryFilter):
+    """The pipeline's filter, recording what the pipeline passes it (accepted samples only) and
+    where it resets: the offline replay runs :mod:`cf_estimator.core.offline` on them."""
+
+    def __init__(self, params: FilterParams) -> None:
+        super().__init__(params)
+        self.rows: list[tuple[float, ...]] = []  #: gyro (3), accel (3), mag (3, NaN = none)
+        self.starts: list[int] = [0]  #: row index of each reset
+        self._in_update = False
+
+    def reset(self) -> None:
+        super().reset()
+        # a reset by the pipeline (not the one inside initialisation) starts a segment
+        if getattr(self, "rows", None) and not self._in_update and \
+                self.starts[-1] != len(self.rows):
+            self.starts.append(len(self.rows))
+
+    def update(self, gyro_rad_s: Any, accel_m_s2: Any, dt_s: float, mag: Any = None) -> Any:
+        m = tuple(mag) if mag is not None else (math.nan, math.nan, math.nan)
+        self.rows.append((*gyro_rad_s, *accel_m_s2, *m))
+        self._in_update = True
+        try:
+            return super().update(gyro_rad_s, accel_m_s2, dt_s, mag)
+        finally:
+            self._in_update = False
+
+
+def _offline_orientations(t_s: np.ndarray, rec: _RecordingFilter, params: FilterParams,
+                          max_dt_s: float) -> tuple[np.ndarray, int]:
+    """((N, 4) offline q_world_from_sensor per processed message, number of segments): the
+    pipeline's accepted samples, split at its resets and at gaps over ``max_dt_s`` (where it
+    did not integrate), each segment through :func:`cf_estimator.core.offline.smooth_segment`."""
+    from cf_estimator.core.filter import EXTRA_COLUMNS
+    from cf_estimator.core.offline import smooth_segment
+
+    rows = np.asarray(rec.rows, dtype=float).reshape(-1, 9)
+    n = rows.shape[0]
+    q = np.full((n, 4), np.nan)
+    bounds = set(rec.starts) | {0, n}
+    if n > 1:
+        bounds |= set((np.flatnonzero(np.diff(t_s) > max_dt_s) + 1).tolist())
+    edges = sorted(bounds)
+    use_mag = params.use_mag and bool(np.any(np.isfinite(rows[:, 6])))
+    count = 0
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        if b <= a:
+            continue
+        count += 1
+        g, acc = np.ascontiguousarray(rows[a:b, 0:3]), np.ascontiguousarray(rows[a:b, 3:6])
+        mg = np.ascontiguousarray(rows[a:b, 6:9]) if use_mag else None
+        smooth_segment(g, acc, mg, t_s[a:b], params, q[a:b], np.zeros((b - a, EXTRA_COLUMNS)))
+    return q, count
+
+
 class _Run:
     """The per-variant state of a replay pass: pipeline, output bag, collected series."""
 
@@ -307,6 +363,13 @@ class _Run:
         self.n_diag = 0
         self.next_diag_ns: int | None = None
         self.copy_inputs = opts.copy_inputs
+        self.offline = opts.offline
+        self.held: list[tuple[int, str, str, Any]] = []  #: offline: outputs written at the end
+        self.outputs: list[tuple[int, Any]] = []
+        self.offline_segments = 0
+        if self.offline:
+            self.recorder = _RecordingFilter(self.fparams)
+            self.pipe._filter = self.recorder  # noqa: SLF001 - same filter, recording its input
         if self.out_path is not None:
             self.bag = io.OutputBag(self.out_path, storage=opts.storage, overwrite=opts.overwrite)
             self.bag.add_topic(OUT_IMU_TOPIC, io.IMU_TYPE)
@@ -316,6 +379,7 @@ class _Run:
             if opts.copy_inputs:
                 for t in topics:
                     self.bag.add_topic(t, types[t] or "")
+            self.bag.set_custom_data("cf_estimator.mode", "offline" if self.offline else "online")
 
     def tick(self, log_ns: int) -> None:
         """The node's diagnostics timer (bag clock): one report per elapsed period."""
@@ -325,8 +389,13 @@ class _Run:
         if log_ns >= self.next_diag_ns:
             if self.bag is not None:
                 report = self.pipe.diagnostics(self.next_diag_ns * 1e-9)
-                self.bag.write(OUT_DIAGNOSTICS_TOPIC, io.DIAGNOSTIC_ARRAY_TYPE, self.next_diag_ns,
-                               io.diagnostics_message(self.next_diag_ns, [report]))
+                msg = io.diagnostics_message(self.next_diag_ns, [report])
+                if self.offline:
+                    self.held.append((self.next_diag_ns, OUT_DIAGNOSTICS_TOPIC,
+                                      io.DIAGNOSTIC_ARRAY_TYPE, msg))
+                else:
+                    self.bag.write(OUT_DIAGNOSTICS_TOPIC, io.DIAGNOSTIC_ARRAY_TYPE,
+                                   self.next_diag_ns, msg)
             self.n_diag += 1
             missed = (log_ns - self.next_diag_ns) // self.period_ns
             self.next_diag_ns += self.period_ns * (missed + 1)
@@ -336,7 +405,9 @@ class _Run:
         if out is None:
             return
         bag = self.bag
-        if bag is not None:
+        if self.offline:
+            self.outputs.append((log_ns, out))
+        elif bag is not None:
             bag.write(OUT_IMU_TOPIC, io.IMU_TYPE, log_ns, io.imu_from_output(out))
             if self.publish_rpy and out.rpy_rad is not None:
                 bag.write(OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE, log_ns, io.rpy_from_output(out))
@@ -364,6 +435,33 @@ class _Run:
                 if text not in self._seen:
                     self._seen.add(text)
                     self.warnings.append(text)
+
+    def finish_offline(self) -> None:
+        """Offline: replace every output's orientation by the offline estimate, then write the
+        held outputs and diagnostics in log-time order."""
+        t = np.asarray(self.t, dtype=float)
+        q, self.offline_segments = _offline_orientations(t, self.recorder, self.fparams,
+                                                         self.pparams.max_dt_s)
+        self.q = [tuple(r) if np.all(np.isfinite(r)) else None for r in q.tolist()]
+        rpy = quat.to_euler(q)
+        self.rpy = [tuple(r) if np.all(np.isfinite(r)) else None for r in rpy.tolist()]
+        for (log_ns, out), qi, ri in zip(self.outputs, self.q, self.rpy, strict=True):
+            if qi is not None:
+                w, x, y, z = qi
+                out = dataclasses.replace(out, orientation_xyzw=(x, y, z, w), rpy_rad=ri)
+            self.held.append((log_ns, OUT_IMU_TOPIC, io.IMU_TYPE, out))
+        self.outputs = []
+        bag = self.bag
+        if bag is not None:
+            for log_ns, topic, msgtype, item in sorted(self.held, key=lambda h: h[0]):
+                if topic == OUT_IMU_TOPIC:
+                    bag.write(topic, msgtype, log_ns, io.imu_from_output(item))
+                    if self.publish_rpy and item.rpy_rad is not None:
+                        bag.write(OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE, log_ns,
+                                  io.rpy_from_output(item))
+                else:
+                    bag.write(topic, msgtype, log_ns, item)
+        self.held = []
 
     def abort(self) -> None:
         if self.bag is not None:
@@ -484,6 +582,14 @@ def replay_variants(
                 r.abort()
             raise
         progress.close()
+        try:
+            for r in runs:
+                if r.offline:
+                    r.finish_offline()
+        except BaseException:
+            for r in runs:
+                r.abort()
+            raise
         for r in runs:
             if r.bag is not None:
                 r.bag.commit()
@@ -505,6 +611,7 @@ def replay_variants(
         mag_in_use = mag_topic is not None and r.fparams.use_mag
         summary: dict[str, Any] = {
             "variant": r.variant.name,
+            "mode": "offline" if r.offline else "online",
             "input": str(in_path),
             "input_format": in_format,
             "output": str(r.out_path) if r.out_path is not None else None,
@@ -532,6 +639,11 @@ def replay_variants(
             "still_fraction": float(np.mean(series.at_rest[init])) if init.any() else None,
             "counters": counters,
             "warnings": r.warnings,
+            **({"offline": {"segments": r.offline_segments,
+                            "note": "orientations from cf_estimator.core.offline (acausal); "
+                                    "the pipeline's guards chose the samples; /diagnostics "
+                                    "and the bias report the online filter"}}
+               if r.offline else {}),
             # what reproduces the run: the effective parameters, the version, the backend
             "parameters": {"filter": as_dict(r.fparams), "pipeline": as_dict(r.pparams)},
             "version": __version__,

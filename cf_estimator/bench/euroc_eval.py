@@ -58,6 +58,12 @@ def _ours_online(flight: Flight, params: FilterParams) -> np.ndarray:
                     params=p).quaternion
 
 
+def _ours_offline(flight: Flight, params: FilterParams) -> np.ndarray:
+    p = dataclasses.replace(params, use_mag=False)
+    return estimate(flight.gyro_rad_s, flight.accel_m_s2, None, timestamps_s=flight.t_s,
+                    params=p, offline=True).quaternion
+
+
 def _peer(name: str) -> Runner:
     from cf_estimator.bench import peers
 
@@ -87,6 +93,7 @@ def register(algorithm: Algorithm) -> None:
 
 
 register(Algorithm("cf_estimator", _ours_online, ours=True))
+register(Algorithm("cf_estimator_offline", _ours_offline, ours=True))
 for _name, _package in (("vqf", "vqf"), ("vqf_offline", "vqf"), ("madgwick", "ahrs"),
                         ("fusion", "imufusion"), ("riann", "riann")):
     register(Algorithm(_name, _peer(_name), _package))
@@ -115,6 +122,9 @@ def select_peers(names: Sequence[str]) -> tuple[list[str], list[str]]:
     for n in names:
         if n not in valid:
             raise ValueError(f"unknown peer {n!r}; valid: {', '.join(valid)}, all, none")
+    # a peer with an offline mode runs in both modes, as ours does (vqf → vqf, vqf_offline)
+    names = list(dict.fromkeys(m for n in names
+                               for m in ((n, f"{n}_offline") if f"{n}_offline" in valid else (n,))))
     run = [n for n in names if installed(ALGORITHMS[n])]
     return run, [n for n in names if n not in run]
 

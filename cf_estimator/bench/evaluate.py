@@ -1,8 +1,10 @@
 """Run our filter and the peers over BROAD trials and collect the metrics (one process per trial).
 
 Algorithm names: ``cf_estimator_9d``/``cf_estimator_6d`` (our filter with the given parameters;
-9-D forces ``use_mag`` on, 6-D off) and ``<peer>_9d``/``<peer>_6d`` for the peers of
-:mod:`cf_estimator.bench.peers` at their defaults.
+9-D forces ``use_mag`` on, 6-D off), ``cf_estimator_offline_9d``/``_6d`` (the same parameters
+through the offline estimator, :mod:`cf_estimator.core.offline`) and ``<peer>_9d``/``<peer>_6d``
+for the peers of :mod:`cf_estimator.bench.peers` at their defaults; a peer with an offline mode
+(VQF) also gives ``<peer>_offline_9d``/``_6d``.
 """
 
 from __future__ import annotations
@@ -21,18 +23,20 @@ from cf_estimator.core.batch import estimate
 from cf_estimator.core.params import FilterParams
 
 OURS = "cf_estimator"
+OURS_OFFLINE = "cf_estimator_offline"
 DIMS = ("9d", "6d")
 
 
-def run_ours(trial: broad.Trial, params: FilterParams, dims: Sequence[str] = DIMS
-             ) -> dict[str, np.ndarray]:
-    """Our filter over a trial: ``{"9d": q, "6d": q}`` (q_ENU_from_sensor, NaN before init)."""
+def run_ours(trial: broad.Trial, params: FilterParams, dims: Sequence[str] = DIMS,
+             offline: bool = False) -> dict[str, np.ndarray]:
+    """Our filter over a trial: ``{"9d": q, "6d": q}`` (q_ENU_from_sensor, NaN before init);
+    ``offline``: the offline estimator."""
     out = {}
     for d in dims:
         p = dataclasses.replace(params, use_mag=(d == "9d"))
         mag = trial.mag_ut if d == "9d" else None
         out[d] = estimate(trial.gyro_rad_s, trial.accel_m_s2, mag, rate_hz=trial.rate_hz,
-                          params=p).quaternion
+                          params=p, offline=offline).quaternion
     return out
 
 
@@ -53,11 +57,20 @@ def evaluate_trial(path: str | os.PathLike, info: Mapping, params: FilterParams,
 
     for d, q in run_ours(trial, params, dims).items():
         score(OURS, d, q)
+    for d, q in run_ours(trial, params, dims, offline=True).items():
+        score(OURS_OFFLINE, d, q)
     runners = peer_mod.runners()
     for p in peers:
         for d, q in runners[p](trial.gyro_rad_s, trial.accel_m_s2, trial.mag_ut, trial.rate_hz,
                                tuple(dims)).items():
             score(p, d, q)
+        if p == "vqf":  # the peer's own offline mode, same run
+            out = peer_mod.run_vqf_offline(trial.gyro_rad_s, trial.accel_m_s2,
+                                           trial.mag_ut if "9d" in dims else None,
+                                           trial.rate_hz)
+            for d in dims:
+                if d in out:
+                    score("vqf_offline", d, out[d])
     return trial.name, trial.groups, results
 
 

@@ -217,7 +217,8 @@ def run_broad(args: Any) -> int:
         result = evaluate_all(paths, info, params, peers, jobs=args.jobs, progress=progress)
     except broad.BroadDataError as exc:
         raise CliError(str(exc)) from None
-    algos = ", ".join(["cf_estimator"] + peers)
+    algos = ", ".join(["cf_estimator", "cf_estimator_offline"]
+                      + [q for p in peers for q in ((p, "vqf_offline") if p == "vqf" else (p,))])
     print(f"BROAD: {len(paths)} trial(s) from {args.data}; RMSE [deg] over movement samples, "
           f"mean over trials; {algos}")
     print(f"cf_estimator parameters: {args.params or 'shipped defaults'}")

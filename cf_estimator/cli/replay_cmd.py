@@ -55,6 +55,10 @@ def register(subparsers: Any) -> None:
                    help="unknown constant heading offset of the reference: none, first (match the "
                         "first scored sample), mean (circular mean); auto = none with a "
                         "magnetometer, first without (default)")
+    p.add_argument("--offline", action="store_true",
+                   help="write the offline (acausal) estimate: every sample uses the whole "
+                   "recording (forward and backward passes; docs/offline.md); same topics, "
+                   "marked offline in the JSON summary and the bag's metadata")
     p.add_argument("--storage", choices=sorted(io.STORAGES), default="mcap",
                    help="output storage plugin (default mcap)")
     p.add_argument("--copy-inputs", action="store_true",
@@ -125,6 +129,8 @@ def print_summary(s: dict[str, Any], out: Any = None) -> None:
     rate = s.get("imu_rate_hz")
     rate_text = f"{rate:.1f} Hz" if rate else "n/a"
     topics = s["topics"]
+    if s.get("mode") == "offline":
+        print(f"mode    offline (acausal), {s['offline']['segments']} segment(s)", file=out)
     print(f"input   {s['input']} ({s['input_format']}): {s['messages_in']} IMU on "
           f"{topics['imu']}, {s['mag_messages_in']} mag on {topics['mag'] or '-'}, "
           f"{s['duration_s']:.1f} s of stamps, {rate_text}", file=out)
@@ -177,6 +183,7 @@ def run(args: argparse.Namespace) -> int:
         imu_topic=args.imu_topic, mag_topic=args.mag_topic, reference_topic=args.reference_topic,
         storage=args.storage, copy_inputs=args.copy_inputs, overwrite=args.overwrite,
         heading_alignment=args.heading_alignment, progress=args.progress,
+        offline=args.offline,
     )
     try:
         result = replay_bag(args.bag, args.output, fparams, pparams, opts)

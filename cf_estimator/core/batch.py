@@ -133,22 +133,30 @@ def estimate(
     params: FilterParams | None = None,
     initial_orientation: Sequence[float] | None = None,
     backend: str | None = None,
+    offline: bool = False,
 ) -> EstimateResult:
     """Run the filter over a recording.
 
     gyro_rad_s, accel_m_s2, mag: (N, 3) in the sensor frame (mag in any unit; NaN rows =
     no sample). Give ``rate_hz`` or ``timestamps_s`` [s]. ``initial_orientation`` (w, x, y, z),
     if given, replaces the initialisation from the first samples. ``backend``: see
-    :mod:`cf_estimator.core.kernel`.
+    :mod:`cf_estimator.core.kernel`. ``offline``: the acausal estimate of
+    :mod:`cf_estimator.core.offline` (every sample uses the whole recording; intervals over
+    ``OFFLINE_MAX_GAP_S`` and non-finite gyro rows split it into segments).
     """
     gyro, acc, mg = _rows(gyro_rad_s, accel_m_s2, mag)
     n = gyro.shape[0]
     t = sample_times(n, rate_hz, timestamps_s)
     f = ComplementaryFilter(params, initial_orientation=initial_orientation, backend=backend)
     warn_units(gyro, acc, f.params.gravity_m_s2)  # deg/s or g: warned once per call site
-    out_q = np.full((n, 4), np.nan)
-    extra = np.zeros((n, EXTRA_COLUMNS))
-    _run_filter(f, gyro, acc, mg, t, out_q, extra)
+    if offline:
+        from cf_estimator.core.offline import estimate_offline
+
+        out_q, extra = estimate_offline(gyro, acc, mg, t, f.params, initial_orientation, backend)
+    else:
+        out_q = np.full((n, 4), np.nan)
+        extra = np.zeros((n, EXTRA_COLUMNS))
+        _run_filter(f, gyro, acc, mg, t, out_q, extra)
     return EstimateResult(
         t, out_q, extra[:, 0:3], extra[:, 6] != 0.0, extra[:, 3:6],
         extra[:, 7].astype(np.int8), extra[:, 8] != 0.0, extra[:, 9].astype(np.int8),

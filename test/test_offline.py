@@ -1,0 +1,119 @@
+"""Offline (acausal) estimation: estimate(..., offline=True), cf_estimator.core.offline."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cf_estimator import metrics
+from cf_estimator.core import offline
+from cf_estimator.core import quaternion as quat
+from cf_estimator.core.batch import estimate
+from cf_estimator.core.params import FilterParams
+from cf_estimator.scenarios import make_scenario
+
+
+def _tilt_deg(q: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
+    return np.degrees(metrics.tilt_error_rad(q, q_ref))
+
+
+@pytest.fixture(scope="module")
+def uav():
+    return make_scenario("uav", seed=0)
+
+
+def test_offline_better_than_online_at_start_and_overall(uav):
+    imu, truth = uav.imu, uav.truth.q_world_from_body
+    t = imu.t_s
+    on = estimate(imu.gyro_rad_s, imu.accel_m_s2, None, timestamps_s=t)
+    off = estimate(imu.gyro_rad_s, imu.accel_m_s2, None, timestamps_s=t, offline=True)
+    assert np.all(np.isfinite(off.quaternion))  # from the first sample on
+    e_on, e_off = _tilt_deg(on.quaternion, truth), _tilt_deg(off.quaternion, truth)
+    start = t < 1.0
+    # the online filter starts without the (large) gyro bias; offline knows it from sample 0
+    assert np.max(e_off[start]) < 0.5 * np.max(e_on[start])
+    late = ~start
+    rms = lambda e: float(np.sqrt(np.mean(e[late] ** 2)))  # noqa: E731
+    assert rms(e_off) < 0.9 * rms(e_on)
+
+
+def test_time_reversal(uav):
+    imu = uav.imu
+    t = imu.t_s
+    g, a = imu.gyro_rad_s, imu.accel_m_s2
+    gr, ar, _, _ = offline.reverse_rows(g, a, None, np.diff(t, prepend=t[0]))
+    q = estimate(g, a, None, timestamps_s=t, offline=True).quaternion
+    q_rev = estimate(gr, ar, None, timestamps_s=-t[::-1], offline=True).quaternion[::-1]
+    d = _tilt_deg(q, q_rev)
+    assert np.max(d) < 0.1  # measured 0.015 deg
+
+
+def test_reverse_rows_undoes_pure_integration():
+    sc = make_scenario("flight", seed=3, duration_s=30.0)
+    t, g = sc.imu.t_s, sc.imu.gyro_rad_s
+    dt = np.diff(t, prepend=t[0])
+    p = FilterParams(k1=1e-9, k2=0.0, startup_k1=1e-9, bias_learning_k2=0.0,
+                     rest_bias_learning=False, use_mag=False, startup_duration_s=0.0)
+    q = np.empty((len(t), 4))
+    offline._pass(p, g, sc.imu.accel_m_s2, None, dt, q, None, (1.0, 0.0, 0.0, 0.0))
+    gr, ar, _, dtr = offline.reverse_rows(g, sc.imu.accel_m_s2, None, dt)
+    qr = np.empty_like(q)
+    offline._pass(p, gr, ar, None, dtr, qr, None, q[-1])
+    assert np.max(_tilt_deg(q, qr[::-1])) < 1e-4
+
+
+def test_online_and_offline_agree_in_undisturbed_steady_state():
+    sc = make_scenario("static", seed=0)
+    imu = sc.imu
+    on = estimate(imu.gyro_rad_s, imu.accel_m_s2, imu.mag_T, timestamps_s=imu.t_s)
+    off = estimate(imu.gyro_rad_s, imu.accel_m_s2, imu.mag_T, timestamps_s=imu.t_s,
+                   offline=True)
+    steady = imu.t_s > 10.0
+    diff = np.degrees(quat.angle_between(on.quaternion[steady], off.quaternion[steady]))
+    assert np.max(diff) < 0.2
+
+
+def test_segments_split_at_gaps_and_invalid_gyro():
+    t = np.concatenate([np.arange(100) * 0.01, 10.0 + np.arange(50) * 0.01])
+    g = np.zeros((150, 3))
+    g[120] = np.nan
+    assert offline.segments(t, g) == [(0, 100), (100, 120), (121, 150)]
+    assert offline.segments(t, np.zeros((150, 3)), max_gap_s=20.0) == [(0, 150)]
+
+
+def test_a_gap_processes_each_segment_on_its_own():
+    sc = make_scenario("flight", seed=1, duration_s=40.0)
+    imu = sc.imu
+    n = len(imu.t_s)
+    cut = n // 2
+    t = imu.t_s.copy()
+    t[cut:] += 3.0  # a 3 s gap: the gyro rate over it is unknown
+    g, a = imu.gyro_rad_s.copy(), imu.accel_m_s2
+    g[cut + 10] = np.nan  # an invalid row: no output, splits again
+    off = estimate(g, a, None, timestamps_s=t, offline=True)
+    assert np.all(np.isnan(off.quaternion[cut + 10]))
+    first = estimate(g[:cut], a[:cut], None, timestamps_s=t[:cut], offline=True)
+    last = estimate(g[cut + 11:], a[cut + 11:], None, timestamps_s=t[cut + 11:], offline=True)
+    np.testing.assert_allclose(off.quaternion[:cut], first.quaternion, atol=1e-12)
+    np.testing.assert_allclose(off.quaternion[cut + 11:], last.quaternion, atol=1e-12)
+
+
+def test_chunked_backward_pass_equals_one_chunk(monkeypatch):
+    sc = make_scenario("flight", seed=2, duration_s=30.0)
+    imu = sc.imu
+    args = (imu.gyro_rad_s, imu.accel_m_s2, imu.mag_T)
+    one = estimate(*args, timestamps_s=imu.t_s, offline=True).quaternion
+    monkeypatch.setattr(offline, "CHUNK_ROWS", 1000)
+    many = estimate(*args, timestamps_s=imu.t_s, offline=True).quaternion
+    np.testing.assert_allclose(one, many, atol=1e-12)
+
+
+def test_offline_result_shape_and_signals(uav):
+    imu = uav.imu
+    r = estimate(imu.gyro_rad_s[:2000], imu.accel_m_s2[:2000], imu.mag_T[:2000],
+                 timestamps_s=imu.t_s[:2000], offline=True)
+    assert r.quaternion.shape == (2000, 4) and r.gyro_bias_rad_s.shape == (2000, 3)
+    np.testing.assert_allclose(np.linalg.norm(r.quaternion, axis=1), 1.0, atol=1e-12)
+    # the bias is known from the first sample: close to the truth there already
+    err = np.linalg.norm(r.gyro_bias_rad_s[0] - imu.gyro_bias_rad_s[0])
+    assert err < 0.2 * np.linalg.norm(imu.gyro_bias_rad_s[0])
