@@ -22,8 +22,8 @@ from cf_estimator.core import design
 from cf_estimator.core.axis import AxisFilter, AxisParams
 from cf_estimator.core.params import FilterParams
 
-K1, K2 = 0.03, 0.001  # seed 000's gains
-DRIFT = 5e-4  # seed 000's drift angular velocity [rad/s]
+K1, K2 = 0.03, 0.001  # Ryzhkov & Karpenko's gains
+DRIFT = 5e-4  # Ryzhkov & Karpenko's drift angular velocity [rad/s]
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -36,7 +36,7 @@ def simulate(params: AxisParams, gyro: np.ndarray | float, accel_angle: np.ndarr
                                                            strict=True)])
 
 
-# ---------------------------------------------------------------- loop parameters (seed 000)
+# -------------------------------------------------------- loop parameters (Ryzhkov & Karpenko)
 
 
 def test_natural_frequency_and_period_seed_000():
@@ -91,7 +91,7 @@ def test_settling_time_exact_matches_simulation():
     assert (outside[-1] + 1) * dt == pytest.approx(ts, abs=1.0)
 
 
-# ------------------------------------------------------------------------ drift (seed 000)
+# ------------------------------------------------------------------ drift (Ryzhkov & Karpenko)
 
 
 def test_impulse_peak_17_7_s():
@@ -147,7 +147,7 @@ def test_drift_peak_with_aperiodic_unit():
         design.drift_peak_error_rad(K1, K2, DRIFT, 30.0)
 
 
-# ---------------------------------------------------------------- acceleration (seed 000)
+# ---------------------------------------------------------------- acceleration (Ryzhkov & Karpenko)
 
 
 def test_accel_event_seed_000():
@@ -199,7 +199,7 @@ def test_accel_event_with_aperiodic_unit_agrees_with_axis_filter():
         design.accel_event_peak_error_rad(K1, K2, 0.2, 5.0, 3.0), rel=0.01)
 
 
-# ------------------------------------------------------------------- vibration (seed 000)
+# ------------------------------------------------------------------- vibration (Ryzhkov & Karpenko)
 
 
 def test_vibration_seed_000():
@@ -227,7 +227,7 @@ def test_vibration_agrees_with_axis_filter():
     assert amplitude == pytest.approx(design.vibration_peak_error_rad(K1, K2, 0.1, f), rel=0.05)
 
 
-# ------------------------------------------------------- thesis first-order filter (seed 003)
+# ------------------------------------------------------- thesis first-order filter (Habliuk 2023)
 
 
 def alpha_filter(accel_angle: np.ndarray, gyro: float, tau: float, dt: float) -> np.ndarray:
@@ -257,7 +257,8 @@ def test_thesis_first_order_acceleration_error():
     sim = np.abs(alpha_filter(accel, 0.0, 100.0, dt)).max()
     assert math.degrees(sim) == pytest.approx(exact, rel=0.01)
     assert abs(math.degrees(sim) - approx) > 0.05
-    # The same filter is AxisFilter with k1 = 1/T, k2 = 0 (seed 001 alpha = 1/(1 + k1 dt)).
+    # The same filter is AxisFilter with k1 = 1/T, k2 = 0 (Komplementär-Filter notes:
+    # alpha = 1/(1 + k1 dt)).
     axis = simulate(AxisParams(k1=0.01, k2=0.0), 0.0, accel, dt)
     assert np.abs(axis).max() == pytest.approx(sim, rel=1e-9)
 
@@ -311,8 +312,9 @@ def test_clipped_accel_error_agrees_with_axis_filter():
 
 
 def test_clipped_recovery_time():
-    # gamma0 = 0.1 rad (seed 000's initial angle), L = 0.02 rad: 0.1/(0.03*0.02) = 166.7 s with
-    # the proportional path alone (checked with k2 = 0); the integral shortens it to 74.4 s.
+    # gamma0 = 0.1 rad (Ryzhkov & Karpenko's initial angle), L = 0.02 rad: 0.1/(0.03*0.02) =
+    # 166.7 s with the proportional path alone (checked with k2 = 0); the integral shortens it
+    # to 74.4 s.
     t_p = design.clipped_recovery_time_s(K1, 0.02, 0.1)
     assert t_p == pytest.approx(166.67, abs=0.01)
     dt = 0.05
@@ -329,7 +331,7 @@ def test_clipped_recovery_time():
     assert err.min() < -0.005
 
 
-# ---------------------------------------------------------------------- thesis check (seed 003)
+# ---------------------------------------------------------------------- thesis check (Habliuk 2023)
 
 
 def test_thesis_limits():

@@ -1,4 +1,4 @@
-"""Scenarios: truth, sensor models and the thesis disturbances (seed 003) behave as specified."""
+"""Scenarios: truth, sensor models and the thesis disturbances (Habliuk 2023) behave as said."""
 
 from __future__ import annotations
 

@@ -18,7 +18,7 @@ from cf_estimator.core.axis import AxisFilter, AxisParams
 from cf_estimator.core.filter import ComplementaryFilter
 from cf_estimator.core.params import FilterParams
 
-K1, K2 = 0.03, 0.001  # seed 000's choice, "k1 = 0,03 s^-1; k2 = 0,001 s^-2"
+K1, K2 = 0.03, 0.001  # Ryzhkov & Karpenko's choice, "k1 = 0,03 s^-1; k2 = 0,001 s^-2"
 DT = 0.01
 
 
@@ -101,7 +101,7 @@ def test_seed001_alpha_filter_is_backward_euler_of_the_proportional_loop():
         phi = alpha * (phi + DT * w) + (1 - alpha) * a
         ref.append(phi)
     assert np.max(np.abs(ours - np.array(ref))) < 1e-12
-    tau = 1.0 / k1  # seed 001: α = τ/(τ+T) is the same number
+    tau = 1.0 / k1  # Komplementär-Filter notes: α = τ/(τ+T) is the same number
     assert alpha == pytest.approx(tau / (tau + DT), rel=1e-15)
 
 
@@ -117,7 +117,7 @@ def test_seed003_aperiodic_unit_after_clip_is_stable_only_below_k1_over_k2():
         assert grew != stable
 
 
-# ---- seed 004: drift about the vertical is not observable by the accelerometer ----------------
+# ---- Ryzhkov, drift: drift about the vertical is not observable by the accelerometer --------
 
 OMEGA = np.array([1e-4, 3e-4, 4e-4])  # "ω_x = 1e-4 1/s; ω_y = 3e-4; ω_z = 4e-4"
 PSI, THETA, PHI = np.radians([10.0, 20.0, 30.0])

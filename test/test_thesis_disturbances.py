@@ -1,4 +1,4 @@
-"""The thesis's disturbances in 3-D (seed 003): the saturation unit is what meets the ±90′ limit.
+"""The thesis's disturbances in 3-D (Habliuk 2023): the saturation unit meets the ±90′ limit.
 
 Simulated with realistic gyro noise and bias, accelerometer noise and bias, and real tilt motion
 (cf_estimator.scenarios): 60 unipolar 15 g impacts of 10–15 ms at 80/min; 6 g vibration swept

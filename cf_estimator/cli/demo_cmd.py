@@ -38,7 +38,7 @@ SCENARIO = "thesis"
 #: shortest flight holding all three disturbances. 55 000 samples per run keep the demo short.
 DEMO_RATE_HZ = 500.0
 DEMO_DURATION_S = 110.0
-LIMIT_ARCMIN = 90.0  # thesis (seed 003): +-90' under impacts and vibration
+LIMIT_ARCMIN = 90.0  # thesis (Habliuk 2023): +-90' under impacts and vibration
 SCORE_FROM_S = 2.0  # skip the start-up phase (2 s on the ground, high gain)
 BAG_NAME = "thesis_flight"
 PLOT_NAME = "demo_errors.png"

@@ -1,4 +1,4 @@
-"""One-axis reference form of the compensation scheme (seed 000, with the thesis's error path).
+"""One-axis reference form of the compensation scheme (Ryzhkov & Karpenko; thesis error path).
 
 Block diagram, per sample (this is the form that reproduces the seeds' numbers)::
 
@@ -8,9 +8,9 @@ Block diagram, per sample (this is the form that reproduces the seeds' numbers):
                │                           ▼
                └── W1(s) ◄── 1/(T s+1) ◄── sat(±L)
 
-    W1(s) = k1 + k2/s + k3/s²  (seed 000: k3 = 0; seed 004 adds k3 and a second channel)
+    W1(s) = k1 + k2/s + k3/s²  (Ryzhkov & Karpenko: k3 = 0; Ryzhkov, drift: k3, second channel)
 
-An optional second measured angle (the magnetometer, seed 004) enters through its own error
+An optional second measured angle (the magnetometer, Ryzhkov, drift) enters through its own error
 e_m = γ̂ − γ_mag and regulator W2(s) = r1 + r2/s, so that the error obeys
 δ = s²/A·δ1 + (k1 s² + k2 s + k3)/A·δ2 + (r1 s + r2) s/A·δ3 with
 A(s) = s³ + (k1+r1)s² + (k2+r2)s + k3.
@@ -20,7 +20,7 @@ the gyro corrected by the integral states, γ⁻ = γ̂ + (ω − z)·dt; form t
 prediction; saturate; aperiodic unit by backward Euler f ← f + dt/(T+dt)·(sat(e) − f); integral
 states by backward Euler (z ← z + k2·dt·f, used from the next sample on); correct
 γ̂ = γ⁻ − g·f with g = k1·dt/(1 + k1·dt), the backward-Euler gain of the proportional path.
-With k2 = k3 = 0, no saturation and T = 0 this is exactly seed 001's
+With k2 = k3 = 0, no saturation and T = 0 this is exactly Komplementär-Filter notes's
 γ̂ₙ = α(γ̂ₙ₋₁ + dt·ω) + (1 − α)·γ_acc with α = 1/(1 + k1·dt); for small dt all paths converge to
 the continuous transfer functions above.
 """

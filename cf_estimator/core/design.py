@@ -1,11 +1,11 @@
-"""Design formulas of the compensation scheme (seed 000) and the thesis checks (seed 003).
+"""Design formulas of the compensation scheme (Ryzhkov & Karpenko), thesis checks (Habliuk 2023).
 
 Pure functions, no ROS. Units: gains k1 [1/s], k2 [1/s²]; angles [rad]; rates [rad/s];
 times [s]; frequencies [rad/s] unless the name says ``_hz``; accelerations as ``a_over_g``
 (dimensionless; the seeds' small-angle convention: a/g of 0.2 is an accelerometer angle error of
 0.2 rad = 11.46°).
 
-The 1-axis loop with the PI regulator W(s) = k1 + k2/s has the error (seed 000, eq. (5))::
+The 1-axis loop with the PI regulator W(s) = k1 + k2/s has the error (Ryzhkov & Karpenko, eq. (5))::
 
     δ = s/D·δ1 + (k1 s + k2)/D·δ2 − s²/D·γ0,      D(s) = s² + k1 s + k2
 
@@ -51,7 +51,7 @@ ARCMIN_PER_RAD = 180.0 * 60.0 / math.pi
 #: 1 °/h in rad/s.
 RAD_S_PER_DEG_H = math.pi / 180.0 / 3600.0
 
-#: Thesis (seed 003) accuracy requirements [arcmin]: on a fixed horizontal base, and under
+#: Thesis (Habliuk 2023) accuracy requirements [arcmin]: on a fixed horizontal base, and under
 #: impacts and vibration ("disturbed"; we also judge the 25 m/s-in-5 s manoeuvre against it).
 THESIS_LIMITS_ARCMIN: dict[str, float] = {"fixed_base": 28.8, "disturbed": 90.0}
 #: Thesis gyro zero offset: 10 °/h [rad/s].
@@ -185,8 +185,8 @@ def impulse_response_d(k1: float, k2: float, t_s: np.ndarray | float) -> np.ndar
 def initial_error_response(k1: float, k2: float, t_s: np.ndarray | float) -> np.ndarray:
     """h'(t) (dimensionless): the error per unit initial angle error, s/D impulse response.
 
-    Starts at 1 and decays to 0 (seed 000, eq. (5), third term, up to sign). Also 1 − the step
-    response of the accelerometer path (k1 s + k2)/D.
+    Starts at 1 and decays to 0 (Ryzhkov & Karpenko, eq. (5), third term, up to sign). Also
+    1 − the step response of the accelerometer path (k1 s + k2)/D.
     """
     _check_gains(k1, k2)
     t = np.asarray(t_s, dtype=float)
@@ -443,7 +443,7 @@ def drift_peak_error_rad(
 
 
 def rough_peak_error_rad(k2: float, rate_rad_s: float) -> float:
-    """The seed's rough peak of s/D·(ω/s): ω/n [rad] (seed 000; overestimates, since it
+    """The seed's rough peak of s/D·(ω/s): ω/n [rad] (Ryzhkov & Karpenko; overestimates, since it
     ignores the damping: 0.906° against the exact 0.507° for the seed's numbers)."""
     return abs(rate_rad_s) / _require_n(k2)
 
@@ -578,7 +578,7 @@ def clipped_recovery_time_s(
     return (-b + math.sqrt(b * b + 4.0 * a * g0)) / (2.0 * a)
 
 
-# ------------------------------------------------------- thesis first-order filter (seed 003)
+# ------------------------------------------------------- thesis first-order filter (Habliuk 2023)
 
 
 def first_order_accel_error_approx_rad(
@@ -638,7 +638,7 @@ def _simulate_peak(params: AxisParams, segments: list[tuple[np.ndarray, float]],
     """Run AxisFilter over segments of (accelerometer angle error per sample, dt); true angle 0.
 
     Returns (peak |γ̂| [rad], its time [s]). The filter's error does not depend on the true
-    motion (seed 000), so a still truth with perfect gyro (+ bias) is the general case.
+    motion (Ryzhkov & Karpenko), so a still truth with perfect gyro (+ bias) is the general case.
     """
     filt = AxisFilter(params)
     update = filt.update

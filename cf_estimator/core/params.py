@@ -1,9 +1,11 @@
 """Filter parameters: one frozen dataclass, validated on construction, that is also the schema.
 
-Gains follow the seeds' names: the accelerometer channel's regulator is W1(s) = k1 + k2/s + k3/s²
-(seed 000: k3 = 0; seed 004 adds k3), the magnetometer channel's is W2(s) = r1 + r2/s (seed 004).
-The saturation unit and the aperiodic unit 1/(T·s + 1) act on the error signal before W1 (thesis,
-seed 003). Defaults are chosen by measurement on recorded and simulated data (see BENCHMARKS.md).
+Gains follow the papers' names (docs/references.md): the accelerometer channel's regulator is
+W1(s) = k1 + k2/s + k3/s² (Ryzhkov & Karpenko: k3 = 0; Ryzhkov, drift, adds k3), the
+magnetometer channel's is W2(s) = r1 + r2/s (Ryzhkov, drift).
+The saturation unit and the aperiodic unit 1/(T·s + 1) act on the error signal before W1 (the
+thesis, Habliuk 2023). Defaults are chosen by measurement on recorded and simulated data (see
+BENCHMARKS.md).
 """
 
 from __future__ import annotations
@@ -23,7 +25,8 @@ class FilterParams:
     k1: float = param(
         0.35,
         "1/s",
-        "Proportional gain of the accelerometer channel (seed W1 = k1 + k2/s + k3/s^2).",
+        "Proportional gain of the accelerometer channel (W1 = k1 + k2/s + k3/s^2, Ryzhkov & "
+        "Karpenko).",
         minimum=0.0,
         maximum=100.0,
         group="gains",
@@ -40,7 +43,7 @@ class FilterParams:
     k3: float = param(
         0.0,
         "1/s^3",
-        "Double-integral gain of W1 (seed 004's full variant; 0 = off). Requires "
+        "Double-integral gain of W1 (the full variant of Ryzhkov, drift; 0 = off). Requires "
         "(k1+r1)(k2+r2) > k3 for stability.",
         minimum=0.0,
         maximum=10.0,
@@ -56,7 +59,8 @@ class FilterParams:
         0.01,
         "rad",
         "Saturation level of the accelerometer error |e| (e ~ small-angle tilt "
-        "error). Keep it above about 2*gyro_bias*17.7 s for the seed gains or bias is not tracked.",
+        "error). Keep it above about 2*gyro_bias*17.7 s for Ryzhkov & Karpenko's example gains "
+        "or bias is not tracked.",
         minimum=0.0,
         maximum=2.0,
         minimum_exclusive=True,
@@ -159,15 +163,15 @@ class FilterParams:
     mag_mode: str = param(
         "yaw",
         "",
-        "'yaw': magnetometer corrects heading only (never roll/pitch); 'full': seed "
-        "004's full-vector channel W2 on all axes.",
+        "'yaw': magnetometer corrects heading only (never roll/pitch); 'full': the "
+        "full-vector channel W2 of Ryzhkov, drift, on all axes.",
         choices=MAG_MODES,
         group="magnetometer",
     )
     r1: float = param(
         0.07,
         "1/s",
-        "Proportional gain of the magnetometer channel (seed 004 W2 = r1 + r2/s).",
+        "Proportional gain of the magnetometer channel (W2 = r1 + r2/s, Ryzhkov, drift).",
         minimum=0.0,
         maximum=100.0,
         group="magnetometer",

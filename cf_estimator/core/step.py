@@ -4,7 +4,7 @@ One sample, in the order the code runs (world frame ENU inside; q = q_world_from
 
     1. predict    q⁻ = Exp_z(z_m·dt) ⊗ q ⊗ Exp((ω − b)·dt)
                   (gyro ω, bias estimate b; z_m: heading channel's world-vertical rate)
-    2. error      e = (a/‖g‖) × ĝ,  ĝ = R⁻ᵀ·ẑ   (seed 000: scaled by gravity, not by |a|)
+    2. error      e = (a/‖g‖) × ĝ,  ĝ = R⁻ᵀ·ẑ   (Ryzhkov & Karpenko: scaled by gravity, not |a|)
                   (≈ small-angle tilt error; linear in the linear acceleration)
     3. saturate   e_s = e·min(1, L/|e|)                     (by norm, keeps the direction)
                   L = saturation_limit_rad while a linear acceleration is present and the gyro
@@ -20,7 +20,7 @@ One sample, in the order the code runs (world frame ENU inside; q = q_world_from
     6. magnetom.  'yaw':  e_ψ = atan2(m_E, m_N) of the measured field in the world frame,
                   saturated; q ← Exp_z(g(r1)·e_ψ) ⊗ q; z_m ← z_m + r2·dt_m·e_ψ (heading only:
                   a rotation about the world vertical never changes roll/pitch)
-                  'full': e_m = m̂ × (R⁻ᵀ·m_ref) through W2 = r1 + r2/s on all axes (seed 004)
+                  'full': e_m = m̂ × (R⁻ᵀ·m_ref) through W2 = r1 + r2/s on all axes (Ryzhkov, drift)
 
 Stillness and bias (``_stillness``): on blocks of rest_window_s, a block whose gyro and
 accelerometer means did not change from the previous block (beyond the thresholds plus the
@@ -406,8 +406,9 @@ def step(
         rate = o.sqrt((gx - s.bx) ** 2 + (gy - s.by) ** 2 + (gz - s.bz) ** 2)
         lw = dt / (RATE_LOWPASS_TIME_CONSTANT_S + dt)
         s.rate_lp = s.rate_lp + lw * (rate - s.rate_lp)
-        # seed 000: e = (a/‖g‖) × ĝ — scaled by gravity, not by |a|, so the error stays linear in
-        # the linear acceleration and the aperiodic unit averages zero-mean accelerations out
+        # Ryzhkov & Karpenko: e = (a/‖g‖) × ĝ — scaled by gravity, not by |a|, so the error stays
+        # linear in the linear acceleration and the aperiodic unit averages zero-mean
+        # accelerations out
         ux, uy, uz = ax / s.g_ref, ay / s.g_ref, az / s.g_ref
         # 2. predicted gravity (up) direction in the sensor frame: third row of R
         vx = 2.0 * (s.qx * s.qz - s.qw * s.qy)
@@ -533,7 +534,7 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
     s.z_m = s.z_m + o.where(yaw_mode & o.not_(first), p.r2 * ldt * yaw_c, 0.0)
     _turn_heading(s, angle, o)
 
-    # 'full' mode (seed 004): vector error against the reference field, all axes
+    # 'full' mode (Ryzhkov, drift): vector error against the reference field, all axes
     full = p.mag_full & o.not_(first) & usable
     rx, ry, rz = 0.0 * s.mag_ref_dip, o.cos(s.mag_ref_dip), -o.sin(s.mag_ref_dip)
     px, py, pz = _rotate(s.qw, -s.qx, -s.qy, -s.qz, rx, ry, rz)

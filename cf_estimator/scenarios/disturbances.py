@@ -1,4 +1,4 @@
-"""The thesis's accelerometer disturbances (seed 003, 2.6 and 3.x).
+"""The thesis's accelerometer disturbances (Habliuk 2023, 2.6 and 3.x).
 
 * :func:`impacts` — repeated shocks: 60 impacts, 80 per minute, 15 g, 10–15 ms.
 * :func:`vibration` — sinusoidal vibration of 6 g amplitude, 20–120 Hz.

@@ -74,7 +74,7 @@ class SensorModel:
 
     @classmethod
     def thesis(cls, **overrides: float) -> SensorModel:
-        """The defaults with the thesis's gyro drift: constant bias std 10 °/h (seed 003, 2.6)."""
+        """The defaults with the thesis's gyro drift: bias std 10 °/h (Habliuk 2023, 2.6)."""
         fields: dict = {"gyro_bias_std_rad_s": float(np.deg2rad(10.0 / 3600.0))}
         fields.update(overrides)
         return cls(**fields)
