@@ -385,3 +385,18 @@ def test_replay_offline_splits_at_resets(tmp_path):
     r = replay_bag(gapped, None, options=ReplayOptions(offline=True, progress=False))
     assert r.summary["resets"] and r.summary["offline"]["segments"] == 2
     assert np.all(np.isfinite(r.series.q_wxyz))
+
+
+def test_replay_offline_plots_the_online_filter_beside_the_offline_estimate(bags, replayed,
+                                                                            tmp_path):
+    from cf_estimator.bag.plots import plot_replay
+
+    r = replay_bag(bags["mcap"], None, options=ReplayOptions(offline=True, progress=False))
+    s, online = r.series, replayed["mcap"].series
+    assert s.online_rpy_rad.shape == s.rpy_rad.shape == online.rpy_rad.shape
+    # the online column is what the online replay printed; the offline one differs from it
+    np.testing.assert_allclose(s.online_rpy_rad, online.rpy_rad, atol=1e-12, equal_nan=True)
+    assert np.nanmax(np.abs(s.rpy_rad - online.rpy_rad)) > 1e-4
+    assert online.online_rpy_rad.shape[0] == 0  # an online replay has no second series
+    paths = plot_replay(r, tmp_path / "plots")
+    assert (tmp_path / "plots" / "attitude.png") in paths

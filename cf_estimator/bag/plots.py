@@ -83,13 +83,18 @@ def plot_replay(
     if scored:
         ref_rpy = np.degrees(quat.to_euler(scored["q_ref"]))
         est_rpy = np.degrees(quat.to_euler(scored["q_est_aligned"]))
+    offline = s.online_rpy_rad.shape[0] == t.size  # an offline replay: show the online too
+    kind = "offline estimate" if offline else "estimate"
     for i, ax in enumerate(axes):
         if ref_rpy is not None:
             tr = scored["t_s"] - t0
             ax.plot(tr, ref_rpy[:, i], color="k", lw=1.0, label="reference")
-            ax.plot(tr, est_rpy[:, i], color="C0", lw=0.8, label="estimate (heading-aligned)")
+            ax.plot(tr, est_rpy[:, i], color="C0", lw=0.8, label=f"{kind} (heading-aligned)")
         else:
-            ax.plot(t, np.degrees(s.rpy_rad[:, i]), color="C0", lw=0.8, label="estimate")
+            ax.plot(t, np.degrees(s.rpy_rad[:, i]), color="C0", lw=0.8, label=kind)
+        if offline:
+            ax.plot(t, np.degrees(s.online_rpy_rad[:, i]), color="C3", lw=0.7, ls="--",
+                    label="online filter")
         ax.set_ylabel(f"{names[i]} [deg]")
         ax.grid(alpha=0.3)
         _shade(ax, windows, t0)

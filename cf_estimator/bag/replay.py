@@ -79,6 +79,8 @@ class ReplaySeries:
     at_rest: np.ndarray  #: (N,) bool per IMU sample: the filter's still phase
     ref_t_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     ref_q_wxyz: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    #: offline replay: (N, 3) the online filter's roll, pitch, yaw [rad] beside the offline ones
+    online_rpy_rad: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
 
 @dataclass
@@ -364,6 +366,7 @@ class _Run:
         self.next_diag_ns: int | None = None
         self.copy_inputs = opts.copy_inputs
         self.offline = opts.offline
+        self.online_rpy: list[Any] = []
         self.held: list[tuple[int, str, str, Any]] = []  #: offline: outputs written at the end
         self.outputs: list[tuple[int, Any]] = []
         self.offline_segments = 0
@@ -442,6 +445,7 @@ class _Run:
         t = np.asarray(self.t, dtype=float)
         q, self.offline_segments = _offline_orientations(t, self.recorder, self.fparams,
                                                          self.pparams.max_dt_s)
+        self.online_rpy = list(self.rpy)  # what the online filter said, for the plots
         self.q = [tuple(r) if np.all(np.isfinite(r)) else None for r in q.tolist()]
         rpy = quat.to_euler(q)
         self.rpy = [tuple(r) if np.all(np.isfinite(r)) else None for r in rpy.tolist()]
@@ -682,6 +686,8 @@ def _series(r: _Run, ref_t: Sequence[float], ref_q: Sequence[Any]) -> ReplaySeri
         gyro_bias_rad_s=np.asarray(r.bias, dtype=float).reshape(-1, 3),
         gyro_bias_sigma_rad_s=np.asarray(r.bias_sigma, dtype=float),
         at_rest=np.asarray(r.rest, dtype=bool),
+        online_rpy_rad=np.array([x if x is not None else (np.nan,) * 3 for x in r.online_rpy],
+                                dtype=float).reshape(-1, 3),
         ref_t_s=np.asarray(ref_t, dtype=float),
         ref_q_wxyz=np.asarray(ref_q, dtype=float).reshape(-1, 4),
     )

@@ -123,7 +123,7 @@ def _pass(params: FilterParams, gyro: np.ndarray, accel: np.ndarray, mag: np.nda
 def _block_means(gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None, dt: np.ndarray,
                  factor: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
     """Pass 1's input: blocks of ``factor`` rows ending at the last row (gyro and
-    accelerometer averaged, the block's last magnetometer row, dt summed); the first row
+    accelerometer averaged, the block's last valid magnetometer row, dt summed); the first row
     alone first (it initialises)."""
     n = len(dt)
     m = (n - 1) // factor
@@ -134,9 +134,20 @@ def _block_means(gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None, dt
 
     g = np.ascontiguousarray(np.vstack([gyro[:first][-1:], blocks(gyro)]))
     a = np.ascontiguousarray(np.vstack([accel[:first][-1:], blocks(accel)]))
-    mg = None if mag is None else np.ascontiguousarray(mag[first - 1::factor])
+    mg = None if mag is None else np.ascontiguousarray(
+        np.vstack([mag[first - 1:first], _last_valid_rows(mag[first:].reshape(m, factor, 3))]))
     d = np.concatenate([[0.0], dt[first:].reshape(m, factor).sum(axis=1)])
     return g, a, mg, d
+
+
+def _last_valid_rows(blocks: np.ndarray) -> np.ndarray:
+    """(M, 3) the last finite row of each (factor, 3) block, NaN where a block has none (a
+    magnetometer slower than the IMU leaves NaN rows between its samples)."""
+    valid = np.all(np.isfinite(blocks), axis=2)
+    last = blocks.shape[1] - 1 - np.argmax(valid[:, ::-1], axis=1)
+    out = blocks[np.arange(blocks.shape[0]), last]
+    out[~valid.any(axis=1)] = np.nan
+    return out
 
 
 #: Rows per chunk of the backward pass and the fusion (bounds their temporaries).
