@@ -89,7 +89,7 @@ setup(
         "pyyaml",
     ],
     extras_require={
-        "test": ["pytest", "hypothesis", "ruff"],
+        "test": ["pytest", "hypothesis", "ruff", "vqf"],  # vqf: the peer the bench tests run
         # riann: RIANN on ONNX Runtime (~80 MB installed, no torch); its weights ship inside
         "bench": ["vqf", "imufusion", "ahrs", "riann"],
         # ROS 2 Jazzy's rclpy and messages from PyPI, for running the node without a ROS install
