@@ -392,7 +392,7 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
         double gain = k1 * dt / (1.0 + k1 * dt);
         expmap(gain * f[0], gain * f[1], gain * f[2], d);
         mul_into(s, d);
-        double dec = gain * (quick ? 1.0 : p->prefilter);
+        double dec = gain * (quick ? 1.0 : (tight ? 0.0 : p->prefilter));
         s->lx = s->lx - dec * s->lx;
         s->ly = s->ly - dec * s->ly;
         s->lz = s->lz - dec * s->lz;

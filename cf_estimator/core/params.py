@@ -122,7 +122,8 @@ class FilterParams:
         "Share of each correction that also turns what the aperiodic unit holds. 1: the unit is "
         "a pre-filter of the measured specific force in the world frame (its memory always "
         "matches the current estimate, as in VQF); 0: the thesis's unit on the clipped error, "
-        "whose memory of already-corrected error keeps acting (slower, smoother loop). Chosen "
+        "whose memory of already-corrected error keeps acting (slower, smoother loop); 0 too "
+        "while a linear acceleration is detected (tight clip). Chosen "
         "by measurement on BROAD, EuRoC and the thesis scenarios (BENCHMARKS.md).",
         minimum=0.0,
         maximum=1.0,

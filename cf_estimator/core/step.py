@@ -14,9 +14,10 @@ One sample, in the order the code runs (world frame ENU inside; q = q_world_from
                   (W1 = k1 + k2/s + k3/s²; g(k) = k·dt/(1+k·dt), the backward-Euler gain;
                   b, the integral state, is the gyro-bias estimate; k2' = max(k2,
                   bias_learning_k2·σ_b²/σ_0²) and k1' = max(k1, 2√k2') while the bias is
-                  uncertain); then l ← l − p·g(k1')·l with p = aperiodic_prefilter: the
-                  correction also turns the unit's memory (p = 1: a pre-filter of the specific
-                  force in the world frame, as VQF's; p = 0: the thesis's unit on the error)
+                  uncertain); then l ← l − p·g(k1')·l with p = aperiodic_prefilter (0 while
+                  the tight clip is on): the correction also turns the unit's memory (p = 1: a
+                  pre-filter of the specific force in the world frame, as VQF's; p = 0: the
+                  thesis's unit on the error)
     6. magnetom.  'yaw':  e_ψ = atan2(m_E, m_N) of the measured field in the world frame,
                   saturated; q ← Exp_z(g(r1)·e_ψ) ⊗ q; z_m ← z_m + r2·dt_m·e_ψ (heading only:
                   a rotation about the world vertical never changes roll/pitch)
@@ -456,8 +457,10 @@ def step(
         s.qw, s.qx, s.qy, s.qz = _mul(s.qw, s.qx, s.qy, s.qz, dw, dx, dy, dz)
         # the correction also turns, by the share aperiodic_prefilter (quick: fully), the
         # filtered error the unit holds (1: a pre-filter of the specific force whose memory
-        # matches the current estimate, as VQF's; 0: the thesis's unit on the error)
-        dec = gain * o.where(quick, 1.0, p.prefilter)
+        # matches the current estimate, as VQF's; 0: the thesis's unit on the error). Not while
+        # a linear acceleration is detected (the tight clip): what the unit holds then is the
+        # disturbance, and the thesis's unit rejects it best (impacts 18.9' -> 17.8')
+        dec = gain * o.where(quick, 1.0, o.where(tight, 0.0, p.prefilter))
         s.lx, s.ly, s.lz = s.lx - dec * s.lx, s.ly - dec * s.ly, s.lz - dec * s.lz
         # recovery: a long unbroken clip is a real attitude error, not a disturbance
         s.clip_timer_s = o.where(clipped, s.clip_timer_s + dt, 0.0)
