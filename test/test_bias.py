@@ -131,8 +131,8 @@ def test_uav_bias_converges_within_30_s_of_flight_and_tilt_holds(uav):
     assert res.gyro_bias_converged[i]
     flying = slice(int(uav.events["takeoff"] * rate), None)
     tilt = _tilt_error_deg(res.quaternion[flying], uav.truth.q_world_from_body[flying])
-    # rotor drag: the specific force is not gravity in cruise (2.6 deg RMS measured, seed 2)
-    assert np.sqrt(np.mean(tilt**2)) < 3.0 and tilt.max() < 8.0
+    # rotor drag: the specific force is not gravity in cruise (2.9 deg RMS measured, seed 2)
+    assert np.sqrt(np.mean(tilt**2)) < 3.5 and tilt.max() < 8.0
 
 
 def test_bias_of_the_tilt_axes_is_learned_in_flight_without_a_still_phase(uav):
