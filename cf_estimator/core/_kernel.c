@@ -239,7 +239,10 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
                  (p->rest_accel_threshold_m_s2 + REST_SAMPLE_SIGMAS * sqrt(s->noise_a2));
     if (has_prev && (jump_g || jump_a)) s->rest_timer_s = 0.0;
 
-    int done = s->blk_t >= p->rest_window_s;
+    if (!(s->blk_t >= p->rest_window_s)) { /* block not complete: only the rest flag */
+        s->at_rest = (char)(p->rest_bias_learning && (s->rest_timer_s >= p->rest_time_s));
+        return; /* step.py runs the block-end lines below with weight 0: same values */
+    }
     double n = s->blk_n;
     double mgx = s->blk_gx / n, mgy = s->blk_gy / n, mgz = s->blk_gz / n;
     double max_ = s->blk_ax / n, may = s->blk_ay / n, maz = s->blk_az / n;
@@ -259,42 +262,36 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
                                       REST_GATE_SIGMAS * sqrt(3.0 * (s->bias_var + r));
     int override = s->gate_timer_s >= REST_GATE_OVERRIDE_S;
     int still = steady && (consistent || override);
-    if (done) s->gate_timer_s = (steady && !consistent) ? s->gate_timer_s + s->blk_t : 0.0;
-    if (done && steady && !consistent && override)
-        s->bias_var = pow(p->bias_prior_sigma_rad_s, 2.0);
-    if (done) s->rest_timer_s = still ? s->rest_timer_s + s->blk_t : 0.0;
+    s->gate_timer_s = (steady && !consistent) ? s->gate_timer_s + s->blk_t : 0.0;
+    if (steady && !consistent && override) s->bias_var = pow(p->bias_prior_sigma_rad_s, 2.0);
+    s->rest_timer_s = still ? s->rest_timer_s + s->blk_t : 0.0;
     s->at_rest = (char)(p->rest_bias_learning && (s->rest_timer_s >= p->rest_time_s));
-    int measure = done && s->at_rest;
-    double k = measure ? s->bias_var / (s->bias_var + r) : 0.0;
-    s->bx = s->bx + k * (mgx - s->bx);
-    s->by = s->by + k * (mgy - s->by);
-    s->bz = s->bz + k * (mgz - s->bz);
-    s->bias_var = s->bias_var - k * s->bias_var;
-    double gw = (done && still) ? s->blk_t / (GRAVITY_TIME_CONSTANT_S + s->blk_t) : 0.0;
-    s->g_ref = s->g_ref + gw * (sqrt(max_ * max_ + may * may + maz * maz) - s->g_ref);
-    if (done) {
-        s->noise_g2 = noise_g2;
-        s->noise_a2 = noise_a2;
-        s->pgx = mgx;
-        s->pgy = mgy;
-        s->pgz = mgz;
-        s->pax = max_;
-        s->pay = may;
-        s->paz = maz;
-        s->prev_n = n;
+    if (s->at_rest) { /* a still block at rest measures the bias */
+        double k = s->bias_var / (s->bias_var + r);
+        s->bx = s->bx + k * (mgx - s->bx);
+        s->by = s->by + k * (mgy - s->by);
+        s->bz = s->bz + k * (mgz - s->bz);
+        s->bias_var = s->bias_var - k * s->bias_var;
     }
-    double keep = done ? 0.0 : 1.0;
-    s->blk_n = s->blk_n * keep;
-    s->blk_t = s->blk_t * keep;
-    s->blk_d = s->blk_d * keep;
-    s->blk_gx = s->blk_gx * keep;
-    s->blk_gy = s->blk_gy * keep;
-    s->blk_gz = s->blk_gz * keep;
-    s->blk_ax = s->blk_ax * keep;
-    s->blk_ay = s->blk_ay * keep;
-    s->blk_az = s->blk_az * keep;
-    s->blk_g2 = s->blk_g2 * keep;
-    s->blk_a2 = s->blk_a2 * keep;
+    if (still) {
+        double gw = s->blk_t / (GRAVITY_TIME_CONSTANT_S + s->blk_t);
+        s->g_ref = s->g_ref + gw * (sqrt(max_ * max_ + may * may + maz * maz) - s->g_ref);
+    }
+    s->noise_g2 = noise_g2;
+    s->noise_a2 = noise_a2;
+    s->pgx = mgx;
+    s->pgy = mgy;
+    s->pgz = mgz;
+    s->pax = max_;
+    s->pay = may;
+    s->paz = maz;
+    s->prev_n = n;
+    s->blk_n = 0.0;
+    s->blk_t = 0.0;
+    s->blk_d = 0.0;
+    s->blk_gx = s->blk_gy = s->blk_gz = 0.0;
+    s->blk_ax = s->blk_ay = s->blk_az = 0.0;
+    s->blk_g2 = s->blk_a2 = 0.0;
 }
 
 static void cf_step(cf_state *s, const cf_params *p, const double *g, const double *acc,
