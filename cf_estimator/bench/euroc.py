@@ -86,6 +86,19 @@ class Flight:
         """(N,) bool: samples with a ground-truth orientation."""
         return np.all(np.isfinite(self.q_ref), axis=1)
 
+    def cropped(self, start_s: float) -> Flight:
+        """The flight from ``start_s`` [s] after its first sample on (a mid-air start: the node
+        restarted in flight, a bag that begins in the air), times re-based to 0 there; named
+        ``<name>@<start_s>s``. ValueError if fewer than two samples are left."""
+        i = int(np.searchsorted(self.t_s, start_s))
+        if self.n_samples - i < 2:
+            raise ValueError(f"{self.name}: nothing left after {start_s:g} s "
+                             f"(the flight lasts {float(self.t_s[-1]):.1f} s)")
+        t0 = float(self.t_s[i])
+        return Flight(f"{self.name}@{start_s:g}s", self.t_s[i:] - t0, self.gyro_rad_s[i:],
+                      self.accel_m_s2[i:], self.q_ref[i:], self.t0_ns + int(round(t0 * 1e9)),
+                      self.path, self.groundtruth_path, self.notes)
+
 
 # -- text tables -------------------------------------------------------------------------------
 def _stamp_ns(token: str, unit_s: bool) -> int:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 import sys
 import time
@@ -90,6 +91,10 @@ def register(subparsers: Any) -> None:
                    "(default: those installed) or 'none'")
     e.add_argument("--params", metavar="YAML", help="ROS 2 parameter file for our filter "
                    "(default: the shipped defaults, FilterParams())")
+    e.add_argument("--start-at", metavar="LIST",
+                   help="comma-separated seconds, e.g. 20,40,60: also crop every flight to start "
+                   "there (a mid-air start: node restarted in flight) and score 2-12 s and 12 s-end "
+                   "after that start, beside the full (ground) start")
     e.add_argument("--json", metavar="OUT", help="write per-flight scores and means as JSON")
     e.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
                    help="worker processes, one flight each (default %(default)s)")
@@ -262,6 +267,15 @@ def run_euroc(args: Any) -> int:
         raise CliError("--jobs must be >= 1", 2)
     if args.settle < 0:
         raise CliError(f"--settle must be >= 0 (got {args.settle:g})", 2)
+    starts: list[float] = []
+    for token in _csv(args.start_at or ""):
+        try:
+            value = float(token)
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and value > 0):
+            raise CliError(f"--start-at takes seconds > 0, got {token!r}", 2)
+        starts.append(value)
     params = _load_params(args.params)
     try:
         if args.groundtruth:
@@ -283,8 +297,19 @@ def run_euroc(args: Any) -> int:
             print(f"  note: {name}: {line}")
     print()
     print(ev.format_table(result), end="")
+    midair = {}
+    for start in starts:
+        mid = ev.run_midair(flights, params, start, peers, jobs=args.jobs)
+        midair[f"{start:g}"] = mid
+        print()
+        w0, w1 = ev.MIDAIR_WINDOWS
+        print(f"Mid-air start {start:g} s into each flight: inclination RMS [deg] "
+              f"{w0[0]:g}-{w0[1]:g} s / {w1[0]:g} s-end after that start "
+              f"({len(mid.flights)} flight(s) long enough)")
+        print(ev.format_table(mid, ev.MIDAIR_SCORES), end="")
     if args.json:
         doc = result.to_json()
+        doc["midair"] = {k: v.to_json() for k, v in midair.items()}
         doc["meta"] = {
             "data": str(args.data), "peers": peers, "peers_skipped": skipped,
             "params_file": args.params, "cf_estimator_params": as_dict(params),

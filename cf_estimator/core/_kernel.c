@@ -183,7 +183,7 @@ static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int
     int big = maxd(yaw_error, -yaw_error) > p->mag_saturation_limit_rad;
     if (usable) s->mag_clip_timer_s = (big && learn && !first) ? s->mag_clip_timer_s + dt_m : 0.0;
     int enter = (p->recovery_trigger_s > 0.0) && (s->mag_clip_timer_s >= p->recovery_trigger_s);
-    int leave = usable && (maxd(yaw_error, -yaw_error) < 0.5 * p->mag_saturation_limit_rad);
+    int leave = usable && (maxd(yaw_error, -yaw_error) < 0.1 * p->mag_saturation_limit_rad);
     s->mag_recovering = (char)(s->mag_recovering ? !leave : enter);
     if (enter) s->mag_clip_timer_s = 0.0;
     int quick = fast || s->mag_recovering;

@@ -590,14 +590,14 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
 
     # heading recovery (as the tilt's): a heading error saturated without a break for
     # recovery_trigger_s of used samples is a real heading error (a compass that was wrong at
-    # start, a magnetometer that came back): corrected with startup_k1 until below half the limit
+    # start, a magnetometer that came back): corrected with startup_k1 until below 0.1 × the limit
     yaw_error = o.atan2(wx, wy)
     big = o.maximum(yaw_error, -yaw_error) > p.mag_saturation_limit_rad
     s.mag_clip_timer_s = o.where(usable, o.where(big & learn & o.not_(first),
                                                  s.mag_clip_timer_s + dt_m, 0.0),
                                  s.mag_clip_timer_s)
     enter = (p.recovery_trigger_s > 0.0) & (s.mag_clip_timer_s >= p.recovery_trigger_s)
-    leave = usable & (o.maximum(yaw_error, -yaw_error) < 0.5 * p.mag_saturation_limit_rad)
+    leave = usable & (o.maximum(yaw_error, -yaw_error) < 0.1 * p.mag_saturation_limit_rad)
     s.mag_recovering = o.where(s.mag_recovering, o.not_(leave), enter)
     s.mag_clip_timer_s = o.where(enter, 0.0, s.mag_clip_timer_s)
     quick = fast | s.mag_recovering

@@ -203,6 +203,9 @@ def compose_report(
         ("gyro_bias_sigma_rad_s", _f(status.gyro_bias_sigma_rad_s if initialized else None)),
         ("gyro_bias_converged", str(bool(initialized and status.gyro_bias_converged)).lower()),
         ("at_rest", str(bool(initialized and status.at_rest)).lower()),
+        ("heading_rate_unverified",
+         str(bool(initialized and status.heading_rate_unverified)).lower()),
+        ("heading_recovering", str(bool(initialized and status.heading_recovering)).lower()),
         ("recovery_count", str(status.recovery_count if initialized else 0)),
     ]
     r = rpy_rad if rpy_rad is not None else (None, None, None)
