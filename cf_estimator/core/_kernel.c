@@ -39,6 +39,7 @@
 #define REST_SAMPLE_SIGMAS 8.0
 #define REST_GATE_SIGMAS 3.0
 #define REST_NOISE_CAP 1.0
+#define BIAS_LEARNING_MAX_ERROR_RAD 0.35
 #define REST_MAG_TOLERANCE_RAD 0.01
 #define ACCEL_DETECT_SIGMAS 3.0
 #define BIAS_RANDOM_WALK_RAD_S_SQRT_S 2e-4
@@ -422,7 +423,8 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
         s->cx = s->cx + k3dt * f[0];
         s->cy = s->cy + k3dt * f[1];
         s->cz = s->cz + k3dt * f[2];
-        double ldt = learn ? dt : 0.0;
+        int small = (en < BIAS_LEARNING_MAX_ERROR_RAD) && (ux * vx + uy * vy + uz * vz > 0.0);
+        double ldt = (learn && small) ? dt : 0.0;
         s->bx = s->bx - ldt * (k2 * f[0] + s->cx);
         s->by = s->by - ldt * (k2 * f[1] + s->cy);
         s->bz = s->bz - ldt * (k2 * f[2] + s->cz);
@@ -854,11 +856,12 @@ PyMODINIT_FUNC PyInit__kernel(void)
     }
     if (PyDict_SetItemString(StateType.tp_dict, "FIELDS", fields) < 0) return NULL;
     Py_DECREF(fields);
-    PyObject *consts = Py_BuildValue("{s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:i,s:d,s:d,s:d,s:i}",
+    PyObject *consts = Py_BuildValue("{s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:i,s:d,s:d,s:d,s:i}",
                                      "ACCEL_LOWPASS_TIME_CONSTANT_S", ACCEL_LOWPASS_TIME_CONSTANT_S,
                                      "ACCEL_SPIKE_SIGMAS", ACCEL_SPIKE_SIGMAS,
                                      "REST_GATE_SIGMAS", REST_GATE_SIGMAS,
                                      "REST_NOISE_CAP", REST_NOISE_CAP,
+                                     "BIAS_LEARNING_MAX_ERROR_RAD", BIAS_LEARNING_MAX_ERROR_RAD,
                                      "REST_MAG_TOLERANCE_RAD", REST_MAG_TOLERANCE_RAD,
                                      "ACCEL_DETECT_SIGMAS", ACCEL_DETECT_SIGMAS,
                                      "QUICK_LAG_TIME_CONSTANT_S", QUICK_LAG_TIME_CONSTANT_S,

@@ -94,6 +94,10 @@ REST_SAMPLE_SIGMAS = 8.0
 #: long it lasts: biases drift (BIAS_RANDOM_WALK_RAD_S_SQRT_S), they do not jump. At power-on
 #: the prior bias_prior_sigma_rad_s bounds what a still phase may take as bias.
 REST_GATE_SIGMAS = 3.0
+#: The integral (bias) learns only while the raw error is below this [rad]: a bias within the
+#: prior leaves an error of at most a few REST_GATE_SIGMAS·bias_prior_sigma_rad_s / k1 (< 0.2
+#: rad at the defaults); more is an attitude error, which must not wind the bias up.
+BIAS_LEARNING_MAX_ERROR_RAD = 0.35
 #: Bias random walk [rad/s/sqrt(s)]: how fast the confidence in a learned bias fades.
 BIAS_RANDOM_WALK_RAD_S_SQRT_S = 2e-4
 #: The bias estimate counts as converged below this standard deviation [rad/s].
@@ -510,7 +514,11 @@ def step(
         k1 = o.maximum(p.k1, 2.0 * o.sqrt(k2))
         k3dt = o.where(learn, p.k3 * dt, 0.0)
         s.cx, s.cy, s.cz = s.cx + k3dt * fx, s.cy + k3dt * fy, s.cz + k3dt * fz
-        ldt = o.where(learn, dt, 0.0)
+        # an error beyond BIAS_LEARNING_MAX_ERROR_RAD is an attitude error (a gyro over range, a
+        # glitch), not a bias: the integral does not learn from it (anti-windup; beyond 90° the
+        # cross product shrinks again, hence the sign of the dot product too)
+        small = (en < BIAS_LEARNING_MAX_ERROR_RAD) & (ux * vx + uy * vy + uz * vz > 0.0)
+        ldt = o.where(learn & small, dt, 0.0)
         s.bx = s.bx - ldt * (k2 * fx + s.cx)
         s.by = s.by - ldt * (k2 * fy + s.cy)
         s.bz = s.bz - ldt * (k2 * fz + s.cz)
