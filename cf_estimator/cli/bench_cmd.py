@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from cf_estimator.cli.base import CliError, finite_float
 from cf_estimator.cli.common import (
     add_params_options,
     check_input_path,
@@ -23,7 +24,6 @@ from cf_estimator.cli.common import (
     load_params,
     note,
 )
-from cf_estimator.cli.main import CliError, finite_float
 
 if TYPE_CHECKING:
     from cf_estimator.bench.speed import BagThroughput
@@ -36,7 +36,8 @@ def _csv(text: str) -> list[str]:
 def register(subparsers: Any) -> None:
     """Add ``bench`` and its sub-commands."""
     p = subparsers.add_parser(
-        "bench", help="accuracy and speed benchmarks (BROAD, thesis scenarios, speed) vs peers",
+        "bench", help="accuracy and speed benchmarks vs peers (bench broad, euroc, scenarios, "
+        "speed)",
         description="Benchmarks of the filter against VQF, x-io Fusion and Madgwick.",
     )
     sub = p.add_subparsers(dest="bench_command", required=True, metavar="BENCHMARK")

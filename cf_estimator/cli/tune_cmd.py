@@ -22,13 +22,13 @@ from typing import Any
 
 import numpy as np
 
+from cf_estimator.cli.base import CliError, finite_float
 from cf_estimator.cli.common import (
     add_params_options,
     check_input_path,
     check_output_file,
     load_params,
 )
-from cf_estimator.cli.main import CliError, finite_float
 
 _BAG_ONLY = ("reference_topic", "imu_topic", "mag_topic", "score_after")
 #: The thesis requirement: at most 90' peak tilt error under impacts, vibration and the 25 m/s
