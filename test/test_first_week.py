@@ -9,11 +9,19 @@ defaults, the filter at 10-50 Hz, and the papercuts of the first week.
 from __future__ import annotations
 
 import ast
+import math
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+import pytest
+from ros_test_helpers import Header, Imu, MagneticField, Quaternion, Time, Vector3
+
 from cf_estimator.cli.main import build_parser
+from cf_estimator.core import quaternion as quat
+from cf_estimator.core.params import FilterParams
+from cf_estimator.pipeline import ImuPipeline, PipelineParams
 
 REPO = Path(__file__).resolve().parents[1]
 PKG = REPO / "cf_estimator"
@@ -81,3 +89,80 @@ def test_missing_package_is_one_line_naming_what_to_install() -> None:
 
 def test_top_level_help_lists_bench_euroc() -> None:
     assert "euroc" in build_parser().format_help()
+
+
+# -- item 3: body frame (FLU / FRD) -------------------------------------------------------------
+G = 9.80665
+T0_NS = 1_700_000_000 * 10**9
+#: Earth field in NED (north, east, down) [T], dip 60 deg.
+MAG_NED_T = (20e-6, 0.0, 34.6e-6)
+
+
+def _frd_to_flu(v) -> tuple[float, float, float]:
+    return (float(v[0]), -float(v[1]), -float(v[2]))
+
+
+def _frd_sample(roll_deg: float, pitch_deg: float, yaw_deg: float):
+    """Specific force [m/s^2] and field [T] in FRD of a still body at PX4's Euler angles."""
+    q_ned_from_frd = quat.from_euler(*np.radians([roll_deg, pitch_deg, yaw_deg]))
+    q_inv = quat.conjugate(q_ned_from_frd)
+    accel = quat.rotate(q_inv, [0.0, 0.0, -G])  # specific force at rest: up = -z in NED
+    mag = quat.rotate(q_inv, MAG_NED_T)
+    return tuple(accel), tuple(mag)
+
+
+def _run_pipeline(world_frame: str, body_frame: str, accel, mag=None, gyro=(0.01, 0.02, 0.03),
+                  n: int = 200):
+    pipe = ImuPipeline(FilterParams(world_frame=world_frame, use_mag=mag is not None),
+                       PipelineParams(body_frame=body_frame))
+    cov = np.array([0.1, 0.01, 0.02, 0.01, 0.2, 0.03, 0.02, 0.03, 0.3])
+    out = None
+    for i in range(n):
+        t = T0_NS + i * 10_000_000
+        header = Header(stamp=Time(sec=t // 10**9, nanosec=t % 10**9), frame_id="imu_link")
+        if mag is not None:
+            pipe.on_mag(MagneticField(header=header, magnetic_field=Vector3(
+                x=mag[0], y=mag[1], z=mag[2]), magnetic_field_covariance=np.zeros(9)))
+        out = pipe.on_imu(Imu(
+            header=header, orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0),
+            orientation_covariance=np.array([-1.0] + [0.0] * 8),
+            angular_velocity=Vector3(x=gyro[0], y=gyro[1], z=gyro[2]),
+            angular_velocity_covariance=cov,
+            linear_acceleration=Vector3(x=accel[0], y=accel[1], z=accel[2]),
+            linear_acceleration_covariance=cov))
+        gyro = (0.0, 0.0, 0.0)  # one turning sample first, then still
+    return out
+
+
+def test_ned_with_flu_input_and_body_frame_flu_gives_px4_roll_pitch_yaw() -> None:
+    accel_frd, mag_frd = _frd_sample(10.0, 5.0, 30.0)
+    accel_flu, mag_flu = _frd_to_flu(accel_frd), _frd_to_flu(mag_frd)
+    for body, accel, mag in (("flu", accel_flu, mag_flu), ("frd", accel_frd, mag_frd)):
+        rpy = [math.degrees(a) for a in _run_pipeline("ned", body, accel, mag).rpy_rad]
+        assert rpy == [pytest_approx(10.0), pytest_approx(5.0), pytest_approx(30.0)], body
+    # the message axes as they are (imu_filter_madgwick's answer): FLU data in NED is upside down
+    roll = math.degrees(_run_pipeline("ned", "sensor", accel_flu).rpy_rad[0])
+    assert abs(roll) == pytest_approx(170.0)
+
+
+def test_enu_with_frd_input_gives_rep103_angles() -> None:
+    accel_frd, _ = _frd_sample(10.0, 5.0, 0.0)
+    roll, pitch, _ = (math.degrees(a) for a in _run_pipeline("enu", "frd", accel_frd).rpy_rad)
+    # REP-103 (FLU in ENU): right side down is +roll as in PX4, nose up is -pitch
+    assert (roll, pitch) == (pytest_approx(10.0), pytest_approx(-5.0))
+
+
+def test_body_frame_converts_the_copied_vectors_and_their_covariances() -> None:
+    out = _run_pipeline("ned", "flu", (0.0, 0.0, G), n=1, gyro=(0.1, 0.2, 0.3))
+    assert out.linear_acceleration == (0.0, 0.0, -G)  # FLU up -> FRD: -z
+    assert out.angular_velocity == (0.1, -0.2, -0.3)
+    # D C D, D = diag(1, -1, -1): xy and xz terms change sign, yz does not
+    assert out.angular_velocity_covariance == (0.1, -0.01, -0.02, -0.01, 0.2, 0.03, -0.02, 0.03,
+                                               0.3)
+    same = _run_pipeline("ned", "frd", (0.0, 0.0, -G), n=1, gyro=(0.1, 0.2, 0.3))
+    assert same.angular_velocity == (0.1, 0.2, 0.3)  # already FRD: untouched
+
+
+def pytest_approx(v: float):
+    """Angles [deg] within 0.05 deg."""
+    return pytest.approx(v, abs=0.05)

@@ -115,7 +115,7 @@ class ImuPipeline:
         self._imu_frame: str | None = None
         self._mag_frame: str | None = None
         self._acc_n = 0
-        self._acc_sum = 0.0
+        self._acc_sx = self._acc_sy = self._acc_sz = 0.0
         self._mag_n = 0
         self._mag_sum = 0.0
         # diagnostics window
@@ -200,6 +200,12 @@ class ImuPipeline:
         self._mag_timeout_ns = int(round(pp.mag_timeout_s * 1e9))
         self._use_mag = self._fp.use_mag
         self._ned = self._fp.world_frame == "ned"
+        # FLU <-> FRD: (x, y, z) -> (x, -y, -z), a half turn about x. Applied to the input
+        # vectors when their convention is not the one paired with the world frame (FLU-ENU,
+        # FRD-NED), so the core estimates q_world_from_body in that paired convention.
+        bf = pp.body_frame
+        self._flip = bf != "sensor" and (bf == "frd") != self._ned
+        self._av_cov.flip = self._la_cov.flip = self._flip
 
     # -- state ------------------------------------------------------------------------------------
     def _clear_time_state(self) -> None:
@@ -219,6 +225,13 @@ class ImuPipeline:
         if self._pending_mag is not None:
             self._pending_mag = None
             self._mag_dropped += 1
+
+    @property
+    def converts_axes(self) -> bool:
+        """True when ``body_frame`` turns the input vectors half a turn about x (FLU <-> FRD):
+        the output's angular velocity, acceleration and their covariances differ from the
+        input's."""
+        return self._flip
 
     @property
     def initialized(self) -> bool:
@@ -271,6 +284,8 @@ class ImuPipeline:
             m = msg.magnetic_field
             mx, my, mz = float(m.x), float(m.y), float(m.z)
             frame = msg.header.frame_id
+            if self._flip:
+                my, mz = -my, -mz
         except Exception:  # noqa: BLE001 - malformed: counted, never raised
             self._mag_invalid += 1
             return
@@ -321,6 +336,8 @@ class ImuPipeline:
         except Exception:  # noqa: BLE001
             self._reject(checks.MALFORMED)
             return None
+        if self._flip:  # into the body convention paired with world_frame (see body_frame)
+            gy, gz, ay, az = -gy, -gz, -ay, -az
         if sec == 0 and nsec == 0:
             self._reject(checks.ZERO_STAMP)
             return None
@@ -385,11 +402,16 @@ class ImuPipeline:
             self._imu_frame = frame
             self._warn(checks.frame_id_warning(str(frame), "IMU"))
         if self._acc_n < checks.ACCEL_CHECK_SAMPLES:
+            # |mean a|, not mean |a|: vibration adds to every |a| (13 m/s^2 on a quadrotor)
+            # but averages out of the vector, which is gravity (plus a mean acceleration)
             self._acc_n += 1
-            self._acc_sum += math.sqrt(a2)
+            self._acc_sx += ax
+            self._acc_sy += ay
+            self._acc_sz += az
             if self._acc_n == checks.ACCEL_CHECK_SAMPLES:
-                self._warn(checks.accel_units_warning(self._acc_sum / self._acc_n,
-                                                      self._fp.gravity_m_s2))
+                n = self._acc_n
+                mean_norm = math.sqrt(self._acc_sx**2 + self._acc_sy**2 + self._acc_sz**2) / n
+                self._warn(checks.accel_units_warning(mean_norm, self._fp.gravity_m_s2))
         if g2 > checks.GYRO_IMPLAUSIBLE_RAD_S**2:
             self._warn(checks.gyro_units_warning(math.sqrt(g2)))
 
@@ -527,18 +549,25 @@ class ImuPipeline:
 class _CovarianceCache:
     """Input covariances rarely change: reuse the last tuple when the bytes are equal."""
 
-    __slots__ = ("raw", "value")
+    __slots__ = ("flip", "raw", "value")
 
     def __init__(self) -> None:
         self.raw: bytes | None = None
         self.value: tuple[float, ...] = ()
+        self.flip = False  #: FLU <-> FRD: D C D with D = diag(1, -1, -1)
+
+    def _convert(self, cov: Any) -> tuple[float, ...]:
+        c = covariance9(cov)
+        if not self.flip or c[0] == -1.0:  # -1: "not provided", kept as is
+            return c
+        return (c[0], -c[1], -c[2], -c[3], c[4], c[5], -c[6], c[7], c[8])
 
     def get(self, cov: Any) -> tuple[float, ...]:
         tobytes = getattr(cov, "tobytes", None)  # array.array (rclpy) and NumPy (rosbags)
         if tobytes is None:
-            return covariance9(cov)
+            return self._convert(cov)
         raw = tobytes()
         if raw != self.raw:
-            self.value = covariance9(cov)
+            self.value = self._convert(cov)
             self.raw = raw
         return self.value
