@@ -166,3 +166,63 @@ def test_body_frame_converts_the_copied_vectors_and_their_covariances() -> None:
 def pytest_approx(v: float):
     """Angles [deg] within 0.05 deg."""
     return pytest.approx(v, abs=0.05)
+
+
+# -- item 5: covariance from the filter's state ------------------------------------------------
+def _still_pipeline_run(mag_of_time, seconds: float, pipe=None, t0_s: float = 0.0):
+    """A level, still sensor at 100 Hz; ``mag_of_time(t)`` the field in the sensor frame (or
+    None: no sample). Returns the pipeline and [(t, yaw [rad], yaw sigma [rad], tilt var)]."""
+    pipe = pipe or ImuPipeline()
+    rows = []
+    for i in range(int(seconds * 100)):
+        t = t0_s + i * 0.01
+        t_ns = T0_NS + int(round(t * 1e9))
+        header = Header(stamp=Time(sec=t_ns // 10**9, nanosec=t_ns % 10**9), frame_id="imu")
+        m = mag_of_time(t)
+        if m is not None:
+            pipe.on_mag(MagneticField(header=header, magnetic_field=Vector3(
+                x=m[0], y=m[1], z=m[2]), magnetic_field_covariance=np.zeros(9)))
+        out = pipe.on_imu(Imu(
+            header=header, orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0),
+            orientation_covariance=np.zeros(9), angular_velocity=Vector3(x=0.0, y=0.0, z=0.0),
+            angular_velocity_covariance=np.zeros(9),
+            linear_acceleration=Vector3(x=0.0, y=0.0, z=G),
+            linear_acceleration_covariance=np.zeros(9)))
+        c = out.orientation_covariance
+        rows.append((t, out.rpy_rad[2], math.sqrt(c[8]), c[0]))
+    return pipe, rows
+
+
+def _field(heading_deg: float):
+    """Earth field [T] in the sensor frame of a level sensor whose ENU yaw is heading_deg."""
+    a = math.radians(heading_deg)
+    north_in_sensor = (math.sin(a), math.cos(a))  # world +y seen from a sensor at yaw a
+    return (20e-6 * north_in_sensor[0], 20e-6 * north_in_sensor[1], -40e-6)
+
+
+def test_yaw_covariance_reports_a_large_heading_error_and_shrinks_with_it() -> None:
+    # heading fixed at 0 for 5 s, then the field says the sensor faces 120 deg: a 120 deg error
+    _pipe, rows = _still_pipeline_run(lambda t: _field(0.0 if t < 5.0 else 120.0), 60.0)
+    before = [r for r in rows if 4.0 < r[0] < 5.0]
+    assert max(r[2] for r in before) < math.radians(4.0)  # referenced and right: about 3 deg
+    after = [r for r in rows if r[0] > 5.2]
+    for t, yaw, sigma, _ in after[::100]:
+        err = abs(math.remainder(yaw - math.radians(120.0), 2 * math.pi))
+        # the reported sigma follows the true heading error (not a constant 3 deg)
+        assert sigma >= 0.8 * err, (t, math.degrees(err), math.degrees(sigma))
+        assert sigma <= err + math.radians(10.0), (t, math.degrees(err), math.degrees(sigma))
+    assert after[0][2] > math.radians(100.0)
+    assert after[-1][2] < after[0][2]
+
+
+def test_yaw_covariance_grows_during_a_magnetometer_dropout_and_tilt_stays_small() -> None:
+    pipe, rows = _still_pipeline_run(lambda t: _field(0.0), 10.0)
+    _, gap = _still_pipeline_run(lambda t: None, 30.0, pipe, t0_s=10.0)
+    sig = [r[2] for r in gap]
+    assert sig[-1] > sig[0] > 0.0  # sigma_b * t since the last used sample (small at rest)
+    assert gap[-1][3] < 2 * PipelineParams().orientation_covariance_rad2  # tilt: still known
+
+
+def test_unreferenced_yaw_covariance_without_magnetometer() -> None:
+    _pipe, rows = _still_pipeline_run(lambda t: None, 1.0)
+    assert rows[-1][2] ** 2 == pytest.approx(PipelineParams().unreferenced_yaw_covariance_rad2)

@@ -30,13 +30,16 @@ class PipelineParams:
         choices=BODY_FRAMES, read_only=True, group="frames",
     )
     orientation_covariance_rad2: float = param(
-        0.0003, "rad^2", "Variance reported for roll and pitch (diagonal of "
-        "orientation_covariance, rotation about the world x/y axes); about (1 deg)^2.",
+        0.0003, "rad^2", "Floor of the variance reported for roll and pitch (diagonal "
+        "of orientation_covariance, rotation about the world x/y axes) once the filter has "
+        "converged, about (1 deg)^2; start-up, recovery and clipped stretches add to it (see "
+        "docs/ros_interface.md, Covariance).",
         minimum=0.0, maximum=100.0, minimum_exclusive=True, group="output",
     )
     yaw_covariance_rad2: float = param(
-        0.003, "rad^2", "Variance reported for yaw while the heading is referenced by the "
-        "magnetometer; about (3 deg)^2.",
+        0.003, "rad^2", "Floor of the variance reported for yaw while the heading is "
+        "referenced by the magnetometer, about (3 deg)^2; the last measured heading error and "
+        "the gyro drift since the last used sample add to it.",
         minimum=0.0, maximum=100.0, minimum_exclusive=True, group="output",
     )
     unreferenced_yaw_covariance_rad2: float = param(

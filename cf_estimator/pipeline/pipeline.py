@@ -36,6 +36,7 @@ from cf_estimator.core.filter import ComplementaryFilter
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import MAG_DISABLED, MAG_REJECTED, MAG_USED
 from cf_estimator.pipeline import checks
+from cf_estimator.pipeline.covariance import OrientationCovariance
 from cf_estimator.pipeline.diagnostics import DiagnosticsReport, WindowStats, compose_report
 from cf_estimator.pipeline.messages import UNKNOWN_COVARIANCE, covariance9
 from cf_estimator.pipeline.params import PipelineParams
@@ -71,10 +72,6 @@ class PipelineOutput:
     rpy_rad: Vec3 | None
     initialized: bool
     warnings: list[str] = field(default_factory=list)
-
-
-def _covariance(var_tilt: float, var_yaw: float) -> tuple[float, ...]:
-    return (var_tilt, 0.0, 0.0, 0.0, var_tilt, 0.0, 0.0, 0.0, var_yaw)
 
 
 class ImuPipeline:
@@ -127,6 +124,9 @@ class ImuPipeline:
         self._pending_mag: tuple[int, float, float, float] | None = None  # (t_ns, x, y, z)
         self._av_cov = _CovarianceCache()
         self._la_cov = _CovarianceCache()
+        self._cov_model = OrientationCovariance(
+            self._pp.orientation_covariance_rad2, self._pp.yaw_covariance_rad2,
+            self._pp.unreferenced_yaw_covariance_rad2, self._fp.bias_prior_sigma_rad_s)
         self._apply_derived()
         self._clear_time_state()
 
@@ -188,10 +188,11 @@ class ImuPipeline:
 
     def _apply_derived(self) -> None:
         pp = self._pp
-        self._cov_referenced = _covariance(pp.orientation_covariance_rad2, pp.yaw_covariance_rad2)
-        self._cov_unreferenced = _covariance(
-            pp.orientation_covariance_rad2, pp.unreferenced_yaw_covariance_rad2
-        )
+        cov = self._cov_model
+        cov.tilt0 = pp.orientation_covariance_rad2
+        cov.yaw0 = pp.yaw_covariance_rad2
+        cov.yaw_unref = pp.unreferenced_yaw_covariance_rad2
+        cov.bias_prior = self._fp.bias_prior_sigma_rad_s
         self._max_dt_ns = int(round(pp.max_dt_s * 1e9))
         # 0 = never; a positive value below 0.5 ns must not round to "never"
         self._reset_gap_on = pp.reset_after_gap_s > 0.0
@@ -220,6 +221,7 @@ class ImuPipeline:
         the old time base).
         """
         self._filter.reset()
+        self._cov_model.reset()
         self._clear_time_state()
         self._resets[reason] = self._resets.get(reason, 0) + 1
         if self._pending_mag is not None:
@@ -417,6 +419,7 @@ class ImuPipeline:
 
         # -- magnetometer sample, used once -------------------------------------------------------
         mag = None
+        mag_used = False
         pending = self._pending_mag
         if pending is not None:
             self._pending_mag = None
@@ -436,6 +439,7 @@ class ImuPipeline:
                 ms = s.mag_status
                 if ms == MAG_USED:
                     self._mag_used += 1
+                    mag_used = True
                     self._last_mag_used_ns = pending[0]  # type: ignore[index]
                 elif ms == MAG_REJECTED:
                     self._mag_rejected += 1
@@ -453,10 +457,10 @@ class ImuPipeline:
             if mag is not None:
                 if f._state.heading_initialized:  # noqa: SLF001
                     self._mag_used += 1
+                    mag_used = True
                     self._last_mag_used_ns = pending[0]  # type: ignore[index]
                 else:  # horizontal component too small to give a heading
                     self._mag_rejected += 1
-        heading = f._state.heading_initialized  # noqa: SLF001
         self._last_ns = t_ns
         self._processed += 1
 
@@ -469,7 +473,10 @@ class ImuPipeline:
         else:
             qw, qx, qy, qz = q
             xyzw = (qx, qy, qz, qw)
-            cov = self._cov_referenced if heading else self._cov_unreferenced
+            last_mag = self._last_mag_used_ns
+            cov = self._cov_model.update(
+                dt, f._state, mag_used,  # noqa: SLF001 - flags without building FilterStatus
+                None if last_mag is None else (t_ns - last_mag) * 1e-9)
             roll = math.atan2(2.0 * (qw * qx + qy * qz), 1.0 - 2.0 * (qx * qx + qy * qy))
             sp = 2.0 * (qw * qy - qz * qx)
             pitch = math.asin(1.0 if sp > 1.0 else (-1.0 if sp < -1.0 else sp))
