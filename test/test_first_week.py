@@ -19,6 +19,7 @@ import pytest
 from ros_test_helpers import Header, Imu, MagneticField, Quaternion, Time, Vector3
 
 from cf_estimator.cli.main import build_parser
+from cf_estimator.cli.main import main as cli_main
 from cf_estimator.core import quaternion as quat
 from cf_estimator.core.params import FilterParams
 from cf_estimator.pipeline import ImuPipeline, PipelineParams
@@ -226,3 +227,66 @@ def test_yaw_covariance_grows_during_a_magnetometer_dropout_and_tilt_stays_small
 def test_unreferenced_yaw_covariance_without_magnetometer() -> None:
     _pipe, rows = _still_pipeline_run(lambda t: None, 1.0)
     assert rows[-1][2] ** 2 == pytest.approx(PipelineParams().unreferenced_yaw_covariance_rad2)
+
+
+# -- item 1: tune safety -----------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def flight60(tmp_path_factory) -> Path:
+    """The issue's bag: `cf-estimator simulate --scenario flight --duration 60 -o flight60`."""
+    path = tmp_path_factory.mktemp("fw_tune") / "flight60"
+    assert cli_main(["simulate", "--scenario", "flight", "--duration", "60", "-o",
+                     str(path)]) == 0
+    return path
+
+
+def test_search_boxes_keep_the_safety_nets() -> None:
+    from cf_estimator.bench import tuning
+
+    boxes = {d.name: (d.lo, d.hi) for d in tuning.SEARCHABLE}
+    assert boxes["recovery_trigger_s"][1] <= 30.0 and boxes["recovery_trigger_s"][0] > 0.0
+    assert boxes["wide_saturation_limit_rad"][0] >= 0.5
+    assert boxes["k1"][0] >= 0.1
+    with pytest.raises(ValueError, match="safety range"):
+        tuning.with_bounds(tuning.DEFAULT_SPACE, {"recovery_trigger_s": (10.0, 400.0)})
+
+
+def test_tune_refuses_to_write_a_set_that_loses_on_validation(flight60, tmp_path, capsys):
+    out = tmp_path / "tuned.yaml"
+    argv = ["tune", "--bag", str(flight60), "--candidates", "24", "--passes", "2",
+            "--out", str(out)]
+    assert cli_main(argv) == 1
+    cap = capsys.readouterr()
+    assert "validation (not searched on" in cap.out and "LOSES" in cap.out
+    last = cap.err.strip().splitlines()[-1]
+    assert last.startswith("cf-estimator: error: the tuned set is worse than the start point")
+    assert "--force" in last and not out.exists()
+    # every searched value inside the safety nets
+    for name, lo, hi in (("recovery_trigger_s", 5.0, 30.0), ("wide_saturation_limit_rad", 0.5,
+                                                                10.0), ("k1", 0.1, 5.0)):
+        line = next(x for x in cap.out.splitlines() if x.strip().startswith(name + " "))
+        assert lo <= float(line.split("->")[1]) <= hi, line
+    # --force: written, with the warning in the file and on stderr
+    assert cli_main([*argv, "--force"]) == 0
+    cap = capsys.readouterr()
+    assert "THE TUNED SET IS WORSE" in cap.err
+    assert "# WARNING: worse than the start point on:" in out.read_text()
+
+
+def test_tune_inclination_objective_does_not_search_the_magnetometer_gains(flight60, capsys):
+    assert cli_main(["tune", "--bag", str(flight60), "--objective", "inclination",
+                     "--candidates", "3", "--passes", "1", "--scenario-limit", "none"]) == 0
+    text = capsys.readouterr().out
+    searching = next(line for line in text.splitlines() if line.startswith("tune: "))
+    assert "k1" in searching and "r1" not in searching and "r2" not in searching
+    assert "cannot see r1, r2" in text
+
+
+def test_tune_validate_reads_held_out_euroc_flights(flight60, capsys):
+    euroc = REPO.parent / "shared" / "data" / "euroc" / "MH_04_difficult"
+    if not euroc.is_dir():
+        pytest.skip("EuRoC data not present")
+    assert cli_main(["tune", "--bag", str(flight60), "--search", "k1", "--candidates", "2",
+                     "--passes", "1", "--scenario-limit", "none", "--validate",
+                     str(euroc)]) == 0
+    text = capsys.readouterr().out
+    assert "held-out MH_04_difficult" in text
