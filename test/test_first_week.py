@@ -290,3 +290,76 @@ def test_tune_validate_reads_held_out_euroc_flights(flight60, capsys):
                      str(euroc)]) == 0
     text = capsys.readouterr().out
     assert "held-out MH_04_difficult" in text
+
+
+# -- item 6: the ROS peers at their ROS defaults -----------------------------------------------
+def _still(roll_deg: float, pitch_deg: float, yaw_deg: float, n: int, gyro=(0.0, 0.0, 0.0),
+           lateral_m_s2: float = 0.0):
+    """n samples of a still sensor at ENU Euler angles (+ a constant world-x acceleration)."""
+    q = quat.from_euler(*np.radians([roll_deg, pitch_deg, yaw_deg]))
+    qi = quat.conjugate(q)
+    acc = quat.rotate(qi, [lateral_m_s2, 0.0, G])
+    mag = quat.rotate(qi, [0.0, 20.0, -40.0])  # uT, north = +y, dip down
+    return (np.tile(gyro, (n, 1)), np.tile(acc, (n, 1)), np.tile(mag, (n, 1)), q)
+
+
+def test_complementary_port_finds_a_still_attitude_in_enu() -> None:
+    from cf_estimator.bench.peers import run_complementary
+
+    g, a, m, q = _still(20.0, -10.0, 30.0, 500)
+    out = run_complementary(g, a, m, 100.0)
+    assert np.degrees(quat.angle_between(out[-1], q)) < 0.01
+    assert np.degrees(quat.angle_between(out[0], q)) < 0.01  # initialised from the first sample
+
+
+def test_complementary_port_learns_the_gyro_bias_at_rest() -> None:
+    from cf_estimator.bench.peers import run_complementary
+
+    g, a, _m, q = _still(0.0, 0.0, 0.0, 6000, gyro=(0.0, 0.0, 0.02))  # 60 s at 100 Hz, 6-D
+    def yaw_drift(out):  # 6-D: the start heading is arbitrary, the change is not
+        return abs(math.remainder(quat.to_euler(out[-1])[2] - quat.to_euler(out[0])[2],
+                                  2 * math.pi))
+
+    drift_on = yaw_drift(run_complementary(g, a, None, 100.0))
+    drift_off = yaw_drift(run_complementary(g, a, None, 100.0, do_bias_estimation=False))
+    assert math.degrees(drift_off) == pytest.approx(0.02 * 60.0 * 180.0 / math.pi, rel=0.01)
+    assert math.degrees(drift_on) < 0.05 * math.degrees(drift_off)  # bias_alpha 0.01: learned
+
+
+def test_complementary_port_adaptive_gain_ignores_large_linear_acceleration() -> None:
+    from cf_estimator.bench.peers import run_complementary
+
+    g, a, _m, q = _still(0.0, 0.0, 0.0, 3000, lateral_m_s2=8.0)  # |a| 1.29 g: factor 0
+    a[0] = (0.0, 0.0, G)  # level at the start
+    def tilt(out):  # angle between estimated and true "up" in the sensor frame (6-D)
+        up = [quat.rotate(quat.conjugate(x), [0.0, 0.0, 1.0]) for x in (out[-1], q)]
+        return math.acos(min(1.0, float(np.dot(up[0], up[1]))))
+
+    tilt_on = tilt(run_complementary(g, a, None, 100.0))
+    tilt_off = tilt(run_complementary(g, a, None, 100.0, do_adaptive_gain=False))
+    assert math.degrees(tilt_on) < 0.01
+    assert math.degrees(tilt_off) > 20.0  # pulled toward atan(8 / 9.8) = 39 deg
+
+
+def test_madgwick_peer_runs_at_imu_filter_madgwick_gain() -> None:
+    pytest.importorskip("ahrs")
+    from ahrs.filters import Madgwick
+
+    from cf_estimator.bench import peers
+
+    assert peers.MADGWICK_ROS_GAIN == 0.1 and peers.MADGWICK_ROS_ZETA == 0.0
+    seen = []
+    real_init = Madgwick.__init__
+
+    def spy(self, *args, **kwargs):
+        real_init(self, *args, **kwargs)
+        seen.append(self)
+
+    g, a, m, q = _still(0.0, 0.0, 0.0, 10)
+    Madgwick.__init__ = spy
+    try:
+        peers.run_madgwick(g, a, m, 100.0)
+        peers.run_madgwick(g, a, None, 100.0)
+    finally:
+        Madgwick.__init__ = real_init
+    assert [f.gain for f in seen] == [0.1, 0.1]

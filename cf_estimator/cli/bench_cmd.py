@@ -87,7 +87,8 @@ def register(subparsers: Any) -> None:
     e.add_argument("--settle", type=finite_float, default=10.0, metavar="S",
                    help="seconds after the first IMU sample before scoring (default %(default)s)")
     e.add_argument("--peers", default="all", metavar="LIST",
-                   help="comma-separated: vqf,vqf_offline,madgwick,fusion,riann, 'all' "
+                   help="comma-separated: vqf,vqf_offline,madgwick,fusion,complementary,riann, "
+                   "'all' "
                    "(default: those installed) or 'none'")
     e.add_argument("--params", metavar="YAML", help="ROS 2 parameter file for our filter "
                    "(default: the shipped defaults, FilterParams())")
@@ -151,7 +152,8 @@ def register(subparsers: Any) -> None:
 def _add_peers_option(parser: Any) -> None:
     """``--peers``, the same in every bench command."""
     parser.add_argument("--peers", default="all", metavar="LIST",
-                        help="peers at their defaults: comma-separated vqf,fusion,madgwick, "
+                        help="peers at their defaults (ROS peers: their ROS packages' defaults): "
+                        "comma-separated vqf,fusion,madgwick,complementary, "
                         "'all' or 'none' (default all; peers not installed are skipped with a "
                         "note: pip install '.[bench]')")
 
