@@ -363,3 +363,45 @@ def test_madgwick_peer_runs_at_imu_filter_madgwick_gain() -> None:
     finally:
         Madgwick.__init__ = real_init
     assert [f.gain for f in seen] == [0.1, 0.1]
+
+
+# -- item 7: low-rate streams (10-50 Hz) -------------------------------------------------------
+def _load_low_rate_script():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("bench_low_rate",
+                                                  REPO / "scripts" / "bench_low_rate.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)  # type: ignore[union-attr]
+    return mod
+
+
+@pytest.mark.parametrize("rate_hz", [10.0, 20.0, 50.0])
+def test_rest_detection_and_bias_learning_work_with_five_samples_per_block(rate_hz) -> None:
+    from cf_estimator import estimate
+    from cf_estimator.scenarios import make_scenario
+
+    sc = make_scenario("static", rate_hz=rate_hz, duration_s=60.0, seed=1)
+    r = estimate(sc.imu.gyro_rad_s, sc.imu.accel_m_s2, None, timestamps_s=sc.imu.t_s,
+                 params=FilterParams(use_mag=False))
+    assert r.at_rest.mean() > 0.9  # the 0.5 s block holds 5 samples at 10 Hz
+    assert sc.imu.t_s[np.argmax(r.at_rest)] < 3.0
+    true_bias = sc.imu.gyro_bias_rad_s[-1]
+    assert np.degrees(np.linalg.norm(true_bias)) > 0.05  # there is a bias to learn
+    assert np.degrees(np.linalg.norm(r.gyro_bias_rad_s[-1] - true_bias)) < 0.05
+    assert bool(r.gyro_bias_converged[-1])
+
+
+def test_euroc_at_10_hz_block_averaged_stays_near_full_rate() -> None:
+    data = REPO.parent / "shared" / "data" / "euroc"
+    if not data.is_dir():
+        pytest.skip("EuRoC data not present")
+    from cf_estimator.bench import euroc
+
+    bench = _load_low_rate_script()
+    flights = euroc.load_flights(data)
+    full = np.mean([bench.euroc_score(f) for f in flights])
+    avg10 = np.mean([bench.euroc_score(bench.reduced(f, 20, True)) for f in flights])
+    pick10 = np.mean([bench.euroc_score(bench.reduced(f, 20, False)) for f in flights])
+    assert avg10 < full + 0.2  # 10 Hz averaged: within 0.2 deg of 200 Hz
+    assert pick10 > avg10 + 1.0  # picking samples aliases the vibration: the docs' advice
