@@ -11,6 +11,7 @@ import argparse
 import importlib
 import os
 import sys
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -75,8 +76,23 @@ def _register_missing(sub: Any, name: str, exc: ModuleNotFoundError) -> None:
 _MISSING: dict[str, str] = {}
 
 
+_SHOWN: set[str] = set()
+
+
+def _one_line_warning(message: Warning | str, category: type[Warning], filename: str,
+                      lineno: int, file: Any = None, line: str | None = None) -> None:
+    """Python warnings (e.g. a peer's, or estimate()'s unit checks) as one line each, once per
+    text: ``cf-estimator: warning: <text>`` instead of the file, line and source line."""
+    text = str(message).splitlines()[0] if str(message) else category.__name__
+    if text in _SHOWN:
+        return
+    _SHOWN.add(text)
+    print(f"cf-estimator: warning: {text}", file=sys.stderr if file is None else file)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``cf-estimator`` console script; returns the exit code."""
+    warnings.showwarning = _one_line_warning  # bench workers (fork) inherit it
     parser = build_parser()
     words = list(sys.argv[1:] if argv is None else argv)
     command = next((w for w in words if not w.startswith("-")), None)

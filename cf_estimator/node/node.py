@@ -145,7 +145,8 @@ class CfEstimatorNode(Node):
             log.warning(f"unknown parameter(s), ignored: {describe_unknown(unknown)}")
         ns = self.get_namespace().rstrip("/")
         self._pipe = ImuPipeline(
-            filter_params, pipeline_params, diagnostics_name=f"{ns}/{self.get_name()}: attitude"
+            filter_params, pipeline_params, diagnostics_name=f"{ns}/{self.get_name()}: attitude",
+            imu_topic=self.resolve_topic_name(IMU_IN),
         )
         self._last_level: int | None = None
         self._converts_axes = self._pipe.converts_axes

@@ -78,7 +78,8 @@ class ImuPipeline:
     """Validated IMU (+ magnetometer) messages → complementary filter → output contents.
 
     ``filter_params``/``pipeline_params`` default to the schema defaults. ``diagnostics_name``
-    is the ``name`` of the diagnostic status (the node passes its fully qualified name).
+    is the ``name`` of the diagnostic status (the node passes its fully qualified name),
+    ``imu_topic`` the IMU input topic named in "no IMU messages" reports.
     """
 
     def __init__(
@@ -87,11 +88,13 @@ class ImuPipeline:
         pipeline_params: PipelineParams | None = None,
         *,
         diagnostics_name: str = "cf_estimator",
+        imu_topic: str = "",
     ) -> None:
         self._fp = filter_params if filter_params is not None else FilterParams()
         self._pp = pipeline_params if pipeline_params is not None else PipelineParams()
         self._filter = ComplementaryFilter(self._fp)
         self.diagnostics_name = diagnostics_name
+        self.imu_topic = imu_topic  #: named in the "no IMU messages" diagnostics (the node's)
         # cumulative counters (plain ints: the hot path increments attributes)
         self._received_imu = 0
         self._processed = 0
@@ -546,6 +549,7 @@ class ImuPipeline:
             mag_age_s=mag_age,
             mag_timeout_s=self._pp.mag_timeout_s,
             filter_backend=self._filter.backend,
+            imu_topic=self.imu_topic,
         )
         self._previous_counters = counters
         self._previous_now_s = now_s
