@@ -18,8 +18,8 @@ row-major 3×3). Documented in docs/ros_interface.md ("Covariance"):
 - yaw, not referenced (``use_mag`` false, or no usable sample yet):
   ``unreferenced_yaw_covariance_rad2``.
 
-Each variance is capped at π² (an angle error is at most π) or the unreferenced yaw variance
-if larger. Plain floats: it runs per message.
+Each variance is capped at π² (an angle error is at most π), or at its configured floor (yaw:
+also the unreferenced variance) if larger. Plain floats: it runs per message.
 """
 
 from __future__ import annotations
@@ -63,12 +63,13 @@ class OrientationCovariance:
         settling = phase in (PHASE_STARTUP, PHASE_RECOVERING)
         e_t = s.error_norm if settling else 0.0  # type: ignore[attr-defined]
         drift = sigma_b * self._clip_s
-        tilt = min(self.tilt0 + e_t * e_t + drift * drift, _PI2)
+        tilt = min(self.tilt0 + e_t * e_t + drift * drift, max(_PI2, self.tilt0))
         if s.heading_initialized:  # type: ignore[attr-defined]
             if mag_used:
                 self._yaw_err = abs(s.yaw_error_rad)  # type: ignore[attr-defined]
             yd = sigma_b * (mag_age_s or 0.0)
-            yaw = min(self.yaw0 + self._yaw_err**2 + yd * yd, max(_PI2, self.yaw_unref))
+            yaw = min(self.yaw0 + self._yaw_err**2 + yd * yd,
+                      max(_PI2, self.yaw_unref, self.yaw0))
         else:
             yaw = self.yaw_unref
         return (tilt, 0.0, 0.0, 0.0, tilt, 0.0, 0.0, 0.0, yaw)
