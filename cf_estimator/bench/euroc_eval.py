@@ -77,6 +77,8 @@ def _peer(name: str) -> Runner:
             return peers.run_fusion(g, a, None, r)
         if name == "madgwick":
             return peers.run_madgwick(g, a, None, r)
+        if name == "complementary":
+            return peers.run_complementary(g, a, None, r)
         if name == "riann":
             return peers.run_riann(g, a, r)
         raise ValueError(f"no runner for peer {name!r}")
@@ -95,7 +97,7 @@ def register(algorithm: Algorithm) -> None:
 register(Algorithm("cf_estimator", _ours_online, ours=True))
 register(Algorithm("cf_estimator_offline", _ours_offline, ours=True))
 for _name, _package in (("vqf", "vqf"), ("vqf_offline", "vqf"), ("madgwick", "ahrs"),
-                        ("fusion", "imufusion"), ("riann", "riann")):
+                        ("fusion", "imufusion"), ("complementary", None), ("riann", "riann")):
     register(Algorithm(_name, _peer(_name), _package))
 
 

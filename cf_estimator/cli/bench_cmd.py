@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from cf_estimator.cli.base import CliError, finite_float
 from cf_estimator.cli.common import (
     add_params_options,
     check_input_path,
@@ -24,7 +25,6 @@ from cf_estimator.cli.common import (
     load_params,
     note,
 )
-from cf_estimator.cli.main import CliError, finite_float
 
 if TYPE_CHECKING:
     from cf_estimator.bench.speed import BagThroughput
@@ -37,7 +37,8 @@ def _csv(text: str) -> list[str]:
 def register(subparsers: Any) -> None:
     """Add ``bench`` and its sub-commands."""
     p = subparsers.add_parser(
-        "bench", help="accuracy and speed benchmarks (BROAD, thesis scenarios, speed) vs peers",
+        "bench", help="accuracy and speed benchmarks vs peers (bench broad, euroc, scenarios, "
+        "speed)",
         description="Benchmarks of the filter against VQF, x-io Fusion and Madgwick.",
     )
     sub = p.add_subparsers(dest="bench_command", required=True, metavar="BENCHMARK")
@@ -87,7 +88,8 @@ def register(subparsers: Any) -> None:
     e.add_argument("--settle", type=finite_float, default=10.0, metavar="S",
                    help="seconds after the first IMU sample before scoring (default %(default)s)")
     e.add_argument("--peers", default="all", metavar="LIST",
-                   help="comma-separated: vqf,vqf_offline,madgwick,fusion,riann, 'all' "
+                   help="comma-separated: vqf,vqf_offline,madgwick,fusion,complementary,riann, "
+                   "'all' "
                    "(default: those installed) or 'none'")
     e.add_argument("--params", metavar="YAML", help="ROS 2 parameter file for our filter "
                    "(default: the shipped defaults, FilterParams())")
@@ -155,7 +157,8 @@ def register(subparsers: Any) -> None:
 def _add_peers_option(parser: Any) -> None:
     """``--peers``, the same in every bench command."""
     parser.add_argument("--peers", default="all", metavar="LIST",
-                        help="peers at their defaults: comma-separated vqf,fusion,madgwick, "
+                        help="peers at their defaults (ROS peers: their ROS packages' defaults): "
+                        "comma-separated vqf,fusion,madgwick,complementary, "
                         "'all' or 'none' (default all; peers not installed are skipped with a "
                         "note: pip install '.[bench]')")
 
