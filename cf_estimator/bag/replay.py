@@ -62,6 +62,8 @@ class ReplayOptions:
     heading_alignment: str = "auto"
     progress: bool | None = None  #: None: a tqdm bar on stderr only when stderr is a terminal
     offline: bool = False  #: write the offline (acausal) estimate (_offline_orientations)
+    #: called with the number of messages read since the last call (a fleet's progress bar)
+    on_messages: Callable[[int], None] | None = None
 
 
 @dataclass
@@ -234,11 +236,15 @@ def _jsonable(value: Any) -> Any:
 
 
 class _Progress:
-    def __init__(self, total: int, enabled: bool | None, desc: str) -> None:
-        if enabled is None:
+    def __init__(self, total: int, enabled: bool | None, desc: str,
+                 on_messages: Callable[[int], None] | None = None) -> None:
+        self._on_messages = on_messages
+        if on_messages is not None:
+            enabled = True  # the caller's bar shows it
+        elif enabled is None:
             enabled = sys.stderr.isatty()
         self._bar = None
-        if enabled:
+        if enabled and on_messages is None:
             from tqdm import tqdm
 
             self._bar = tqdm(total=total, unit="msg", unit_scale=True, desc=desc,
@@ -246,15 +252,21 @@ class _Progress:
         self._pending = 0
 
     def tick(self) -> None:
-        if self._bar is not None:
+        if self._bar is not None or self._on_messages is not None:
             self._pending += 1
             if self._pending >= 2000:
-                self._bar.update(self._pending)
-                self._pending = 0
+                self._flush()
 
-    def close(self) -> None:
+    def _flush(self) -> None:
         if self._bar is not None:
             self._bar.update(self._pending)
+        if self._on_messages is not None:
+            self._on_messages(self._pending)
+        self._pending = 0
+
+    def close(self) -> None:
+        self._flush()
+        if self._bar is not None:
             self._bar.close()
 
 
@@ -538,7 +550,7 @@ def replay_variants(
         try:
             for v in variants:
                 runs.append(_Run(v, opts, topics, types, pipeline_factory))
-            progress = _Progress(total, opts.progress, in_path.name)
+            progress = _Progress(total, opts.progress, in_path.name, opts.on_messages)
             copy = opts.copy_inputs and any(r.bag is not None for r in runs)
             for m in bag.messages(topics):
                 log_ns = m.log_time_ns
