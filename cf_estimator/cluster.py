@@ -47,6 +47,10 @@ class Engine:
     def check_paths(self, paths: Sequence[str], *, writable: Sequence[str] = ()) -> None:
         """Every worker can read ``paths`` and write into the directories ``writable``."""
 
+    def share(self, obj: Any) -> Any:
+        """A handle tasks can carry instead of ``obj`` (here: ``obj`` itself)."""
+        return obj
+
     def close(self) -> None:
         """Release workers (idempotent)."""
 
@@ -127,6 +131,7 @@ class DaskEngine(Engine):
                                "'cf_estimator[cluster]' (or 'dask[distributed]')") from None
         self._cluster = None
         self.client = None
+        self._shared: dict[int, tuple[Any, Any]] = {}
         try:
             if address.startswith("local:"):
                 n = _count(address[len("local:"):])
@@ -182,6 +187,14 @@ class DaskEngine(Engine):
                     "the workers by path, so they must be on storage every worker mounts at "
                     "the same path")
 
+    def share(self, obj: Any) -> Any:
+        """``obj`` scattered once to the workers (a future that tasks carry; kept, per object,
+        for the engine's lifetime, so the tuner's passes reuse it)."""
+        key = id(obj)
+        if key not in self._shared:
+            self._shared[key] = (obj, self.client.scatter(obj, hash=False))
+        return self._shared[key][1]
+
     def map(self, fn: Callable[[Any], Any], tasks: Sequence[Any],
             on_done: Callable[[int, Any], None] | None = None) -> list[Any]:
         from distributed import as_completed
@@ -206,6 +219,7 @@ class DaskEngine(Engine):
     def close(self) -> None:
         client, cluster = getattr(self, "client", None), self._cluster
         self.client, self._cluster = None, None
+        self._shared = {}
         # closing must not mask the real error
         if client is not None:
             with contextlib.suppress(Exception):

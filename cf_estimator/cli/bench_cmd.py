@@ -65,6 +65,9 @@ def register(subparsers: Any) -> None:
     b.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
                    help="worker processes, one trial each (default %(default)s)")
     b.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    from cf_estimator.cluster import add_cluster_option
+
+    add_cluster_option(b)
     b.set_defaults(run=run_broad)
 
     e = sub.add_parser(
@@ -93,6 +96,7 @@ def register(subparsers: Any) -> None:
     e.add_argument("--json", metavar="OUT", help="write per-flight scores and means as JSON")
     e.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
                    help="worker processes, one flight each (default %(default)s)")
+    add_cluster_option(e)
     e.set_defaults(run=run_euroc)
 
     s = sub.add_parser(
@@ -213,10 +217,17 @@ def run_broad(args: Any) -> int:
         if not args.quiet:
             print(f"[{i}/{n}] {name} ({time.monotonic() - start:.0f} s)", file=sys.stderr)
 
+    from cf_estimator.cluster import ClusterError, make_engine
+
     try:
-        result = evaluate_all(paths, info, params, peers, jobs=args.jobs, progress=progress)
+        with make_engine(args.cluster, args.jobs) as engine:
+            engine.check_paths([str(Path(p).absolute()) for p in paths])
+            result = evaluate_all([Path(p).absolute() for p in paths] if args.cluster else paths,
+                                  info, params, peers, jobs=engine, progress=progress)
     except broad.BroadDataError as exc:
         raise CliError(str(exc)) from None
+    except ClusterError as exc:
+        raise CliError(str(exc), 2) from None
     algos = ", ".join(["cf_estimator", "cf_estimator_offline"]
                       + [q for p in peers for q in ((p, "vqf_offline") if p == "vqf" else (p,))])
     print(f"BROAD: {len(paths)} trial(s) from {args.data}; RMSE [deg] over movement samples, "
@@ -274,7 +285,13 @@ def run_euroc(args: Any) -> int:
             flights = euroc.load_flights(args.data)
     except euroc.EurocDataError as exc:
         raise CliError(str(exc), 2) from None
-    result = ev.run_euroc(flights, params, peers, args.settle, jobs=args.jobs)
+    from cf_estimator.cluster import ClusterError, make_engine
+
+    try:  # on a cluster the flights (read here from their CSV files) travel once each
+        with make_engine(args.cluster, args.jobs) as engine:
+            result = ev.run_euroc(flights, params, peers, args.settle, jobs=engine)
+    except ClusterError as exc:
+        raise CliError(str(exc), 2) from None
     print(f"EuRoC: {len(result.flights)} flight(s) from {args.data}; 6-D inclination error "
           f"[deg] vs ground truth after the first {args.settle:g} s: RMS / max")
     print(f"cf_estimator parameters: {args.params or 'shipped defaults'}")
