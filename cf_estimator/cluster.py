@@ -137,7 +137,7 @@ class DaskEngine(Engine):
                 n = _count(address[len("local:"):])
                 self._cluster = LocalCluster(
                     n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                    dashboard_address=None, silence_logs=50,
+                    dashboard_address="127.0.0.1:0", silence_logs=50,  # loopback, any port
                 )
                 self.client = Client(self._cluster, timeout=CONNECT_TIMEOUT_S)
                 self.description = f"Dask LocalCluster, {n} worker process(es)"

@@ -48,17 +48,19 @@ def find_bags(inputs: Sequence[str | os.PathLike[str]]) -> list[Path]:
         if not p.is_dir() or _is_ros2_dir(p):
             found.append(p)
             continue
+        here_found: list[Path] = []
         for root, dirs, files in os.walk(p):
             dirs[:] = sorted(d for d in dirs if not d.startswith("."))
             here = Path(root)
             if here != p and (_is_ros2_dir(here) or _storage_dir(here)):
-                found.append(here)
+                here_found.append(here)
                 dirs[:] = []
                 continue
-            found.extend(here / f for f in sorted(files)
-                         if f.endswith(".bag") and not f.startswith("."))
+            here_found.extend(here / f for f in files
+                              if f.endswith(".bag") and not f.startswith("."))
             if here == p and _storage_dir(here):
-                found.append(here)
+                here_found.append(here)
+        found.extend(sorted(here_found, key=lambda b: b.relative_to(p).as_posix()))
     return list(dict.fromkeys(found))
 
 
@@ -99,6 +101,8 @@ def replay_task(task: ReplayTask) -> dict[str, Any]:
     """Replay one bag; ``{"status": "ok", "summary": ...}`` or ``{"status": "failed",
     "input": ..., "error": one line}`` (never raises for a bad bag)."""
     try:
+        if task.output is not None:  # the fleet's output directory, on the worker's side
+            Path(task.output).parent.mkdir(parents=True, exist_ok=True)
         result = replay_bag(task.bag, task.output, task.filter_params, task.pipeline_params,
                             task.options)
         summary = result.summary
