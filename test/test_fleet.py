@@ -232,3 +232,23 @@ def test_bench_broad_on_a_local_cluster_matches_the_local_run(tmp_path, engine, 
     assert main([*args, "--json", str(tmp_path / "d.json"), "--cluster", "local:2"]) == 0
     capsys.readouterr()
     assert (tmp_path / "l.json").read_bytes() == (tmp_path / "d.json").read_bytes()
+
+
+def test_bench_fleet_prints_throughputs_and_finds_the_cluster_results_identical(tmp_path,
+                                                                                 capsys):
+    pytest.importorskip("distributed")
+    js = tmp_path / "fleet.json"
+    rc = main(["bench", "fleet", "--flights", "2", "--duration", "40", "--rate", "50",
+               "--workers", "1", "--candidates", "3", "--json", str(js)])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    doc = json.loads(js.read_text())
+    assert [r["workers"] for r in doc["runs"]] == [0, 1]
+    assert doc["runs"][0]["identical"] is None and doc["runs"][1]["identical"] is True
+    assert doc["imu_messages"] == 2 * 40 * 50 and doc["candidates"] == 3
+    for r in doc["runs"]:
+        assert r["replay_messages"] == 2 * (2000 + 2000) and r["replay_messages_per_s"] > 0
+        assert r["param_samples"] == 3 * 4000 and r["param_samples_per_s"] > 0
+    rows = [line.split() for line in out.splitlines() if line.startswith("  no Dask")
+            or line.startswith("  LocalCluster")]
+    assert len(rows) == 2 and rows[0][-1] == "reference" and rows[1][-1] == "yes"
