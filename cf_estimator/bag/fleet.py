@@ -255,6 +255,14 @@ def comparable(summary: dict[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in summary.items() if k not in TIMING_KEYS}
 
 
+def _shown(path: str | None) -> str:
+    """A path as the table shows it: relative to the working directory when below it."""
+    if not path:
+        return "-"
+    rel = os.path.relpath(path)
+    return path if rel.startswith("..") else rel
+
+
 def format_table(fleet: dict[str, Any]) -> str:
     """The console table: one line per bag (figures or the failure), then the totals."""
     rows = [("bag", "format", "IMU msgs", "stamps s", "rejected", "resets", "bias",
@@ -266,7 +274,7 @@ def format_table(fleet: dict[str, Any]) -> str:
     for name in order:
         kind, s = by_name[name]
         if kind == "failed":
-            lines.append(f"FAILED  {s['error']}")
+            lines.append(f"FAILED  {s['error'].replace(s['input'], _shown(s['input']))}")
             continue
         rmse = s.get("rmse_deg")
         rmse_text = f"{rmse['total']:.2f}/{rmse['inclination']:.2f}" if rmse else "-"
@@ -275,7 +283,7 @@ def format_table(fleet: dict[str, Any]) -> str:
             str(sum((s.get("messages_rejected") or {}).values())),
             str(sum((s.get("resets") or {}).values())),
             "converged" if s.get("gyro_bias_converged") else "no",
-            rmse_text, s.get("output") or "-",
+            rmse_text, _shown(s.get("output")),
         ))
     widths = [max(len(r[c]) for r in rows) for c in range(len(rows[0]))]
     table = ["  ".join(v.ljust(w) if c in (0, 1, 6, 8) else v.rjust(w)
