@@ -113,6 +113,10 @@ def _looks_like_bag(path: Path) -> str | None:
     return None
 
 
+#: Messages decoded together by ``InputBag.messages(bulk=True)``.
+_BULK_CHUNK = 8192
+
+
 class InputBag:
     """An open input bag (use :func:`open_bag`); a context manager."""
 
@@ -215,8 +219,12 @@ class InputBag:
         return None
 
     # -- messages ------------------------------------------------------------------------------
-    def messages(self, topics: Iterable[str]) -> Iterator[BagMessage]:
+    def messages(self, topics: Iterable[str], *, bulk: bool = False) -> Iterator[BagMessage]:
         """Deserialized messages of ``topics`` in log-time order (as recorded, interleaved).
+
+        ``bulk``: sensor_msgs/Imu and MagneticField are decoded a few thousand at a time with
+        NumPy (:mod:`cf_estimator.bag.cdr`: light objects with the same field names and values;
+        other types and unusual messages through rosbags as usual).
 
         Any failure of the reader (truncated chunk, corrupt record, undecodable message) is
         raised as :class:`BagError` naming the file.
@@ -227,22 +235,63 @@ class InputBag:
             return
         reader = self._reader
         it = reader.messages(connections=conns)
-        while True:
+
+        def decode_one(conn: Any, log_ns: int, raw: bytes) -> Any:
             try:
-                item = next(it)
-            except StopIteration:
-                return
-            except Exception as exc:  # noqa: BLE001 - any reader failure is a bad bag
-                raise BagError(f"{self.path}: cannot read messages: {_short(exc)}") from exc
-            conn, log_ns, raw = item
-            try:
-                msg = reader.deserialize(raw, conn.msgtype)
+                return reader.deserialize(raw, conn.msgtype)
             except Exception as exc:  # noqa: BLE001
                 raise BagError(
                     f"{self.path}: cannot decode a {conn.msgtype} message on {conn.topic} at "
                     f"log time {log_ns} ns: {_short(exc)}"
                 ) from exc
-            yield BagMessage(conn.topic, conn.msgtype, int(log_ns), msg)
+
+        def next_item() -> Any:
+            try:
+                return next(it)
+            except StopIteration:
+                return None
+            except Exception as exc:  # noqa: BLE001 - any reader failure is a bad bag
+                raise BagError(f"{self.path}: cannot read messages: {_short(exc)}") from exc
+
+        if not bulk:
+            while (item := next_item()) is not None:
+                conn, log_ns, raw = item
+                yield BagMessage(conn.topic, conn.msgtype, int(log_ns),
+                                 decode_one(conn, log_ns, raw))
+            return
+        from cf_estimator.bag import cdr
+
+        fast = (IMU_TYPE, MAG_TYPE)
+        ros2 = self.is_ros2
+        done = False
+        while not done:
+            chunk = []
+            while len(chunk) < _BULK_CHUNK:
+                item = next_item()
+                if item is None:
+                    done = True
+                    break
+                chunk.append(item)
+            decoded: list[Any] = [None] * len(chunk)
+            by_type: dict[str, list[int]] = {}
+            for i, (conn, log_ns, raw) in enumerate(chunk):
+                if conn.msgtype in fast:
+                    by_type.setdefault(conn.msgtype, []).append(i)
+                else:
+                    decoded[i] = decode_one(conn, log_ns, raw)
+            for msgtype, idx in by_type.items():
+                items = [chunk[i] for i in idx]
+                pos = {id(it[2]): it for it in items}
+
+                def fallback(raw: bytes, mt: str, pos: dict = pos) -> Any:
+                    conn, log_ns, _ = pos[id(raw)]
+                    return decode_one(conn, log_ns, raw)
+
+                for i, m in zip(idx, cdr.decode([it[2] for it in items], msgtype, ros2,
+                                                fallback), strict=True):
+                    decoded[i] = m
+            for (conn, log_ns, _raw), msg in zip(chunk, decoded, strict=True):
+                yield BagMessage(conn.topic, conn.msgtype, int(log_ns), msg)
 
     def to_jazzy(self, msg: Any, msgtype: str) -> Any:
         """``msg`` (from this bag's typestore) as a Jazzy message object (ROS 1 ``seq`` dropped)."""
@@ -472,6 +521,16 @@ class OutputBag:
             self.add_topic(topic, msgtype)
             conn = self._connections[key]
         data = self._store.serialize_cdr(msg, msgtype)
+        self._writer.write(conn, int(log_time_ns), data)
+        self.counts[topic] += 1
+
+    def write_raw(self, topic: str, msgtype: str, log_time_ns: int, data: bytes) -> None:
+        """Write one message already serialized (Jazzy CDR) at ``log_time_ns``."""
+        key = (topic, msgtype)
+        conn = self._connections.get(key)
+        if conn is None:
+            self.add_topic(topic, msgtype)
+            conn = self._connections[key]
         self._writer.write(conn, int(log_time_ns), data)
         self.counts[topic] += 1
 

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from cf_estimator import __version__, metrics
-from cf_estimator.bag import io
+from cf_estimator.bag import cdr, io
 from cf_estimator.core import quaternion as quat
 from cf_estimator.core.filter import ComplementaryFilter, bias_sigma
 from cf_estimator.core.kernel import resolve_backend
@@ -62,6 +62,8 @@ class ReplayOptions:
     heading_alignment: str = "auto"
     progress: bool | None = None  #: None: a tqdm bar on stderr only when stderr is a terminal
     offline: bool = False  #: write the offline (acausal) estimate (_offline_orientations)
+    #: decode IMU/magnetometer messages in bulk with NumPy (same values; False: one by one)
+    bulk_decode: bool = True
     #: called with the number of messages read since the last call (a fleet's progress bar)
     on_messages: Callable[[int], None] | None = None
 
@@ -422,10 +424,12 @@ class _Run:
         bag = self.bag
         if self.offline:
             self.outputs.append((log_ns, out))
-        elif bag is not None:
-            bag.write(OUT_IMU_TOPIC, io.IMU_TYPE, log_ns, io.imu_from_output(out))
+        elif bag is not None:  # the bytes rosbags would serialize (bag/cdr.py), in one call
+            bag.write_raw(OUT_IMU_TOPIC, io.IMU_TYPE, log_ns, cdr.imu_cdr(out))
             if self.publish_rpy and out.rpy_rad is not None:
-                bag.write(OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE, log_ns, io.rpy_from_output(out))
+                bag.write_raw(OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE, log_ns,
+                              cdr.vector3_stamped_cdr(out.stamp_sec, out.stamp_nanosec,
+                                                      out.frame_id, out.rpy_rad))
         t = out.stamp_sec + out.stamp_nanosec * 1e-9
         self.t.append(t)
         if out.initialized:
@@ -471,10 +475,11 @@ class _Run:
         if bag is not None:
             for log_ns, topic, msgtype, item in sorted(self.held, key=lambda h: h[0]):
                 if topic == OUT_IMU_TOPIC:
-                    bag.write(topic, msgtype, log_ns, io.imu_from_output(item))
+                    bag.write_raw(topic, msgtype, log_ns, cdr.imu_cdr(item))
                     if self.publish_rpy and item.rpy_rad is not None:
-                        bag.write(OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE, log_ns,
-                                  io.rpy_from_output(item))
+                        bag.write_raw(OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE, log_ns,
+                                      cdr.vector3_stamped_cdr(item.stamp_sec, item.stamp_nanosec,
+                                                              item.frame_id, item.rpy_rad))
                 else:
                     bag.write(topic, msgtype, log_ns, item)
         self.held = []
@@ -552,7 +557,9 @@ def replay_variants(
                 runs.append(_Run(v, opts, topics, types, pipeline_factory))
             progress = _Progress(total, opts.progress, in_path.name, opts.on_messages)
             copy = opts.copy_inputs and any(r.bag is not None for r in runs)
-            for m in bag.messages(topics):
+            # IMU and magnetometer decoded in bulk (bag/cdr.py), except when the inputs are
+            # copied: those need rosbags' message objects
+            for m in bag.messages(topics, bulk=not copy and opts.bulk_decode):
                 log_ns = m.log_time_ns
                 if first_log is None:
                     first_log = log_ns
