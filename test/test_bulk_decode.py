@@ -195,3 +195,36 @@ def test_output_encoding_is_what_rosbags_serializes_for_every_frame_length_and_v
                                                              io.IMU_TYPE)), frame
         assert cdr.vector3_stamped_cdr(out.stamp_sec, out.stamp_nanosec, frame, out.rpy_rad) \
             == bytes(store.serialize_cdr(io.rpy_from_output(out), io.VECTOR3_STAMPED_TYPE))
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_write_raw_gives_the_file_rosbags_writer_writes(tmp_path, storage):
+    """Over 1 MB (several chunks), three topics, non-monotonic log times: same bytes."""
+    store = io.typestore()
+    msgs = []
+    for i in range(6000):
+        out = _output(FRAMES[i % len(FRAMES)], [0.001 * i + k for k in range(40)])
+        msgs.append((OUT_IMU_TOPIC, io.IMU_TYPE, 10**9 + 1000 * i - (i % 7) * 333,
+                     io.imu_from_output(out)))
+        msgs.append((OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE, 10**9 + 1000 * i,
+                     io.rpy_from_output(out)))
+        if i % 500 == 0:
+            msgs.append(("/diagnostics", io.DIAGNOSTIC_ARRAY_TYPE, 10**9 + 1000 * i,
+                         io.diagnostics_message(10**9 + 1000 * i, [])))
+    for name, raw in (("objects", False), ("raw", True)):
+        (tmp_path / name).mkdir()
+        with io.OutputBag(tmp_path / name / "bag", storage=storage) as bag:
+            for topic, msgtype, t, m in msgs:
+                if raw:
+                    bag.write_raw(topic, msgtype, t, bytes(store.serialize_cdr(m, msgtype)))
+                else:
+                    bag.write(topic, msgtype, t, m)
+    a, b = tmp_path / "objects" / "bag", tmp_path / "raw" / "bag"
+    files = sorted(p.name for p in a.iterdir())
+    assert files == sorted(p.name for p in b.iterdir())
+    if storage == "mcap":
+        assert (a / "bag.mcap").stat().st_size > 2**21
+        assert (a / "bag.mcap").read_bytes() == (b / "bag.mcap").read_bytes()
+    assert (a / "metadata.yaml").read_text() == (b / "metadata.yaml").read_text()
+    for topic in (OUT_IMU_TOPIC, OUT_RPY_TOPIC, "/diagnostics"):
+        assert raw_messages(a, topic) == raw_messages(b, topic)

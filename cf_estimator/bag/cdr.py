@@ -164,6 +164,8 @@ def _header_struct(kind: str, frame: bytes, n_doubles: int) -> struct.Struct:
 
 
 def _cov(c: Any) -> tuple[float, ...]:
+    if type(c) is tuple and len(c) == 9:  # the pipeline's covariances: tuples of floats
+        return c
     if c is None:
         return (0.0,) * 9
     t = tuple(float(x) for x in c)

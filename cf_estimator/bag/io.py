@@ -19,6 +19,7 @@ import contextlib
 import functools
 import os
 import shutil
+import struct
 import tempfile
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
@@ -113,6 +114,10 @@ def _looks_like_bag(path: Path) -> str | None:
     return None
 
 
+#: An mcap Message record's fixed part: opcode, record length, channel id, sequence, log time,
+#: publish time (rosbags writes log time twice); and the size that closes a chunk (rosbags').
+_MCAP_MESSAGE = struct.Struct("<BQHIQQ")
+_MCAP_CHUNK_BYTES = 2**20
 #: Messages decoded together by ``InputBag.messages(bulk=True)``.
 _BULK_CHUNK = 8192
 
@@ -525,14 +530,60 @@ class OutputBag:
         self.counts[topic] += 1
 
     def write_raw(self, topic: str, msgtype: str, log_time_ns: int, data: bytes) -> None:
-        """Write one message already serialized (Jazzy CDR) at ``log_time_ns``."""
+        """Write one message already serialized (Jazzy CDR) at ``log_time_ns``.
+
+        For mcap storage the message record goes straight into rosbags' pending chunk with the
+        bookkeeping ``Writer.write`` and ``McapWriter.write`` do (the same file, byte for byte:
+        tested against them); any other storage goes through ``Writer.write``.
+        """
         key = (topic, msgtype)
         conn = self._connections.get(key)
         if conn is None:
             self.add_topic(topic, msgtype)
             conn = self._connections[key]
-        self._writer.write(conn, int(log_time_ns), data)
+        ts = int(log_time_ns)
+        st = self._mcap
+        if st is None:
+            self._writer.write(conn, ts, data)
+        else:
+            cid = conn.id
+            w = self._writer
+            if ts < st.message_start_time:
+                st.message_start_time = ts
+            if ts > st.message_end_time:
+                st.message_end_time = ts
+            st.channel_stats[cid] += 1
+            chunk = st.chunk
+            if ts < chunk.message_start_time:
+                chunk.message_start_time = ts
+            if ts > chunk.message_end_time:
+                chunk.message_end_time = ts
+            bio = chunk.bio
+            chunk.msgs[cid].append((ts, bio.tell()))
+            bio.write(_MCAP_MESSAGE.pack(0x05, 22 + len(data), cid, 0, ts, ts))
+            bio.write(data)
+            if bio.tell() > _MCAP_CHUNK_BYTES:
+                st.close_chunk()
+            w.counts[cid] += 1
+            if ts < w.min_timestamp:
+                w.min_timestamp = ts
+            if ts > w.max_timestamp:
+                w.max_timestamp = ts
         self.counts[topic] += 1
+
+    @functools.cached_property
+    def _mcap(self) -> Any:
+        """rosbags' McapWriter when :meth:`write_raw` may write into it directly, else None."""
+        from rosbags.rosbag2.storage_mcap import McapWriter
+        from rosbags.rosbag2.writer import CompressionMode
+
+        st = getattr(self._writer, "storage", None)
+        if type(st) is not McapWriter or self._writer.compression_mode != CompressionMode.NONE:
+            return None
+        if not all(hasattr(st, a) for a in ("chunk", "channel_stats", "message_start_time",
+                                            "message_end_time", "close_chunk")):
+            return None
+        return st
 
     def commit(self) -> Path:
         """Finish the bag and move it to its final path (replacing an old one with overwrite)."""
