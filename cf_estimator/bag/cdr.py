@@ -176,16 +176,23 @@ def _cov(c: Any) -> tuple[float, ...]:
 
 def imu_cdr(out: Any) -> bytes:
     """The Jazzy CDR bytes of :func:`cf_estimator.bag.io.imu_from_output` for ``out``."""
-    frame = str(out.frame_id).encode("utf-8")
+    return imu_cdr_fields(out.stamp_sec, out.stamp_nanosec, out.frame_id, out.orientation_xyzw,
+                          out.orientation_covariance, out.angular_velocity,
+                          out.angular_velocity_covariance, out.linear_acceleration,
+                          out.linear_acceleration_covariance)
+
+
+def imu_cdr_fields(sec: int, nanosec: int, frame_id: str, xyzw: Sequence[float],
+                   orientation_cov: Any, g: Sequence[float], g_cov: Any, a: Sequence[float],
+                   a_cov: Any) -> bytes:
+    """The Jazzy CDR bytes of a sensor_msgs/Imu from its fields (quaternion in ROS order)."""
+    frame = str(frame_id).encode("utf-8")
     s = _header_struct("imu", frame, IMU_DOUBLES)
-    ox, oy, oz, ow = out.orientation_xyzw
-    g, a = out.angular_velocity, out.linear_acceleration
-    return s.pack(_CDR_LE, int(out.stamp_sec), int(out.stamp_nanosec), len(frame) + 1,
-                  frame, float(ox), float(oy), float(oz), float(ow),
-                  *_cov(out.orientation_covariance),
-                  float(g[0]), float(g[1]), float(g[2]), *_cov(out.angular_velocity_covariance),
-                  float(a[0]), float(a[1]), float(a[2]),
-                  *_cov(out.linear_acceleration_covariance))
+    ox, oy, oz, ow = xyzw
+    return s.pack(_CDR_LE, int(sec), int(nanosec), len(frame) + 1, frame,
+                  float(ox), float(oy), float(oz), float(ow), *_cov(orientation_cov),
+                  float(g[0]), float(g[1]), float(g[2]), *_cov(g_cov),
+                  float(a[0]), float(a[1]), float(a[2]), *_cov(a_cov))
 
 
 def vector3_stamped_cdr(sec: int, nanosec: int, frame_id: str, v: Sequence[float]) -> bytes:

@@ -37,7 +37,7 @@ from cf_estimator.core.filter import ComplementaryFilter, bias_sigma
 from cf_estimator.core.kernel import resolve_backend
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import BIAS_CONVERGED_SIGMA_RAD_S
-from cf_estimator.pipeline import ImuPipeline, PipelineParams
+from cf_estimator.pipeline import ImuPipeline, PipelineParams, bulk
 from cf_estimator.schema import as_dict
 
 OUT_IMU_TOPIC = "/imu/data"
@@ -64,6 +64,9 @@ class ReplayOptions:
     offline: bool = False  #: write the offline (acausal) estimate (_offline_orientations)
     #: decode IMU/magnetometer messages in bulk with NumPy (same values; False: one by one)
     bulk_decode: bool = True
+    #: with bulk_decode, one online variant: ordinary runs through the pipeline at once
+    #: (pipeline/bulk.py; same outputs, bit for bit; False: message by message)
+    bulk_pipeline: bool = True
     #: called with the number of messages read since the last call (a fleet's progress bar)
     on_messages: Callable[[int], None] | None = None
 
@@ -293,6 +296,9 @@ class ReplayVariant:
     output_path: str | os.PathLike[str] | None = None
 
 
+#: Events handed to the bulk pipeline at once, and the shortest run worth a bulk pass.
+_BULK_EVENTS = 8192
+_MIN_BULK_RUN = 16
 #: Bias samples kept for plots at most this often [s of stamp time] (status() costs ~20 us).
 _BIAS_SAMPLE_PERIOD_S = 0.02
 
@@ -416,6 +422,66 @@ class _Run:
             self.n_diag += 1
             missed = (log_ns - self.next_diag_ns) // self.period_ns
             self.next_diag_ns += self.period_ns * (missed + 1)
+
+    def events(self, events: Sequence[tuple[int, int, Any]]) -> None:
+        """IMU, magnetometer and other messages (``(kind, log_ns, msg)``, log order) as
+        :meth:`tick` + :meth:`imu` / ``on_mag`` one by one would process them: ordinary runs
+        (up to the next diagnostics tick) through :mod:`cf_estimator.pipeline.bulk`."""
+        i, n = 0, len(events)
+        while i < n:
+            kind, log_ns, msg = events[i]
+            self.tick(log_ns)
+            if kind != bulk.OTHER:
+                run = bulk.scan(self.pipe, events, i, self.next_diag_ns)
+                if run.n >= _MIN_BULK_RUN:
+                    self.imu_run(run)
+                    i = run.end
+                    continue
+            if kind == bulk.IMU:
+                self.imu(log_ns, msg)
+            elif kind == bulk.MAG:
+                self.pipe.on_mag(msg)
+            i += 1
+
+    def imu_run(self, run: bulk.Scan) -> None:
+        """An ordinary run: the filter over it, then its outputs and series as :meth:`imu`
+        writes them one by one."""
+        ts = [s + ns * 1e-9 for s, ns in zip(run.sec, run.nsec, strict=True)]
+        marks = []
+        next_bias = self.next_bias_t
+        for k, t in enumerate(ts):
+            if t >= next_bias:
+                marks.append(k)
+                next_bias = t + _BIAS_SAMPLE_PERIOD_S
+        flt = self.pipe.filter
+
+        def on_mark(k: int) -> None:
+            self.bias_t.append(ts[k])
+            self.bias.append(tuple(float(c) for c in flt.gyro_bias_rad_s))
+            self.bias_sigma.append(bias_sigma(flt._state))  # noqa: SLF001 - read-only
+
+        c = bulk.commit(self.pipe, run, marks, on_mark)
+        self.next_bias_t = next_bias
+        q = c.q_wxyz.tolist()
+        bag = self.bag
+        if bag is not None:
+            frame, cov, av_cov, la_cov = run.frame, c.covariance, c.av_cov, c.la_cov
+            write = bag.write_raw
+            imu_cdr, v3_cdr = cdr.imu_cdr_fields, cdr.vector3_stamped_cdr
+            for k, (qw, qx, qy, qz) in enumerate(q):
+                log_ns, sec, nsec = run.log_ns[k], run.sec[k], run.nsec[k]
+                write(OUT_IMU_TOPIC, io.IMU_TYPE, log_ns,
+                      imu_cdr(sec, nsec, frame, (qx, qy, qz, qw), cov, run.gyro[k], av_cov,
+                              run.accel[k], la_cov))
+                if self.publish_rpy:
+                    write(OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE, log_ns,
+                          v3_cdr(sec, nsec, frame, c.rpy[k]))
+        self.t.extend(ts)
+        self.q.extend(tuple(r) for r in q)
+        self.rpy.extend(c.rpy)
+        self.clipped.extend((c.extra[:, 6] != 0.0).tolist())
+        self.enorm.extend(c.error_norm)
+        self.rest.extend((c.extra[:, 8] != 0.0).tolist())
 
     def imu(self, log_ns: int, msg: Any) -> None:
         out = self.pipe.on_imu(msg)
@@ -558,27 +624,43 @@ def replay_variants(
             progress = _Progress(total, opts.progress, in_path.name, opts.on_messages)
             copy = opts.copy_inputs and any(r.bag is not None for r in runs)
             # IMU and magnetometer decoded in bulk (bag/cdr.py), except when the inputs are
-            # copied: those need rosbags' message objects
-            for m in bag.messages(topics, bulk=not copy and opts.bulk_decode):
+            # copied: those need rosbags' message objects; runs of ordinary messages through
+            # the pipeline at once (pipeline/bulk.py) for one online variant
+            decode_bulk = not copy and opts.bulk_decode
+            bulk_run = runs[0] if (decode_bulk and opts.bulk_pipeline and len(runs) == 1
+                                   and not runs[0].offline and pipeline_factory is None) else None
+            events: list[tuple[int, int, Any]] = []
+            for m in bag.messages(topics, bulk=decode_bulk):
                 log_ns = m.log_time_ns
                 if first_log is None:
                     first_log = log_ns
                 last_log = log_ns
-                for r in runs:
-                    r.tick(log_ns)
-                if copy:
-                    jazzy = bag.to_jazzy(m.msg, m.msgtype)
+                if bulk_run is not None:
+                    events.append((bulk.IMU if m.topic == imu_topic else bulk.MAG
+                                   if m.topic == mag_topic else bulk.OTHER, log_ns, m.msg))
+                    if len(events) >= _BULK_EVENTS:
+                        bulk_run.events(events)
+                        events = []
+                    if m.topic == imu_topic:
+                        n_imu += 1
+                    elif m.topic == mag_topic:
+                        n_mag += 1
+                else:
                     for r in runs:
-                        if r.bag is not None:
-                            r.bag.write(m.topic, m.msgtype, log_ns, jazzy)
-                if m.topic == imu_topic:
-                    n_imu += 1
-                    for r in runs:
-                        r.imu(log_ns, m.msg)
-                elif m.topic == mag_topic:
-                    n_mag += 1
-                    for r in runs:
-                        r.pipe.on_mag(m.msg)
+                        r.tick(log_ns)
+                    if copy:
+                        jazzy = bag.to_jazzy(m.msg, m.msgtype)
+                        for r in runs:
+                            if r.bag is not None:
+                                r.bag.write(m.topic, m.msgtype, log_ns, jazzy)
+                    if m.topic == imu_topic:
+                        n_imu += 1
+                        for r in runs:
+                            r.imu(log_ns, m.msg)
+                    elif m.topic == mag_topic:
+                        n_mag += 1
+                        for r in runs:
+                            r.pipe.on_mag(m.msg)
                 if m.topic == ref_topic:
                     if m.topic != imu_topic:
                         n_ref += 1
@@ -589,6 +671,8 @@ def replay_variants(
                         ref_t.append(h.sec + h.nanosec * 1e-9)
                         ref_q.append((q[0] / nq, q[1] / nq, q[2] / nq, q[3] / nq))
                 progress.tick()
+            if bulk_run is not None and events:
+                bulk_run.events(events)
             if n_imu == 0:
                 raise io.BagError(f"{in_path}: topic {imu_topic!r} yielded no messages")
             if n_imu + n_mag + n_ref < total:
