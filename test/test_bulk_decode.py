@@ -228,3 +228,42 @@ def test_write_raw_gives_the_file_rosbags_writer_writes(tmp_path, storage):
     assert (a / "metadata.yaml").read_text() == (b / "metadata.yaml").read_text()
     for topic in (OUT_IMU_TOPIC, OUT_RPY_TOPIC, "/diagnostics"):
         assert raw_messages(a, topic) == raw_messages(b, topic)
+
+
+def test_bulk_encoding_and_write_rows_give_the_bytes_of_message_by_message_writes(tmp_path):
+    """Vectorized CDR rows = one-call encodings; write_rows = write_raw per message (several
+    mcap chunks, log times not monotonic, a NaN and -0.0 in the values)."""
+    rng = np.random.default_rng(3)
+    n = 9000
+    sec = rng.integers(0, 2**31 - 1, n)
+    nsec = rng.integers(0, 10**9, n)
+    q = rng.normal(size=(n, 4))
+    g, a, rpy = rng.normal(size=(n, 3)), rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
+    q[5, 2], g[7, 0], a[9, 1] = NAN, -0.0, INF
+    cov, gcov, acov = (0.1,) * 9, tuple(np.arange(9.0)), (NAN,) + (0.0,) * 8
+    log = (10**9 + 1000 * np.arange(n) - (np.arange(n) % 5) * 777).astype(np.int64)
+    for frame in ("imu_link", "", "ünï"):
+        rows = cdr.imu_cdr_rows(sec, nsec, frame, q, cov, g, gcov, a, acov)
+        vrows = cdr.vector3_stamped_rows(sec, nsec, frame, rpy)
+        for k in (0, 5, 7, 9, n - 1):
+            assert rows[k].tobytes() == cdr.imu_cdr_fields(
+                int(sec[k]), int(nsec[k]), frame, q[k].tolist(), cov, g[k].tolist(), gcov,
+                a[k].tolist(), acov)
+            assert vrows[k].tobytes() == cdr.vector3_stamped_cdr(int(sec[k]), int(nsec[k]),
+                                                                 frame, rpy[k].tolist())
+    (tmp_path / "one").mkdir()
+    (tmp_path / "rows").mkdir()
+    with io.OutputBag(tmp_path / "one" / "bag") as bag:
+        for k in range(n):
+            bag.write_raw(OUT_IMU_TOPIC, io.IMU_TYPE, int(log[k]), rows[k].tobytes())
+            bag.write_raw(OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE, int(log[k]),
+                          vrows[k].tobytes())
+    with io.OutputBag(tmp_path / "rows" / "bag") as bag:
+        for lo, hi in ((0, 1), (1, 4000), (4000, 4001), (4001, n)):  # several calls
+            bag.write_rows(log[lo:hi], [(OUT_IMU_TOPIC, io.IMU_TYPE, rows[lo:hi]),
+                                        (OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE,
+                                         vrows[lo:hi])])
+    one, many = tmp_path / "one" / "bag", tmp_path / "rows" / "bag"
+    assert (one / "bag.mcap").stat().st_size > 3 * 2**20
+    assert (one / "bag.mcap").read_bytes() == (many / "bag.mcap").read_bytes()
+    assert (one / "metadata.yaml").read_text() == (many / "metadata.yaml").read_text()

@@ -84,20 +84,62 @@ def _layout(raw: bytes, ros2: bool) -> tuple[int, int] | None:
     return end - 1, end + (-(end - 4) % 8)  # doubles aligned to 8 after the encapsulation
 
 
-def decode(raws: Sequence[bytes], msgtype: str, ros2: bool,
-           fallback: Callable[[bytes, str], Any]) -> list[Any]:
-    """Decode every message of ``raws`` (one type): light views where the layout is the plain
-    one, ``fallback(raw, msgtype)`` (rosbags' deserializer) for the others, in order."""
+class Block:
+    """Messages of one type decoded into arrays (row k = message k of the raws given).
+
+    ``plain[k]``: row k was decoded from the plain layout (``values``, ``sec``, ``nsec``,
+    ``frame`` hold it); otherwise ``objects[k]`` is rosbags' message. :meth:`message` gives
+    either as an object with the sensor_msgs field names.
+    """
+
+    def __init__(self, n: int, imu: bool) -> None:
+        self.imu = imu
+        self.n = n
+        d = IMU_DOUBLES if imu else MAG_DOUBLES
+        self.values = np.zeros((n, d))
+        self.sec: list[int] = [0] * n
+        self.nsec: list[int] = [0] * n
+        self.frame: list[str | None] = [None] * n
+        self.plain: list[bool] = [False] * n
+        self.objects: list[Any] = [None] * n
+
+    def message(self, k: int) -> Any:
+        """Message k as an object (a light view, or rosbags' message for an unusual one)."""
+        if not self.plain[k]:
+            return self.objects[k]
+        v = self.values[k].tolist()
+        header = Header(Stamp(self.sec[k], self.nsec[k]), self.frame[k] or "")
+        if self.imu:
+            m = ImuView()
+            m.header = header
+            m.orientation = Vector(v[0], v[1], v[2], v[3])
+            m.orientation_covariance = self.values[k, 4:13]
+            m.angular_velocity = Vector(v[13], v[14], v[15])
+            m.angular_velocity_covariance = self.values[k, 16:25]
+            m.linear_acceleration = Vector(v[25], v[26], v[27])
+            m.linear_acceleration_covariance = self.values[k, 28:37]
+            return m
+        m = MagView()
+        m.header = header
+        m.magnetic_field = Vector(v[0], v[1], v[2])
+        m.magnetic_field_covariance = self.values[k, 3:12]
+        return m
+
+
+def decode_block(raws: Sequence[bytes], msgtype: str, ros2: bool,
+                 fallback: Callable[[bytes, str], Any]) -> Block:
+    """Decode ``raws`` (one type) into a :class:`Block`: NumPy views where the layout is the
+    plain one, ``fallback(raw, msgtype)`` (rosbags' deserializer) for the others."""
     from cf_estimator.bag import io
 
     imu = msgtype == io.IMU_TYPE
     n_doubles = IMU_DOUBLES if imu else MAG_DOUBLES
-    out: list[Any] = [None] * len(raws)
+    block = Block(len(raws), imu)
     groups: dict[tuple[int, int, int], list[int]] = {}
     for i, raw in enumerate(raws):
         lay = _layout(raw, ros2)
         if lay is None or len(raw) != lay[1] + 8 * n_doubles:
-            out[i] = fallback(raw, msgtype)
+            block.objects[i] = fallback(raw, msgtype)
             continue
         groups.setdefault((len(raw), *lay), []).append(i)
     for (size, frame_end, body), idx in groups.items():
@@ -110,35 +152,34 @@ def decode(raws: Sequence[bytes], msgtype: str, ros2: bool,
         # one frame id string per distinct byte pattern (usually one for the whole bag)
         if frames.shape[1] == 0:
             uniq, inverse = np.zeros((1, 0), dtype=np.uint8), np.zeros(len(idx), dtype=int)
+        elif bool(np.all(frames == frames[0])):
+            uniq, inverse = frames[:1], np.zeros(len(idx), dtype=int)
         else:
             uniq, inverse = np.unique(frames, axis=0, return_inverse=True)
         texts = [_utf8(bytes(u)) for u in uniq]  # None: not UTF-8, left to rosbags
         nul_ok = (buf[:, frame_end] == 0).tolist() if ros2 else [True] * len(idx)
         inverse = inverse.reshape(-1).tolist()
         sec_list, nsec_list = secs.tolist(), stamps[:, 1].tolist()
-        rows = values.tolist()
+        rows = np.asarray(idx)
+        block.values[rows] = values
         for k, i in enumerate(idx):
             frame = texts[inverse[k]]
             if frame is None or not nul_ok[k]:  # the NUL terminator must be there too
-                out[i] = fallback(raws[i], msgtype)
+                block.objects[i] = fallback(raws[i], msgtype)
                 continue
-            v = rows[k]
-            if imu:
-                m = ImuView()
-                m.header = Header(Stamp(sec_list[k], nsec_list[k]), frame)
-                m.orientation = Vector(v[0], v[1], v[2], v[3])
-                m.orientation_covariance = values[k, 4:13]
-                m.angular_velocity = Vector(v[13], v[14], v[15])
-                m.angular_velocity_covariance = values[k, 16:25]
-                m.linear_acceleration = Vector(v[25], v[26], v[27])
-                m.linear_acceleration_covariance = values[k, 28:37]
-            else:
-                m = MagView()
-                m.header = Header(Stamp(sec_list[k], nsec_list[k]), frame)
-                m.magnetic_field = Vector(v[0], v[1], v[2])
-                m.magnetic_field_covariance = values[k, 3:12]
-            out[i] = m
-    return out
+            block.sec[i] = sec_list[k]
+            block.nsec[i] = nsec_list[k]
+            block.frame[i] = frame
+            block.plain[i] = True
+    return block
+
+
+def decode(raws: Sequence[bytes], msgtype: str, ros2: bool,
+           fallback: Callable[[bytes, str], Any]) -> list[Any]:
+    """Decode every message of ``raws`` (one type) into objects: light views where the layout
+    is the plain one, ``fallback(raw, msgtype)`` (rosbags' deserializer) for the others."""
+    block = decode_block(raws, msgtype, ros2, fallback)
+    return [block.message(k) for k in range(block.n)]
 
 
 def _utf8(b: bytes) -> str | None:
@@ -201,3 +242,46 @@ def vector3_stamped_cdr(sec: int, nanosec: int, frame_id: str, v: Sequence[float
     s = _header_struct("v3", frame, 3)
     return s.pack(_CDR_LE, int(sec), int(nanosec), len(frame) + 1, frame,
                   float(v[0]), float(v[1]), float(v[2]))
+
+
+# -- bulk encoding -----------------------------------------------------------------------------
+def _header_rows(sec: np.ndarray, nsec: np.ndarray, frame: bytes, n_doubles: int
+                 ) -> tuple[np.ndarray, int]:
+    """(n, header bytes) uint8: encapsulation, stamp, frame id with NUL, padding to 8."""
+    n = sec.shape[0]
+    end = 16 + len(frame) + 1
+    size = end + (-(end - 4) % 8)
+    head = np.zeros((n, size), dtype=np.uint8)
+    head[:, 0:4] = np.frombuffer(_CDR_LE, dtype=np.uint8)
+    head[:, 4:8] = sec.astype("<i4").view(np.uint8).reshape(n, 4)
+    head[:, 8:12] = nsec.astype("<u4").view(np.uint8).reshape(n, 4)
+    head[:, 12:16] = np.frombuffer(struct.pack("<I", len(frame) + 1), dtype=np.uint8)
+    if frame:
+        head[:, 16:16 + len(frame)] = np.frombuffer(frame, dtype=np.uint8)
+    return head, size + 8 * n_doubles
+
+
+def imu_cdr_rows(sec: np.ndarray, nsec: np.ndarray, frame_id: str, q_xyzw: np.ndarray,
+                 orientation_cov: Sequence[float], gyro: np.ndarray, gyro_cov: Sequence[float],
+                 accel: np.ndarray, accel_cov: Sequence[float]) -> np.ndarray:
+    """(n, size) uint8: row k = :func:`imu_cdr_fields` of message k (one frame id for all)."""
+    frame = str(frame_id).encode("utf-8")
+    head, _size = _header_rows(sec, nsec, frame, IMU_DOUBLES)
+    n = sec.shape[0]
+    body = np.empty((n, IMU_DOUBLES), dtype="<f8")
+    body[:, 0:4] = q_xyzw
+    body[:, 4:13] = np.asarray(orientation_cov, dtype=np.float64)
+    body[:, 13:16] = gyro
+    body[:, 16:25] = np.asarray(gyro_cov, dtype=np.float64)
+    body[:, 25:28] = accel
+    body[:, 28:37] = np.asarray(accel_cov, dtype=np.float64)
+    return np.concatenate([head, body.view(np.uint8)], axis=1)
+
+
+def vector3_stamped_rows(sec: np.ndarray, nsec: np.ndarray, frame_id: str, v: np.ndarray
+                         ) -> np.ndarray:
+    """(n, size) uint8: row k = :func:`vector3_stamped_cdr` of message k."""
+    frame = str(frame_id).encode("utf-8")
+    head, _size = _header_rows(sec, nsec, frame, 3)
+    body = np.ascontiguousarray(v, dtype="<f8")
+    return np.concatenate([head, body.view(np.uint8)], axis=1)

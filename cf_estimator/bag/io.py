@@ -298,6 +298,43 @@ class InputBag:
             for (conn, log_ns, _raw), msg in zip(chunk, decoded, strict=True):
                 yield BagMessage(conn.topic, conn.msgtype, int(log_ns), msg)
 
+    def chunks(self, topics: Iterable[str]) -> Iterator[MessageChunk]:
+        """The messages of ``topics`` in log-time order, a few thousand at a time: Imu and
+        MagneticField decoded into arrays (:class:`cf_estimator.bag.cdr.Block`), other types
+        by rosbags when asked for (:meth:`MessageChunk.msg`). Failures as :meth:`messages`."""
+        from cf_estimator.bag import cdr
+
+        wanted = set(topics)
+        conns = [c for c in self._reader.connections if c.topic in wanted]
+        if not conns:
+            return
+        reader = self._reader
+        it = reader.messages(connections=conns)
+        ros2 = self.is_ros2
+        done = False
+        while not done:
+            items = []
+            try:
+                for _ in range(_BULK_CHUNK):
+                    items.append(next(it))
+            except StopIteration:
+                done = True
+            except Exception as exc:  # noqa: BLE001 - any reader failure is a bad bag
+                raise BagError(f"{self.path}: cannot read messages: {_short(exc)}") from exc
+            if not items:
+                return
+            chunk = MessageChunk(self, items)
+            for msgtype in (IMU_TYPE, MAG_TYPE):
+                idx = [i for i, it_ in enumerate(items) if it_[0].msgtype == msgtype]
+                if not idx:
+                    continue
+                block = cdr.decode_block([items[i][2] for i in idx], msgtype, ros2,
+                                         chunk._decode_raw)  # noqa: SLF001
+                chunk.blocks[msgtype] = block
+                for k, i in enumerate(idx):
+                    chunk.row[i] = k
+            yield chunk
+
     def to_jazzy(self, msg: Any, msgtype: str) -> Any:
         """``msg`` (from this bag's typestore) as a Jazzy message object (ROS 1 ``seq`` dropped)."""
         return migrate_to_jazzy(self._reader.typestore, msgtype, msg, self._cache)
@@ -305,6 +342,46 @@ class InputBag:
     @functools.cached_property
     def _cache(self) -> dict[str, object]:
         return {}
+
+
+class MessageChunk:
+    """Consecutive messages of :meth:`InputBag.chunks`: ``topic``, ``msgtype``, ``log_ns`` per
+    message; ``blocks[msgtype]`` (Imu, MagneticField) with ``row[i]`` = message i's row."""
+
+    def __init__(self, bag: InputBag, items: list[Any]) -> None:
+        self._bag = bag
+        self._items = items
+        self.topic = [c.topic for c, _t, _r in items]
+        self.msgtype = [c.msgtype for c, _t, _r in items]
+        self.log_ns = [int(t) for _c, t, _r in items]
+        self.blocks: dict[str, Any] = {}
+        self.row = [-1] * len(items)
+        self._by_raw: dict[int, int] = {}
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def _decode_raw(self, raw: bytes, _msgtype: str = "") -> Any:
+        if not self._by_raw:
+            self._by_raw = {id(r): i for i, (_c, _t, r) in enumerate(self._items)}
+        return self._decode(self._by_raw[id(raw)])
+
+    def _decode(self, i: int) -> Any:
+        conn, log_ns, raw = self._items[i]
+        try:
+            return self._bag._reader.deserialize(raw, conn.msgtype)  # noqa: SLF001
+        except Exception as exc:  # noqa: BLE001
+            raise BagError(
+                f"{self._bag.path}: cannot decode a {conn.msgtype} message on {conn.topic} at "
+                f"log time {log_ns} ns: {_short(exc)}"
+            ) from exc
+
+    def msg(self, i: int) -> Any:
+        """Message i as an object (a light view for a decoded row, else rosbags')."""
+        block = self.blocks.get(self.msgtype[i])
+        if block is not None:
+            return block.message(self.row[i])
+        return self._decode(i)
 
 
 def migrate_to_jazzy(src_store: Any, msgtype: str, msg: Any, cache: dict[str, object]) -> Any:
@@ -570,6 +647,84 @@ class OutputBag:
             if ts > w.max_timestamp:
                 w.max_timestamp = ts
         self.counts[topic] += 1
+
+    def write_rows(self, log_time_ns: np.ndarray,
+                   topics: Sequence[tuple[str, str, np.ndarray]]) -> None:
+        """Write n messages on each of ``topics`` (``(topic, msgtype, (n, size) uint8 CDR
+        rows)``), row by row: row k of every topic at ``log_time_ns[k]``, in the order given —
+        what n × :meth:`write_raw` calls write, byte for byte, with the mcap records built as
+        one NumPy array and appended a chunk at a time."""
+        ts = np.asarray(log_time_ns, dtype=np.int64)
+        n = ts.shape[0]
+        if n == 0:
+            return
+        st = self._mcap
+        new = any((t, mt) not in self._connections for t, mt, _r in topics)
+        if st is None or new:  # a new topic is declared where its first message is written
+            first = n if st is None else 1
+            for k in range(first):
+                for topic, msgtype, rows in topics:
+                    self.write_raw(topic, msgtype, int(ts[k]), rows[k].tobytes())
+            if first < n:
+                self.write_rows(ts[first:], [(t, mt, r[first:]) for t, mt, r in topics])
+            return
+        conns = [self._connections[(t, mt)] for t, mt, _r in topics]
+        parts, sizes = [], []
+        for conn, (_t, _m, rows) in zip(conns, topics, strict=True):
+            size = rows.shape[1]
+            rec = np.empty((n, 31 + size), dtype=np.uint8)
+            rec[:, 0] = 0x05
+            rec[:, 1:9] = np.frombuffer(struct.pack("<Q", 22 + size), dtype=np.uint8)
+            rec[:, 9:11] = np.frombuffer(struct.pack("<H", conn.id), dtype=np.uint8)
+            rec[:, 11:15] = 0
+            stamp = ts.astype("<u8").view(np.uint8).reshape(n, 8)
+            rec[:, 15:23] = stamp
+            rec[:, 23:31] = stamp
+            rec[:, 31:] = rows
+            parts.append(rec)
+            sizes.append(31 + size)
+        flat = np.concatenate(parts, axis=1).reshape(-1)
+        m = len(topics)
+        rec_sizes = np.tile(np.asarray(sizes, dtype=np.int64), n)  # record r = row r//m, topic r%m
+        starts = np.concatenate([[0], np.cumsum(rec_sizes)])
+        cids = [c.id for c in conns]
+        ts_list = ts.tolist()
+        w = self._writer
+        pos, total = 0, n * m
+        while pos < total:
+            chunk = st.chunk
+            bio = chunk.bio
+            tell = bio.tell()
+            ends = tell + starts[pos + 1:] - starts[pos]  # chunk size after each record
+            over = int(np.searchsorted(ends, _MCAP_CHUNK_BYTES, side="right"))
+            last = min(pos + over, total - 1)  # the record after which the chunk closes
+            offsets = (tell + starts[pos:last + 1] - starts[pos]).tolist()
+            lo, hi = pos // m, last // m
+            t_min, t_max = min(ts_list[lo:hi + 1]), max(ts_list[lo:hi + 1])
+            if t_min < chunk.message_start_time:
+                chunk.message_start_time = t_min
+            if t_max > chunk.message_end_time:
+                chunk.message_end_time = t_max
+            if t_min < st.message_start_time:
+                st.message_start_time = t_min
+            if t_max > st.message_end_time:
+                st.message_end_time = t_max
+            if t_min < w.min_timestamp:
+                w.min_timestamp = t_min
+            if t_max > w.max_timestamp:
+                w.max_timestamp = t_max
+            for j in [(pos + k) % m for k in range(m)]:  # the chunk's index keeps first-seen order
+                cid = cids[j]
+                first = pos + ((j - pos) % m)
+                recs = range(first, last + 1, m)
+                chunk.msgs[cid].extend((ts_list[r // m], offsets[r - pos]) for r in recs)
+                st.channel_stats[cid] += len(recs)
+                w.counts[cid] += len(recs)
+                self.counts[topics[j][0]] += len(recs)
+            bio.write(flat[starts[pos]:starts[last + 1]].tobytes())
+            if bio.tell() > _MCAP_CHUNK_BYTES:
+                st.close_chunk()
+            pos = last + 1
 
     @functools.cached_property
     def _mcap(self) -> Any:

@@ -262,6 +262,13 @@ class _Progress:
             if self._pending >= 2000:
                 self._flush()
 
+    def add(self, n: int) -> None:
+        """``n`` messages read at once."""
+        if self._bar is not None or self._on_messages is not None:
+            self._pending += n
+            if self._pending >= 2000:
+                self._flush()
+
     def _flush(self) -> None:
         if self._bar is not None:
             self._bar.update(self._pending)
@@ -423,24 +430,27 @@ class _Run:
             missed = (log_ns - self.next_diag_ns) // self.period_ns
             self.next_diag_ns += self.period_ns * (missed + 1)
 
-    def events(self, events: Sequence[tuple[int, int, Any]]) -> None:
-        """IMU, magnetometer and other messages (``(kind, log_ns, msg)``, log order) as
-        :meth:`tick` + :meth:`imu` / ``on_mag`` one by one would process them: ordinary runs
-        (up to the next diagnostics tick) through :mod:`cf_estimator.pipeline.bulk`."""
-        i, n = 0, len(events)
+    def events(self, ev: bulk.Events) -> None:
+        """IMU, magnetometer and other messages (log order) as :meth:`tick` + :meth:`imu` /
+        ``on_mag`` one by one would process them: ordinary runs (up to the next diagnostics
+        tick) through :mod:`cf_estimator.pipeline.bulk`, the others one by one."""
+        i, n = 0, len(ev.kind)
+        kinds, logs = ev.kind, ev.log_ns
+        retry = 0  # after a short run, go message by message for a while before scanning again
         while i < n:
-            kind, log_ns, msg = events[i]
+            kind, log_ns = kinds[i], logs[i]
             self.tick(log_ns)
-            if kind != bulk.OTHER:
-                run = bulk.scan(self.pipe, events, i, self.next_diag_ns)
+            if kind != bulk.OTHER and i >= retry:
+                run = bulk.scan(self.pipe, ev, i, self.next_diag_ns)
                 if run.n >= _MIN_BULK_RUN:
                     self.imu_run(run)
                     i = run.end
                     continue
+                retry = i + 1 if run.n_events > 0 else i + _MIN_BULK_RUN
             if kind == bulk.IMU:
-                self.imu(log_ns, msg)
+                self.imu(log_ns, ev.message(i))
             elif kind == bulk.MAG:
-                self.pipe.on_mag(msg)
+                self.pipe.on_mag(ev.message(i))
             i += 1
 
     def imu_run(self, run: bulk.Scan) -> None:
@@ -462,22 +472,19 @@ class _Run:
 
         c = bulk.commit(self.pipe, run, marks, on_mark)
         self.next_bias_t = next_bias
-        q = c.q_wxyz.tolist()
         bag = self.bag
-        if bag is not None:
-            frame, cov, av_cov, la_cov = run.frame, c.covariance, c.av_cov, c.la_cov
-            write = bag.write_raw
-            imu_cdr, v3_cdr = cdr.imu_cdr_fields, cdr.vector3_stamped_cdr
-            for k, (qw, qx, qy, qz) in enumerate(q):
-                log_ns, sec, nsec = run.log_ns[k], run.sec[k], run.nsec[k]
-                write(OUT_IMU_TOPIC, io.IMU_TYPE, log_ns,
-                      imu_cdr(sec, nsec, frame, (qx, qy, qz, qw), cov, run.gyro[k], av_cov,
-                              run.accel[k], la_cov))
-                if self.publish_rpy:
-                    write(OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE, log_ns,
-                          v3_cdr(sec, nsec, frame, c.rpy[k]))
+        if bag is not None:  # every output message of the run encoded and written at once
+            sec, nsec = np.asarray(run.sec, dtype=np.int64), np.asarray(run.nsec, dtype=np.int64)
+            rows = cdr.imu_cdr_rows(sec, nsec, run.frame, c.q_wxyz[:, [1, 2, 3, 0]],
+                                    c.covariance, c.gyro, c.av_cov, c.accel, c.la_cov)
+            topics = [(OUT_IMU_TOPIC, io.IMU_TYPE, rows)]
+            if self.publish_rpy:
+                topics.append((OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE,
+                               cdr.vector3_stamped_rows(sec, nsec, run.frame,
+                                                        np.asarray(c.rpy, dtype=np.float64))))
+            bag.write_rows(np.asarray(run.log_ns, dtype=np.int64), topics)
         self.t.extend(ts)
-        self.q.extend(tuple(r) for r in q)
+        self.q.extend(tuple(r) for r in c.q_wxyz.tolist())
         self.rpy.extend(c.rpy)
         self.clipped.extend((c.extra[:, 6] != 0.0).tolist())
         self.enorm.extend(c.error_norm)
@@ -555,6 +562,17 @@ class _Run:
             self.bag.abort()
 
 
+def _add_reference(ref_type: str | None, msg: Any, ref_t: list[float],
+                   ref_q: list[tuple[float, float, float, float]]) -> None:
+    """A reference message's stamp and normalised (w, x, y, z), when it has an orientation."""
+    h = msg.header.stamp
+    q = _reference_quaternion(ref_type or "", msg)
+    nq = math.sqrt(sum(c * c for c in q))
+    if math.isfinite(nq) and nq > 0.5:
+        ref_t.append(h.sec + h.nanosec * 1e-9)
+        ref_q.append((q[0] / nq, q[1] / nq, q[2] / nq, q[3] / nq))
+
+
 def replay_bag(
     input_path: str | os.PathLike[str],
     output_path: str | os.PathLike[str] | None,
@@ -629,50 +647,50 @@ def replay_variants(
             decode_bulk = not copy and opts.bulk_decode
             bulk_run = runs[0] if (decode_bulk and opts.bulk_pipeline and len(runs) == 1
                                    and not runs[0].offline and pipeline_factory is None) else None
-            events: list[tuple[int, int, Any]] = []
-            for m in bag.messages(topics, bulk=decode_bulk):
+            if bulk_run is not None:
+                for chunk in bag.chunks(topics):
+                    if first_log is None:
+                        first_log = chunk.log_ns[0]
+                    last_log = chunk.log_ns[-1]
+                    kinds = [bulk.IMU if t == imu_topic else bulk.MAG if t == mag_topic
+                             else bulk.OTHER for t in chunk.topic]
+                    n_imu += kinds.count(bulk.IMU)
+                    n_mag += kinds.count(bulk.MAG)
+                    bulk_run.events(bulk.Events(
+                        kinds, chunk.log_ns, chunk.row, chunk.blocks.get(io.IMU_TYPE),
+                        chunk.blocks.get(io.MAG_TYPE), chunk.msg))
+                    if ref_topic is not None:
+                        for i, t in enumerate(chunk.topic):
+                            if t == ref_topic:
+                                if t != imu_topic:
+                                    n_ref += 1
+                                _add_reference(ref_type, chunk.msg(i), ref_t, ref_q)
+                    progress.add(len(chunk))
+            for m in (() if bulk_run is not None else bag.messages(topics, bulk=decode_bulk)):
                 log_ns = m.log_time_ns
                 if first_log is None:
                     first_log = log_ns
                 last_log = log_ns
-                if bulk_run is not None:
-                    events.append((bulk.IMU if m.topic == imu_topic else bulk.MAG
-                                   if m.topic == mag_topic else bulk.OTHER, log_ns, m.msg))
-                    if len(events) >= _BULK_EVENTS:
-                        bulk_run.events(events)
-                        events = []
-                    if m.topic == imu_topic:
-                        n_imu += 1
-                    elif m.topic == mag_topic:
-                        n_mag += 1
-                else:
+                for r in runs:
+                    r.tick(log_ns)
+                if copy:
+                    jazzy = bag.to_jazzy(m.msg, m.msgtype)
                     for r in runs:
-                        r.tick(log_ns)
-                    if copy:
-                        jazzy = bag.to_jazzy(m.msg, m.msgtype)
-                        for r in runs:
-                            if r.bag is not None:
-                                r.bag.write(m.topic, m.msgtype, log_ns, jazzy)
-                    if m.topic == imu_topic:
-                        n_imu += 1
-                        for r in runs:
-                            r.imu(log_ns, m.msg)
-                    elif m.topic == mag_topic:
-                        n_mag += 1
-                        for r in runs:
-                            r.pipe.on_mag(m.msg)
+                        if r.bag is not None:
+                            r.bag.write(m.topic, m.msgtype, log_ns, jazzy)
+                if m.topic == imu_topic:
+                    n_imu += 1
+                    for r in runs:
+                        r.imu(log_ns, m.msg)
+                elif m.topic == mag_topic:
+                    n_mag += 1
+                    for r in runs:
+                        r.pipe.on_mag(m.msg)
                 if m.topic == ref_topic:
                     if m.topic != imu_topic:
                         n_ref += 1
-                    h = m.msg.header.stamp
-                    q = _reference_quaternion(ref_type or "", m.msg)
-                    nq = math.sqrt(sum(c * c for c in q))
-                    if math.isfinite(nq) and nq > 0.5:
-                        ref_t.append(h.sec + h.nanosec * 1e-9)
-                        ref_q.append((q[0] / nq, q[1] / nq, q[2] / nq, q[3] / nq))
+                    _add_reference(ref_type, m.msg, ref_t, ref_q)
                 progress.tick()
-            if bulk_run is not None and events:
-                bulk_run.events(events)
             if n_imu == 0:
                 raise io.BagError(f"{in_path}: topic {imu_topic!r} yielded no messages")
             if n_imu + n_mag + n_ref < total:

@@ -47,8 +47,8 @@ class Scan:
     sec: list[int] = field(default_factory=list)
     nsec: list[int] = field(default_factory=list)
     log_ns: list[int] = field(default_factory=list)
-    gyro: list[tuple[float, float, float]] = field(default_factory=list)
-    accel: list[tuple[float, float, float]] = field(default_factory=list)
+    rows: list[int] = field(default_factory=list)  #: row of each message in ``values``
+    values: Any = None  #: the IMU block's (n, 37) values: gyro columns 13:16, accel 25:28
     mag: list[tuple[float, float, float] | None] = field(default_factory=list)
     mag_t_ns: list[int] = field(default_factory=list)  #: stamp of the row's mag sample
     dt: list[float] = field(default_factory=list)
@@ -66,11 +66,49 @@ def _ordinary_start(pipe: ImuPipeline) -> bool:
             and pipe._acc_n >= checks.ACCEL_CHECK_SAMPLES)
 
 
-def scan(pipe: ImuPipeline, events: Sequence[tuple[int, int, Any]], start: int,
-         limit_log_ns: int | None = None) -> Scan:
-    """The longest run of ordinary events from ``events[start]`` (``(kind, log_ns, msg)``,
-    kind :data:`IMU` or :data:`MAG`), stopping before an event logged at or after
-    ``limit_log_ns``. Nothing of ``pipe`` changes."""
+class Events:
+    """Consecutive IMU, magnetometer and other messages in log order, as arrays.
+
+    ``kind[i]`` (:data:`IMU`, :data:`MAG`, :data:`OTHER`), ``log_ns[i]``, ``row[i]`` = its row
+    in ``imu`` / ``mag`` (blocks of decoded messages: ``values`` (n, 37 | 12) float64,
+    ``sec``, ``nsec``, ``frame``, ``plain`` per row; see :class:`cf_estimator.bag.cdr.Block`);
+    ``message(i)``: message i as an object, for the per-message path.
+    """
+
+    def __init__(self, kind: Sequence[int], log_ns: Sequence[int], row: Sequence[int],
+                 imu: Any, mag: Any, message: Callable[[int], Any]) -> None:
+        self.kind, self.log_ns, self.row = kind, log_ns, row
+        self.imu, self.mag, self.message = imu, mag, message
+        self._cols: dict[str, list[float]] = {}
+        self._cov: dict[tuple[int, bytes | None], list[bool]] = {}
+
+    def column(self, name: str) -> list[float]:
+        """``gx gy gz ax ay az`` (IMU) or ``mx my mz`` (magnetometer) as a list of floats."""
+        col = self._cols.get(name)
+        if col is None:
+            j = {"gx": 13, "gy": 14, "gz": 15, "ax": 25, "ay": 26, "az": 27,
+                 "mx": 0, "my": 1, "mz": 2}[name]
+            block = self.mag if name[0] == "m" else self.imu
+            col = self._cols[name] = block.values[:, j].tolist()
+        return col
+
+    def same_covariance(self, start: int, raw: bytes | None) -> list[bool]:
+        """Per IMU row: its covariance starting at column ``start`` has the bytes ``raw``."""
+        key = (start, raw)
+        same = self._cov.get(key)
+        if same is None:
+            cov = np.ascontiguousarray(self.imu.values[:, start:start + 9]).view(np.uint8)
+            if raw is None or len(raw) != 72:
+                same = [False] * self.imu.n
+            else:
+                same = np.all(cov == np.frombuffer(raw, dtype=np.uint8), axis=1).tolist()
+            self._cov[key] = same
+        return same
+
+
+def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = None) -> Scan:
+    """The longest run of ordinary events from ``ev`` index ``start``, stopping before an
+    event logged at or after ``limit_log_ns``. Nothing of ``pipe`` changes."""
     p = pipe
     out = Scan(start)
     if not _ordinary_start(p):
@@ -79,7 +117,6 @@ def scan(pipe: ImuPipeline, events: Sequence[tuple[int, int, Any]], start: int,
     use_mag = p._use_mag
     imu_frame, mag_frame = p._imu_frame, p._mag_frame
     mag_ready = p._mag_n >= checks.MAG_CHECK_SAMPLES
-    av_raw, la_raw = p._av_cov.raw, p._la_cov.raw
     last = p._last_ns
     reset_on, reset_ns = p._reset_gap_on, p._reset_gap_ns
     max_dt_ns, timeout = p._max_dt_ns, p._mag_timeout_ns
@@ -90,24 +127,37 @@ def scan(pipe: ImuPipeline, events: Sequence[tuple[int, int, Any]], start: int,
     w = p._window
     dt_min, dt_max, dt_sum, n_dt = w.dt_min, w.dt_max, w.dt_sum, w.n_dt
     isfinite = math.isfinite
+    kinds, logs, rows = ev.kind, ev.log_ns, ev.row
+    imu, mag_block = ev.imu, ev.mag
+    if imu is not None:
+        i_sec, i_nsec, i_frame, i_plain = imu.sec, imu.nsec, imu.frame, imu.plain
+        gxs, gys, gzs = ev.column("gx"), ev.column("gy"), ev.column("gz")
+        axs, ays, azs = ev.column("ax"), ev.column("ay"), ev.column("az")
+        av_same = ev.same_covariance(16, p._av_cov.raw)
+        la_same = ev.same_covariance(28, p._la_cov.raw)
+    if mag_block is not None:
+        m_sec, m_nsec, m_frame, m_plain = (mag_block.sec, mag_block.nsec, mag_block.frame,
+                                           mag_block.plain)
+        mxs, mys, mzs = ev.column("mx"), ev.column("my"), ev.column("mz")
+    out_rows = out.rows
     i = start
-    n_ev = len(events)
+    n_ev = len(kinds)
     while i < n_ev:
-        kind, log_ns, msg = events[i]
+        kind = kinds[i]
+        log_ns = logs[i]
         if limit_log_ns is not None and log_ns >= limit_log_ns:
             break
         if kind == OTHER:
             i += 1
             continue
+        k = rows[i]
         if kind == MAG:
-            if not use_mag or not heading or not mag_ready:
+            if not use_mag or not heading or not mag_ready or not m_plain[k]:
                 break
-            st = msg.header.stamp
-            t_m = st.sec * 1_000_000_000 + st.nanosec
-            m = msg.magnetic_field
-            mx, my, mz = float(m.x), float(m.y), float(m.z)
+            t_m = m_sec[k] * 1_000_000_000 + m_nsec[k]
+            mx, my, mz = mxs[k], mys[k], mzs[k]
             n2 = mx * mx + my * my + mz * mz
-            if t_m == 0 or not isfinite(n2) or n2 == 0.0 or msg.header.frame_id != mag_frame:
+            if t_m == 0 or not isfinite(n2) or n2 == 0.0 or m_frame[k] != mag_frame:
                 break
             if pending is not None:
                 dropped += 1
@@ -115,13 +165,12 @@ def scan(pipe: ImuPipeline, events: Sequence[tuple[int, int, Any]], start: int,
             n_mag += 1
             i += 1
             continue
-        h = msg.header
-        st = h.stamp
-        sec, nsec = st.sec, st.nanosec
-        av, la = msg.angular_velocity, msg.linear_acceleration
-        gx, gy, gz = float(av.x), float(av.y), float(av.z)
-        ax, ay, az = float(la.x), float(la.y), float(la.z)
-        if (sec == 0 and nsec == 0) or h.frame_id != imu_frame:
+        if not i_plain[k]:
+            break
+        sec, nsec = i_sec[k], i_nsec[k]
+        gx, gy, gz = gxs[k], gys[k], gzs[k]
+        ax, ay, az = axs[k], ays[k], azs[k]
+        if (sec == 0 and nsec == 0) or i_frame[k] != imu_frame:
             break
         if not (isfinite(gx) and isfinite(gy) and isfinite(gz) and isfinite(ax)
                 and isfinite(ay) and isfinite(az)):
@@ -134,8 +183,7 @@ def scan(pipe: ImuPipeline, events: Sequence[tuple[int, int, Any]], start: int,
         d_ns = t_ns - last
         if d_ns <= 0 or (reset_on and d_ns > reset_ns):
             break
-        if msg.angular_velocity_covariance.tobytes() != av_raw or \
-                msg.linear_acceleration_covariance.tobytes() != la_raw:
+        if not (av_same[k] and la_same[k]):
             break
         if pending is not None and not heading:
             break
@@ -163,12 +211,11 @@ def scan(pipe: ImuPipeline, events: Sequence[tuple[int, int, Any]], start: int,
             else:
                 stale += 1
             pending = None
+        out_rows.append(k)
         out.t_ns.append(t_ns)
         out.sec.append(sec)
         out.nsec.append(nsec)
         out.log_ns.append(log_ns)
-        out.gyro.append((gx, gy, gz))
-        out.accel.append((ax, ay, az))
         out.mag.append(mag)
         out.mag_t_ns.append(mag_t)
         out.dt.append(dt)
@@ -177,6 +224,7 @@ def scan(pipe: ImuPipeline, events: Sequence[tuple[int, int, Any]], start: int,
     out.end = i
     out.n_events = i - start
     out.frame = str(imu_frame)
+    out.values = imu.values if imu is not None else None
     out.state = {
         "_last_ns": last, "_dt_mean": dt_mean, "_gaps": gaps, "_pending_mag": pending,
         "dropped": dropped, "stale": stale, "n_mag": n_mag,
@@ -196,6 +244,8 @@ class Committed:
     covariance: tuple[float, ...]  #: orientation covariance of every row
     av_cov: tuple[float, ...]
     la_cov: tuple[float, ...]
+    gyro: np.ndarray  #: (n, 3) the rows the filter got [rad/s] (= the output's input copy)
+    accel: np.ndarray  #: (n, 3) [m/s²]
 
 
 def commit(pipe: ImuPipeline, run: Scan, marks: Sequence[int] = (),
@@ -209,8 +259,9 @@ def commit(pipe: ImuPipeline, run: Scan, marks: Sequence[int] = (),
     p = pipe
     n = run.n
     f = p._filter  # noqa: SLF001
-    gyro = np.array(run.gyro, dtype=np.float64).reshape(n, 3)
-    acc = np.array(run.accel, dtype=np.float64).reshape(n, 3)
+    sel = run.values[np.asarray(run.rows, dtype=np.intp)]
+    gyro = np.ascontiguousarray(sel[:, 13:16])
+    acc = np.ascontiguousarray(sel[:, 25:28])
     has_mag = any(m is not None for m in run.mag)
     mag = None
     if has_mag:
@@ -293,4 +344,4 @@ def commit(pipe: ImuPipeline, run: Scan, marks: Sequence[int] = (),
     w.proc_sum += elapsed
     if elapsed / n > w.proc_max:
         w.proc_max = elapsed / n
-    return Committed(q, rpy, extra, en, cov, p._av_cov.value, p._la_cov.value)
+    return Committed(q, rpy, extra, en, cov, p._av_cov.value, p._la_cov.value, gyro, acc)
