@@ -104,9 +104,11 @@ def test_a_fleet_replay_writes_what_single_replays_write(good_dir, tmp_path):
     assert diagnostics_values(single) == diagnostics_values(many)
 
 
-def test_no_bags_in_a_directory_is_a_one_line_usage_error(tmp_path, capsys):
-    (tmp_path / "empty").mkdir()
-    assert main(["replay", str(tmp_path / "empty"), "--json", str(tmp_path / "j")]) == 2
+def test_no_bags_in_directories_is_a_one_line_usage_error(tmp_path, capsys):
+    for d in ("empty", "empty2"):
+        (tmp_path / d).mkdir()
+    assert main(["replay", str(tmp_path / "empty"), str(tmp_path / "empty2"), "--json",
+                 str(tmp_path / "j")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("cf-estimator: error: no bags found in") and "\n" not in err
 

@@ -789,14 +789,9 @@ def replay_variants(
 
 
 def _series(r: _Run, ref_t: Sequence[float], ref_q: Sequence[Any]) -> ReplaySeries:
-    n = len(r.t)
-    q = np.full((n, 4), np.nan)
-    rpy = np.full((n, 3), np.nan)
-    for i, (qi, ri) in enumerate(zip(r.q, r.rpy, strict=True)):
-        if qi is not None:
-            q[i] = qi
-        if ri is not None:
-            rpy[i] = ri
+    nan4, nan3 = (np.nan,) * 4, (np.nan,) * 3
+    q = np.array([x if x is not None else nan4 for x in r.q], dtype=float).reshape(-1, 4)
+    rpy = np.array([x if x is not None else nan3 for x in r.rpy], dtype=float).reshape(-1, 3)
     return ReplaySeries(
         t_s=np.asarray(r.t, dtype=float),
         q_wxyz=q,

@@ -180,8 +180,12 @@ def _is_fleet(args: argparse.Namespace) -> bool:
     if len(args.bag) > 1 or args.cluster is not None:
         return True
     p = Path(args.bag[0])
-    return p.is_dir() and not (p / "metadata.yaml").is_file() and not (
-        any(p.glob("*.mcap")) or any(p.glob("*.db3")))
+    if not p.is_dir() or (p / "metadata.yaml").is_file() or any(p.glob("*.mcap")) or \
+            any(p.glob("*.db3")):
+        return False
+    from cf_estimator.bag.fleet import find_bags
+
+    return bool(find_bags([p]))  # a directory without bags: the single-bag error says why
 
 
 def _options(args: argparse.Namespace) -> ReplayOptions:
