@@ -135,6 +135,8 @@ def decode_block(raws: Sequence[bytes], msgtype: str, ros2: bool,
     imu = msgtype == io.IMU_TYPE
     n_doubles = IMU_DOUBLES if imu else MAG_DOUBLES
     block = Block(len(raws), imu)
+    if _decode_uniform(block, raws, ros2, n_doubles):
+        return block
     groups: dict[tuple[int, int, int], list[int]] = {}
     for i, raw in enumerate(raws):
         lay = _layout(raw, ros2)
@@ -172,6 +174,40 @@ def decode_block(raws: Sequence[bytes], msgtype: str, ros2: bool,
             block.frame[i] = frame
             block.plain[i] = True
     return block
+
+
+def _decode_uniform(block: Block, raws: Sequence[bytes], ros2: bool, n_doubles: int) -> bool:
+    """The common case at NumPy speed: every message has the plain layout, one size and one
+    frame id. False (nothing written) when that is not so."""
+    n = len(raws)
+    if n == 0:
+        return False
+    lay = _layout(raws[0], ros2)
+    size = len(raws[0])
+    if lay is None or size != lay[1] + 8 * n_doubles:
+        return False
+    buf = np.frombuffer(b"".join(raws), dtype=np.uint8)
+    if buf.shape[0] != n * size:
+        return False  # sizes differ
+    buf = buf.reshape(n, size)
+    frame_end, body = lay
+    # same header prefix after the stamp (encapsulation, frame id length, frame id, its NUL)
+    ref = buf[0]
+    if not (bool(np.all(buf[:, 12:body] == ref[12:body])) and (
+            not ros2 or bool(np.all(buf[:, 0:4] == ref[0:4])))):
+        return False
+    if ros2 and ref[frame_end] != 0:
+        return False
+    frame = _utf8(bytes(ref[16:frame_end]))
+    if frame is None:
+        return False
+    stamps = np.ascontiguousarray(buf[:, 4:12]).view("<u4").reshape(n, 2)
+    secs = np.ascontiguousarray(stamps[:, 0]).view("<i4") if ros2 else stamps[:, 0]
+    block.values = np.ascontiguousarray(buf[:, body:]).view("<f8").astype(np.float64)
+    block.sec, block.nsec = secs.tolist(), stamps[:, 1].tolist()
+    block.frame = [frame] * n
+    block.plain = [True] * n
+    return True
 
 
 def decode(raws: Sequence[bytes], msgtype: str, ros2: bool,
