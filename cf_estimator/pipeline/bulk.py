@@ -20,6 +20,7 @@ on real and hostile bags (test/test_bulk_pipeline.py). It relies on: ``run_rows`
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -66,6 +67,25 @@ def _ordinary_start(pipe: ImuPipeline) -> bool:
             and pipe._acc_n >= checks.ACCEL_CHECK_SAMPLES)
 
 
+def _imu_ok(v: np.ndarray, sec: np.ndarray, nsec: np.ndarray) -> np.ndarray:
+    """``on_imu``'s value checks, vectorized with its own arithmetic (same results)."""
+    gx, gy, gz, ax, ay, az = (v[:, j] for j in (13, 14, 15, 25, 26, 27))
+    with np.errstate(over="ignore", invalid="ignore"):
+        finite = np.all(np.isfinite(v[:, [13, 14, 15, 25, 26, 27]]), axis=1)
+        a2 = ax * ax + ay * ay + az * az
+        g2 = gx * gx + gy * gy + gz * gz
+        return (finite & ~((sec == 0) & (nsec == 0)) & (a2 != 0.0) & (g2 <= _GYRO_MAX2)
+                & (a2 <= _ACCEL_MAX2) & (g2 <= _GYRO_WARN2))
+
+
+def _mag_ok(v: np.ndarray, sec: np.ndarray, nsec: np.ndarray) -> np.ndarray:
+    """``on_mag``'s validity checks, vectorized with its own arithmetic."""
+    mx, my, mz = v[:, 0], v[:, 1], v[:, 2]
+    with np.errstate(over="ignore", invalid="ignore"):
+        n2 = mx * mx + my * my + mz * mz
+        return ((sec * 1_000_000_000 + nsec) != 0) & np.isfinite(n2) & (n2 != 0.0)
+
+
 class Events:
     """Consecutive IMU, magnetometer and other messages in log order, as arrays.
 
@@ -81,6 +101,8 @@ class Events:
         self.imu, self.mag, self.message = imu, mag, message
         self._cols: dict[str, list[float]] = {}
         self._cov: dict[tuple[int, bytes | None], list[bool]] = {}
+        self._static: dict[str, np.ndarray] | None = None
+        self._frames: dict[tuple[int, str | None], np.ndarray] = {}
 
     def column(self, name: str) -> list[float]:
         """``gx gy gz ax ay az`` (IMU) or ``mx my mz`` (magnetometer) as a list of floats."""
@@ -91,6 +113,47 @@ class Events:
             block = self.mag if name[0] == "m" else self.imu
             col = self._cols[name] = block.values[:, j].tolist()
         return col
+
+    def static(self) -> dict[str, np.ndarray]:
+        """Per-event arrays that do not depend on the pipeline's state (computed once):
+        ``imu_ok`` (plain layout, non-zero stamp, finite, plausible and non-zero vectors — the
+        checks of ``on_imu`` in its own arithmetic), ``mag_ok`` (``on_mag``'s validity),
+        ``t_ns`` (header stamps [ns] of IMU and magnetometer events), per event."""
+        st = self._static
+        if st is not None:
+            return st
+        n = len(self.kind)
+        kind = np.asarray(self.kind, dtype=np.int8)
+        row = np.asarray(self.row, dtype=np.intp)
+        ok = np.zeros(n, dtype=bool)
+        t_ns = np.zeros(n, dtype=np.int64)
+        for blk, k, check in ((self.imu, IMU, _imu_ok), (self.mag, MAG, _mag_ok)):
+            if blk is None:
+                continue
+            sel = np.flatnonzero(kind == k)
+            r = row[sel]
+            sec = np.asarray(blk.sec, dtype=np.int64)[r]
+            nsec = np.asarray(blk.nsec, dtype=np.int64)[r]
+            t_ns[sel] = sec * 1_000_000_000 + nsec
+            plain = np.asarray(blk.plain, dtype=bool)[r]
+            ok[sel] = plain & check(blk.values[r], sec, nsec)
+        self._static = st = {"kind": kind, "ok": ok, "t_ns": t_ns}
+        return st
+
+    def frame_is(self, kind: int, frame: str | None) -> np.ndarray:
+        """Per event: of ``kind`` and with header frame id ``frame``."""
+        key = (kind, frame)
+        out = self._frames.get(key)
+        if out is None:
+            blk = self.imu if kind == IMU else self.mag
+            out = np.zeros(len(self.kind), dtype=bool)
+            if blk is not None:
+                same = [f == frame for f in blk.frame]
+                for i, (k, r) in enumerate(zip(self.kind, self.row, strict=True)):
+                    if k == kind:
+                        out[i] = same[r]
+            self._frames[key] = out
+        return out
 
     def same_covariance(self, start: int, raw: bytes | None) -> list[bool]:
         """Per IMU row: its covariance starting at column ``start`` has the bytes ``raw``."""
@@ -108,86 +171,91 @@ class Events:
 
 def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = None) -> Scan:
     """The longest run of ordinary events from ``ev`` index ``start``, stopping before an
-    event logged at or after ``limit_log_ns``. Nothing of ``pipe`` changes."""
+    event logged at or after ``limit_log_ns``. Nothing of ``pipe`` changes.
+
+    Where the run ends is found with NumPy (the static checks, the frame ids, covariances and
+    stamp order); the bookkeeping that is sequential by nature (the mean interval, gaps,
+    pairing magnetometer samples with IMU messages) runs over the run's messages in order.
+    """
     p = pipe
     out = Scan(start)
     if not _ordinary_start(p):
         return out
     heading = bool(p._filter._state.heading_initialized)  # noqa: SLF001
-    use_mag = p._use_mag
-    imu_frame, mag_frame = p._imu_frame, p._mag_frame
-    mag_ready = p._mag_n >= checks.MAG_CHECK_SAMPLES
-    last = p._last_ns
-    reset_on, reset_ns = p._reset_gap_on, p._reset_gap_ns
+    pending = p._pending_mag
+    if pending is not None and not heading:
+        return out
+    st = ev.static()
+    n_ev = len(ev.kind)
+    stop = n_ev
+    if limit_log_ns is not None:
+        # log times are sorted in a chunk (the reader merges by log time)
+        stop = bisect.bisect_left(ev.log_ns, limit_log_ns, start, n_ev)
+    if stop <= start:
+        return out
+    kind = st["kind"][start:stop]
+    good = np.ones(stop - start, dtype=bool)
+    is_imu = kind == IMU
+    is_mag = kind == MAG
+    ok = st["ok"][start:stop]
+    if ev.imu is not None and is_imu.any():
+        good &= ~is_imu | (ok & ev.frame_is(IMU, p._imu_frame)[start:stop])
+        av = np.asarray(ev.same_covariance(16, p._av_cov.raw), dtype=bool)
+        la = np.asarray(ev.same_covariance(28, p._la_cov.raw), dtype=bool)
+        rows = np.asarray(ev.row[start:stop], dtype=np.intp)
+        imu_pos = np.flatnonzero(is_imu)
+        cov_ok = np.ones(stop - start, dtype=bool)
+        cov_ok[imu_pos] = av[rows[imu_pos]] & la[rows[imu_pos]]
+        good &= cov_ok
+        # stamps increase from message to message, without a gap that resets the filter
+        t = st["t_ns"][start:stop][imu_pos]
+        d = np.diff(t, prepend=np.int64(p._last_ns))
+        t_ok = d > 0
+        if p._reset_gap_on:
+            t_ok &= d <= p._reset_gap_ns
+        seq_ok = np.ones(stop - start, dtype=bool)
+        seq_ok[imu_pos] = t_ok
+        good &= seq_ok
+    if is_mag.any():
+        if not (p._use_mag and heading and p._mag_n >= checks.MAG_CHECK_SAMPLES):
+            good &= ~is_mag
+        else:
+            good &= ~is_mag | (ok & ev.frame_is(MAG, p._mag_frame)[start:stop])
+    bad = np.flatnonzero(~good)
+    end = start + (int(bad[0]) if bad.size else stop - start)
+    if end <= start:
+        return out
+    # -- the sequential bookkeeping over the run, in the pipeline's order ---------------------
+    kinds, rows_l, t_all = ev.kind, ev.row, st["t_ns"]
     max_dt_ns, timeout = p._max_dt_ns, p._mag_timeout_ns
     dt_mean, gaps = p._dt_mean, p._gaps
-    pending = p._pending_mag
-    dropped = stale = 0
-    n_mag = 0
+    dropped = stale = n_mag = 0
     w = p._window
     dt_min, dt_max, dt_sum, n_dt = w.dt_min, w.dt_max, w.dt_sum, w.n_dt
-    isfinite = math.isfinite
-    kinds, logs, rows = ev.kind, ev.log_ns, ev.row
-    imu, mag_block = ev.imu, ev.mag
-    if imu is not None:
-        i_sec, i_nsec, i_frame, i_plain = imu.sec, imu.nsec, imu.frame, imu.plain
-        gxs, gys, gzs = ev.column("gx"), ev.column("gy"), ev.column("gz")
-        axs, ays, azs = ev.column("ax"), ev.column("ay"), ev.column("az")
-        av_same = ev.same_covariance(16, p._av_cov.raw)
-        la_same = ev.same_covariance(28, p._la_cov.raw)
+    last = p._last_ns
+    mag_block = ev.mag
     if mag_block is not None:
-        m_sec, m_nsec, m_frame, m_plain = (mag_block.sec, mag_block.nsec, mag_block.frame,
-                                           mag_block.plain)
         mxs, mys, mzs = ev.column("mx"), ev.column("my"), ev.column("mz")
-    out_rows = out.rows
-    i = start
-    n_ev = len(kinds)
-    while i < n_ev:
-        kind = kinds[i]
-        log_ns = logs[i]
-        if limit_log_ns is not None and log_ns >= limit_log_ns:
-            break
-        if kind == OTHER:
-            i += 1
+    t_list = t_all[start:end].tolist()
+    logs = ev.log_ns
+    imu_sec = ev.imu.sec if ev.imu is not None else []
+    imu_nsec = ev.imu.nsec if ev.imu is not None else []
+    max_dt_fallback = min(p._pp.max_dt_s, 0.01)
+    o_rows, o_t, o_sec, o_nsec, o_log = out.rows, out.t_ns, out.sec, out.nsec, out.log_ns
+    o_mag, o_mag_t, o_dt = out.mag, out.mag_t_ns, out.dt
+    for i in range(start, end):
+        kd = kinds[i]
+        if kd == OTHER:
             continue
-        k = rows[i]
-        if kind == MAG:
-            if not use_mag or not heading or not mag_ready or not m_plain[k]:
-                break
-            t_m = m_sec[k] * 1_000_000_000 + m_nsec[k]
-            mx, my, mz = mxs[k], mys[k], mzs[k]
-            n2 = mx * mx + my * my + mz * mz
-            if t_m == 0 or not isfinite(n2) or n2 == 0.0 or m_frame[k] != mag_frame:
-                break
+        k = rows_l[i]
+        t_ns = t_list[i - start]
+        if kd == MAG:
             if pending is not None:
                 dropped += 1
-            pending = (t_m, mx, my, mz)
+            pending = (t_ns, mxs[k], mys[k], mzs[k])
             n_mag += 1
-            i += 1
             continue
-        if not i_plain[k]:
-            break
-        sec, nsec = i_sec[k], i_nsec[k]
-        gx, gy, gz = gxs[k], gys[k], gzs[k]
-        ax, ay, az = axs[k], ays[k], azs[k]
-        if (sec == 0 and nsec == 0) or i_frame[k] != imu_frame:
-            break
-        if not (isfinite(gx) and isfinite(gy) and isfinite(gz) and isfinite(ax)
-                and isfinite(ay) and isfinite(az)):
-            break
-        a2 = ax * ax + ay * ay + az * az
-        g2 = gx * gx + gy * gy + gz * gz
-        if a2 == 0.0 or g2 > _GYRO_MAX2 or a2 > _ACCEL_MAX2 or g2 > _GYRO_WARN2:
-            break
-        t_ns = sec * 1_000_000_000 + nsec
         d_ns = t_ns - last
-        if d_ns <= 0 or (reset_on and d_ns > reset_ns):
-            break
-        if not (av_same[k] and la_same[k]):
-            break
-        if pending is not None and not heading:
-            break
-        # -- the message is ordinary: the pipeline's bookkeeping, in its order ------------------
         dt = d_ns * 1e-9
         if n_dt == 0 or dt < dt_min:
             dt_min = dt
@@ -197,34 +265,34 @@ def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = N
         n_dt += 1
         if d_ns > max_dt_ns:
             gaps += 1
-            dt = dt_mean if dt_mean > 0.0 else min(p._pp.max_dt_s, 0.01)
+            dt = dt_mean if dt_mean > 0.0 else max_dt_fallback
         elif dt_mean > 0.0:
             dt_mean += 0.05 * (dt - dt_mean)
         else:
             dt_mean = dt
-        mag = None
-        mag_t = 0
         if pending is not None:
             if abs(t_ns - pending[0]) <= timeout:
-                mag = (pending[1], pending[2], pending[3])
-                mag_t = pending[0]
+                o_mag.append((pending[1], pending[2], pending[3]))
+                o_mag_t.append(pending[0])
             else:
                 stale += 1
+                o_mag.append(None)
+                o_mag_t.append(0)
             pending = None
-        out_rows.append(k)
-        out.t_ns.append(t_ns)
-        out.sec.append(sec)
-        out.nsec.append(nsec)
-        out.log_ns.append(log_ns)
-        out.mag.append(mag)
-        out.mag_t_ns.append(mag_t)
-        out.dt.append(dt)
+        else:
+            o_mag.append(None)
+            o_mag_t.append(0)
+        o_rows.append(k)
+        o_t.append(t_ns)
+        o_sec.append(imu_sec[k])
+        o_nsec.append(imu_nsec[k])
+        o_log.append(logs[i])
+        o_dt.append(dt)
         last = t_ns
-        i += 1
-    out.end = i
-    out.n_events = i - start
-    out.frame = str(imu_frame)
-    out.values = imu.values if imu is not None else None
+    out.end = end
+    out.n_events = end - start
+    out.frame = str(p._imu_frame)
+    out.values = ev.imu.values if ev.imu is not None else None
     out.state = {
         "_last_ns": last, "_dt_mean": dt_mean, "_gaps": gaps, "_pending_mag": pending,
         "dropped": dropped, "stale": stale, "n_mag": n_mag,
