@@ -686,8 +686,10 @@ class OutputBag:
             sizes.append(31 + size)
         flat = np.concatenate(parts, axis=1).reshape(-1)
         m = len(topics)
-        rec_sizes = np.tile(np.asarray(sizes, dtype=np.int64), n)  # record r = row r//m, topic r%m
-        starts = np.concatenate([[0], np.cumsum(rec_sizes)])
+        # record r = row r // m, topic r % m: its offset in ``flat``
+        prefix = np.concatenate([[0], np.cumsum(sizes[:-1])]).astype(np.int64)
+        r_all = np.arange(n * m + 1, dtype=np.int64)
+        starts = (r_all // m) * int(sum(sizes)) + prefix[r_all % m]
         cids = [c.id for c in conns]
         ts_list = ts.tolist()
         w = self._writer
