@@ -267,3 +267,58 @@ def test_bulk_encoding_and_write_rows_give_the_bytes_of_message_by_message_write
     assert (one / "bag.mcap").stat().st_size > 3 * 2**20
     assert (one / "bag.mcap").read_bytes() == (many / "bag.mcap").read_bytes()
     assert (one / "metadata.yaml").read_text() == (many / "metadata.yaml").read_text()
+
+
+@pytest.fixture(scope="module")
+def clean_flight(tmp_path_factory) -> Path:
+    from cf_estimator.bag.simulate import write_scenario_bag
+    from cf_estimator.scenarios import make_scenario
+
+    d = tmp_path_factory.mktemp("clean")
+    return write_scenario_bag(make_scenario("uav", rate_hz=400.0, duration_s=40.0, seed=5),
+                              d / "uav").path
+
+
+@pytest.mark.parametrize("variant", [
+    {"filter": {"world_frame": "ned"}},
+    {"filter": {"use_mag": False}},
+    {"pipeline": {"publish_rpy": False, "rpy_unwrap": False}},
+    {"pipeline": {"max_dt_s": 0.0021, "reset_after_gap_s": 0.0}},  # every interval a "gap"
+    {"mag_topic": "none"},
+])
+@pytest.mark.parametrize("bag", ["clean", "hostile"])
+def test_bulk_pipeline_equals_message_by_message_for_other_parameters(
+        variant, bag, clean_flight, hostile, tmp_path):
+    import dataclasses
+
+    from cf_estimator.core.params import FilterParams
+    from cf_estimator.pipeline import PipelineParams
+
+    src = clean_flight if bag == "clean" else hostile["mcap"]
+    fp = dataclasses.replace(FilterParams(), **variant.get("filter", {}))
+    pp = dataclasses.replace(PipelineParams(), **variant.get("pipeline", {}))
+    out = {}
+    for mode, kw in (("bulk", {}), ("one", {"bulk_decode": False})):
+        opts = ReplayOptions(progress=False, mag_topic=variant.get("mag_topic"), **kw)
+        out[mode] = replay_bag(src, tmp_path / mode, fp, pp, opts).summary
+    a, b = tmp_path / "bulk", tmp_path / "one"
+    topics = (OUT_IMU_TOPIC, OUT_RPY_TOPIC) if pp.publish_rpy else (OUT_IMU_TOPIC,)
+    for topic in topics:
+        assert raw_messages(a, topic) == raw_messages(b, topic)
+    assert diagnostics_values(a) == diagnostics_values(b)
+    ca, cb = comparable(out["bulk"]), comparable(out["one"])
+    ca.pop("output"), cb.pop("output")
+    assert ca == cb
+
+
+def test_the_bulk_pipeline_takes_almost_every_message_of_a_clean_flight(clean_flight, tmp_path,
+                                                                        monkeypatch):
+    from cf_estimator.pipeline import bulk
+
+    rows = []
+    real = bulk.commit
+    monkeypatch.setattr(bulk, "commit", lambda pipe, run, *a, **k: (rows.append(run.n),
+                                                                    real(pipe, run, *a, **k))[1])
+    s = replay_bag(clean_flight, tmp_path / "o", options=ReplayOptions(progress=False)).summary
+    assert s["messages_processed"] == s["messages_in"] == 16000
+    assert sum(rows) > 0.95 * 16000 and len(rows) < 100  # runs of about a second each
