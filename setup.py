@@ -89,7 +89,10 @@ setup(
         "pyyaml",
     ],
     extras_require={
-        "test": ["pytest", "hypothesis", "ruff", "vqf"],  # vqf: the peer the bench tests run
+        # vqf: the peer the bench tests run; dask[distributed]: the LocalCluster (loopback) tests
+        "test": ["pytest", "hypothesis", "ruff", "vqf", "dask[distributed]"],
+        # --cluster ADDRESS|local:N on replay, tune and bench (docs/cluster.md)
+        "cluster": ["dask[distributed]"],
         # riann: RIANN on ONNX Runtime (~80 MB installed, no torch); its weights ship inside
         "bench": ["vqf", "imufusion", "ahrs", "riann"],
         # ROS 2 Jazzy's rclpy and messages from PyPI, for running the node without a ROS install

@@ -31,13 +31,13 @@ from typing import Any
 import numpy as np
 
 from cf_estimator import __version__, metrics
-from cf_estimator.bag import io
+from cf_estimator.bag import cdr, io
 from cf_estimator.core import quaternion as quat
 from cf_estimator.core.filter import ComplementaryFilter, bias_sigma
 from cf_estimator.core.kernel import resolve_backend
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import BIAS_CONVERGED_SIGMA_RAD_S
-from cf_estimator.pipeline import ImuPipeline, PipelineParams
+from cf_estimator.pipeline import ImuPipeline, PipelineParams, bulk
 from cf_estimator.schema import as_dict
 
 OUT_IMU_TOPIC = "/imu/data"
@@ -62,6 +62,13 @@ class ReplayOptions:
     heading_alignment: str = "auto"
     progress: bool | None = None  #: None: a tqdm bar on stderr only when stderr is a terminal
     offline: bool = False  #: write the offline (acausal) estimate (_offline_orientations)
+    #: decode IMU/magnetometer messages in bulk with NumPy (same values; False: one by one)
+    bulk_decode: bool = True
+    #: with bulk_decode, one online variant: ordinary runs through the pipeline at once
+    #: (pipeline/bulk.py; same outputs, bit for bit; False: message by message)
+    bulk_pipeline: bool = True
+    #: called with the number of messages read since the last call (a fleet's progress bar)
+    on_messages: Callable[[int], None] | None = None
 
 
 @dataclass
@@ -234,11 +241,15 @@ def _jsonable(value: Any) -> Any:
 
 
 class _Progress:
-    def __init__(self, total: int, enabled: bool | None, desc: str) -> None:
-        if enabled is None:
+    def __init__(self, total: int, enabled: bool | None, desc: str,
+                 on_messages: Callable[[int], None] | None = None) -> None:
+        self._on_messages = on_messages
+        if on_messages is not None:
+            enabled = True  # the caller's bar shows it
+        elif enabled is None:
             enabled = sys.stderr.isatty()
         self._bar = None
-        if enabled:
+        if enabled and on_messages is None:
             from tqdm import tqdm
 
             self._bar = tqdm(total=total, unit="msg", unit_scale=True, desc=desc,
@@ -246,15 +257,28 @@ class _Progress:
         self._pending = 0
 
     def tick(self) -> None:
-        if self._bar is not None:
+        if self._bar is not None or self._on_messages is not None:
             self._pending += 1
             if self._pending >= 2000:
-                self._bar.update(self._pending)
-                self._pending = 0
+                self._flush()
 
-    def close(self) -> None:
+    def add(self, n: int) -> None:
+        """``n`` messages read at once."""
+        if self._bar is not None or self._on_messages is not None:
+            self._pending += n
+            if self._pending >= 2000:
+                self._flush()
+
+    def _flush(self) -> None:
         if self._bar is not None:
             self._bar.update(self._pending)
+        if self._on_messages is not None:
+            self._on_messages(self._pending)
+        self._pending = 0
+
+    def close(self) -> None:
+        self._flush()
+        if self._bar is not None:
             self._bar.close()
 
 
@@ -279,6 +303,9 @@ class ReplayVariant:
     output_path: str | os.PathLike[str] | None = None
 
 
+#: Events handed to the bulk pipeline at once, and the shortest run worth a bulk pass.
+_BULK_EVENTS = 8192
+_MIN_BULK_RUN = 16
 #: Bias samples kept for plots at most this often [s of stamp time] (status() costs ~20 us).
 _BIAS_SAMPLE_PERIOD_S = 0.02
 
@@ -403,6 +430,66 @@ class _Run:
             missed = (log_ns - self.next_diag_ns) // self.period_ns
             self.next_diag_ns += self.period_ns * (missed + 1)
 
+    def events(self, ev: bulk.Events) -> None:
+        """IMU, magnetometer and other messages (log order) as :meth:`tick` + :meth:`imu` /
+        ``on_mag`` one by one would process them: ordinary runs (up to the next diagnostics
+        tick) through :mod:`cf_estimator.pipeline.bulk`, the others one by one."""
+        i, n = 0, len(ev.kind)
+        kinds, logs = ev.kind, ev.log_ns
+        retry = 0  # after a short run, go message by message for a while before scanning again
+        while i < n:
+            kind, log_ns = kinds[i], logs[i]
+            self.tick(log_ns)
+            if kind != bulk.OTHER and i >= retry:
+                run = bulk.scan(self.pipe, ev, i, self.next_diag_ns)
+                if run.n >= _MIN_BULK_RUN:
+                    self.imu_run(run)
+                    i = run.end
+                    continue
+                retry = i + 1 if run.n_events > 0 else i + _MIN_BULK_RUN
+            if kind == bulk.IMU:
+                self.imu(log_ns, ev.message(i))
+            elif kind == bulk.MAG:
+                self.pipe.on_mag(ev.message(i))
+            i += 1
+
+    def imu_run(self, run: bulk.Scan) -> None:
+        """An ordinary run: the filter over it, then its outputs and series as :meth:`imu`
+        writes them one by one."""
+        ts = [s + ns * 1e-9 for s, ns in zip(run.sec, run.nsec, strict=True)]
+        marks = []
+        next_bias = self.next_bias_t
+        for k, t in enumerate(ts):
+            if t >= next_bias:
+                marks.append(k)
+                next_bias = t + _BIAS_SAMPLE_PERIOD_S
+        flt = self.pipe.filter
+
+        def on_mark(k: int) -> None:
+            self.bias_t.append(ts[k])
+            self.bias.append(tuple(float(c) for c in flt.gyro_bias_rad_s))
+            self.bias_sigma.append(bias_sigma(flt._state))  # noqa: SLF001 - read-only
+
+        c = bulk.commit(self.pipe, run, marks, on_mark)
+        self.next_bias_t = next_bias
+        bag = self.bag
+        if bag is not None:  # every output message of the run encoded and written at once
+            sec, nsec = np.asarray(run.sec, dtype=np.int64), np.asarray(run.nsec, dtype=np.int64)
+            rows = cdr.imu_cdr_rows(sec, nsec, run.frame, c.q_wxyz[:, [1, 2, 3, 0]],
+                                    c.covariance, c.gyro, c.av_cov, c.accel, c.la_cov)
+            topics = [(OUT_IMU_TOPIC, io.IMU_TYPE, rows)]
+            if self.publish_rpy:
+                topics.append((OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE,
+                               cdr.vector3_stamped_rows(sec, nsec, run.frame,
+                                                        np.asarray(c.rpy, dtype=np.float64))))
+            bag.write_rows(np.asarray(run.log_ns, dtype=np.int64), topics)
+        self.t.extend(ts)
+        self.q.extend(tuple(r) for r in c.q_wxyz.tolist())
+        self.rpy.extend(c.rpy)
+        self.clipped.extend((c.extra[:, 6] != 0.0).tolist())
+        self.enorm.extend(c.error_norm)
+        self.rest.extend((c.extra[:, 8] != 0.0).tolist())
+
     def imu(self, log_ns: int, msg: Any) -> None:
         out = self.pipe.on_imu(msg)
         if out is None:
@@ -410,10 +497,12 @@ class _Run:
         bag = self.bag
         if self.offline:
             self.outputs.append((log_ns, out))
-        elif bag is not None:
-            bag.write(OUT_IMU_TOPIC, io.IMU_TYPE, log_ns, io.imu_from_output(out))
+        elif bag is not None:  # the bytes rosbags would serialize (bag/cdr.py), in one call
+            bag.write_raw(OUT_IMU_TOPIC, io.IMU_TYPE, log_ns, cdr.imu_cdr(out))
             if self.publish_rpy and out.rpy_rad is not None:
-                bag.write(OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE, log_ns, io.rpy_from_output(out))
+                bag.write_raw(OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE, log_ns,
+                              cdr.vector3_stamped_cdr(out.stamp_sec, out.stamp_nanosec,
+                                                      out.frame_id, out.rpy_rad))
         t = out.stamp_sec + out.stamp_nanosec * 1e-9
         self.t.append(t)
         if out.initialized:
@@ -459,10 +548,11 @@ class _Run:
         if bag is not None:
             for log_ns, topic, msgtype, item in sorted(self.held, key=lambda h: h[0]):
                 if topic == OUT_IMU_TOPIC:
-                    bag.write(topic, msgtype, log_ns, io.imu_from_output(item))
+                    bag.write_raw(topic, msgtype, log_ns, cdr.imu_cdr(item))
                     if self.publish_rpy and item.rpy_rad is not None:
-                        bag.write(OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE, log_ns,
-                                  io.rpy_from_output(item))
+                        bag.write_raw(OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE, log_ns,
+                                      cdr.vector3_stamped_cdr(item.stamp_sec, item.stamp_nanosec,
+                                                              item.frame_id, item.rpy_rad))
                 else:
                     bag.write(topic, msgtype, log_ns, item)
         self.held = []
@@ -470,6 +560,17 @@ class _Run:
     def abort(self) -> None:
         if self.bag is not None:
             self.bag.abort()
+
+
+def _add_reference(ref_type: str | None, msg: Any, ref_t: list[float],
+                   ref_q: list[tuple[float, float, float, float]]) -> None:
+    """A reference message's stamp and normalised (w, x, y, z), when it has an orientation."""
+    h = msg.header.stamp
+    q = _reference_quaternion(ref_type or "", msg)
+    nq = math.sqrt(sum(c * c for c in q))
+    if math.isfinite(nq) and nq > 0.5:
+        ref_t.append(h.sec + h.nanosec * 1e-9)
+        ref_q.append((q[0] / nq, q[1] / nq, q[2] / nq, q[3] / nq))
 
 
 def replay_bag(
@@ -538,9 +639,34 @@ def replay_variants(
         try:
             for v in variants:
                 runs.append(_Run(v, opts, topics, types, pipeline_factory))
-            progress = _Progress(total, opts.progress, in_path.name)
+            progress = _Progress(total, opts.progress, in_path.name, opts.on_messages)
             copy = opts.copy_inputs and any(r.bag is not None for r in runs)
-            for m in bag.messages(topics):
+            # IMU and magnetometer decoded in bulk (bag/cdr.py), except when the inputs are
+            # copied: those need rosbags' message objects; runs of ordinary messages through
+            # the pipeline at once (pipeline/bulk.py) for one online variant
+            decode_bulk = not copy and opts.bulk_decode
+            bulk_run = runs[0] if (decode_bulk and opts.bulk_pipeline and len(runs) == 1
+                                   and not runs[0].offline and pipeline_factory is None) else None
+            if bulk_run is not None:
+                for chunk in bag.chunks(topics):
+                    if first_log is None:
+                        first_log = chunk.log_ns[0]
+                    last_log = chunk.log_ns[-1]
+                    kinds = [bulk.IMU if t == imu_topic else bulk.MAG if t == mag_topic
+                             else bulk.OTHER for t in chunk.topic]
+                    n_imu += kinds.count(bulk.IMU)
+                    n_mag += kinds.count(bulk.MAG)
+                    bulk_run.events(bulk.Events(
+                        kinds, chunk.log_ns, chunk.row, chunk.blocks.get(io.IMU_TYPE),
+                        chunk.blocks.get(io.MAG_TYPE), chunk.msg))
+                    if ref_topic is not None:
+                        for i, t in enumerate(chunk.topic):
+                            if t == ref_topic:
+                                if t != imu_topic:
+                                    n_ref += 1
+                                _add_reference(ref_type, chunk.msg(i), ref_t, ref_q)
+                    progress.add(len(chunk))
+            for m in (() if bulk_run is not None else bag.messages(topics, bulk=decode_bulk)):
                 log_ns = m.log_time_ns
                 if first_log is None:
                     first_log = log_ns
@@ -563,12 +689,7 @@ def replay_variants(
                 if m.topic == ref_topic:
                     if m.topic != imu_topic:
                         n_ref += 1
-                    h = m.msg.header.stamp
-                    q = _reference_quaternion(ref_type or "", m.msg)
-                    nq = math.sqrt(sum(c * c for c in q))
-                    if math.isfinite(nq) and nq > 0.5:
-                        ref_t.append(h.sec + h.nanosec * 1e-9)
-                        ref_q.append((q[0] / nq, q[1] / nq, q[2] / nq, q[3] / nq))
+                    _add_reference(ref_type, m.msg, ref_t, ref_q)
                 progress.tick()
             if n_imu == 0:
                 raise io.BagError(f"{in_path}: topic {imu_topic!r} yielded no messages")
@@ -668,14 +789,9 @@ def replay_variants(
 
 
 def _series(r: _Run, ref_t: Sequence[float], ref_q: Sequence[Any]) -> ReplaySeries:
-    n = len(r.t)
-    q = np.full((n, 4), np.nan)
-    rpy = np.full((n, 3), np.nan)
-    for i, (qi, ri) in enumerate(zip(r.q, r.rpy, strict=True)):
-        if qi is not None:
-            q[i] = qi
-        if ri is not None:
-            rpy[i] = ri
+    nan4, nan3 = (np.nan,) * 4, (np.nan,) * 3
+    q = np.array([x if x is not None else nan4 for x in r.q], dtype=float).reshape(-1, 4)
+    rpy = np.array([x if x is not None else nan3 for x in r.rpy], dtype=float).reshape(-1, 3)
     return ReplaySeries(
         t_s=np.asarray(r.t, dtype=float),
         q_wxyz=q,

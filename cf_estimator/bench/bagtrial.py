@@ -160,7 +160,7 @@ def _collect(bag: Any, topics: dict[str, str | None], mag_timeout_s: float) -> _
     c = _Collected()
     pending: tuple[int, tuple[float, float, float]] | None = None
     wanted = [t for t in (imu, mag, ref) if t is not None]
-    for m in bag.messages(wanted):
+    for m in bag.messages(wanted, bulk=True):  # Imu/MagneticField decoded with NumPy
         if m.topic == ref:  # may also be the IMU topic (an IMU with its own orientation)
             q = reference_quaternion(ref_type, m.msg)
             if q is not None:

@@ -229,8 +229,10 @@ def flight_info(flight: Flight) -> dict:
 
 
 def _worker(task: tuple) -> dict[str, dict[str, float]]:
+    from cf_estimator.bench.parallel import aligned
+
     flight, params, peers, settle_s = task
-    return evaluate_flight(flight, params, peers, settle_s)
+    return evaluate_flight(aligned(flight), params, peers, settle_s)  # aligned: a cluster's copy
 
 
 def run_euroc(flights: Sequence[Flight], params: FilterParams, peers: Sequence[str] = (),

@@ -10,10 +10,10 @@ for the peers of :mod:`cf_estimator.bench.peers` at their defaults; a peer with 
 from __future__ import annotations
 
 import dataclasses
-import multiprocessing
 import os
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -79,24 +79,24 @@ def _worker(args: tuple) -> tuple:
 
 
 def run_broad(paths: Sequence[Path], info: Mapping, params: FilterParams,
-              peers: Sequence[str] = (), jobs: int = 1,
+              peers: Sequence[str] = (), jobs: Any = 1,
               progress: Callable[[str, int, int], None] | None = None) -> broad.BenchResult:
-    """Evaluate every trial (in ``jobs`` processes); results keep the order of ``paths``."""
+    """Evaluate every trial (in ``jobs`` processes, or on a cluster engine: trials go to the
+    workers by path); results keep the order of ``paths``."""
+    from cf_estimator.bench.parallel import run_tasks
+
     tasks = [(str(p), dict(info), params, tuple(peers)) for p in paths]
     done: dict[str, tuple] = {}
-    if jobs <= 1 or len(tasks) <= 1:
-        for i, t in enumerate(tasks, 1):
-            name, groups, res = _worker(t)
-            done[name] = (groups, res)
-            if progress:
-                progress(name, i, len(tasks))
-    else:
-        ctx = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
-        with ctx.Pool(min(jobs, len(tasks))) as pool:
-            for i, (name, groups, res) in enumerate(pool.imap_unordered(_worker, tasks), 1):
-                done[name] = (groups, res)
-                if progress:
-                    progress(name, i, len(tasks))
+    count = [0]
+
+    def on_done(_i: int, out: tuple) -> None:
+        name, groups, res = out
+        done[name] = (groups, res)
+        count[0] += 1
+        if progress:
+            progress(name, count[0], len(tasks))
+
+    run_tasks(_worker, tasks, jobs, on_done)
     result = broad.BenchResult()
     result.group_order = [g.get("name") for g in info.get("groups", []) if isinstance(g, Mapping)]
     for p in paths:

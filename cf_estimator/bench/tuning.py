@@ -29,12 +29,13 @@ import dataclasses
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from cf_estimator.bench.bagtrial import BagTrial
 from cf_estimator.bench.broad import Trial
-from cf_estimator.bench.parallel import run_tasks
+from cf_estimator.bench.parallel import aligned, run_tasks, share, workers_of
 from cf_estimator.core.batch import estimate_many
 from cf_estimator.core.params import FilterParams
 from cf_estimator.metrics import rmse_deg
@@ -229,7 +230,7 @@ def score_trial(candidates: Sequence[FilterParams], trial: Trial) -> tuple[np.nd
 
 def _score_worker(args: tuple) -> tuple[np.ndarray, np.ndarray]:
     candidates, trial = args
-    return score_trial(candidates, trial)
+    return score_trial(candidates, aligned(trial))
 
 
 def _chunks(n: int, parts: int) -> list[slice]:
@@ -238,18 +239,19 @@ def _chunks(n: int, parts: int) -> list[slice]:
     return [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
 
 
-def _split(n_candidates: int, n_units: int, jobs: int) -> list[slice]:
+def _split(n_candidates: int, n_units: int, jobs: Any) -> list[slice]:
     """Candidate slices so that ``n_units`` × slices fills ``jobs`` (one slice when it does)."""
-    return _chunks(n_candidates, max(1, jobs // max(1, n_units)))
+    return _chunks(n_candidates, max(1, workers_of(jobs) // max(1, n_units)))
 
 
-def score_candidates(candidates: Sequence[FilterParams], trials: Sequence[Trial], jobs: int = 1
+def score_candidates(candidates: Sequence[FilterParams], trials: Sequence[Trial], jobs: Any = 1
                      ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """trial → (total, inclination) RMSE arrays [deg] over the candidates. Trials (and, with
-    fewer trials than jobs, slices of the candidates) are spread over ``jobs`` processes."""
+    fewer trials than jobs, slices of the candidates) are spread over ``jobs`` processes, or
+    over a cluster engine's workers (each trial's arrays sent once, then reused)."""
     cands = list(candidates)
     parts = _split(len(cands), len(trials), jobs)
-    tasks = [(cands[s], t) for t in trials for s in parts]
+    tasks = [(cands[s], share(jobs, t)) for t in trials for s in parts]
     out = run_tasks(_score_worker, tasks, jobs)
     scores = {}
     for i, t in enumerate(trials):
@@ -353,7 +355,7 @@ def round_params(params: FilterParams, space: Sequence[Dim], digits: int = 2) ->
 
 # -- thesis scenarios as a constraint ----------------------------------------------------------
 def scenario_peaks(candidates: Sequence[FilterParams], names: Sequence[str] = (
-        "impacts", "vibration", "acceleration"), seed: int = 0, jobs: int = 1) -> np.ndarray:
+        "impacts", "vibration", "acceleration"), seed: int = 0, jobs: Any = 1) -> np.ndarray:
     """(P, S) peak tilt error [arcmin] of every candidate (6-D) on each scenario, over the
     scored windows of :func:`cf_estimator.bench.scenarios.scenario_masks` (NaN: none scored)."""
     cands = list(candidates)

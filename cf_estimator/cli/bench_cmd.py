@@ -67,6 +67,9 @@ def register(subparsers: Any) -> None:
     b.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
                    help="worker processes, one trial each (default %(default)s)")
     b.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    from cf_estimator.cluster import add_cluster_option
+
+    add_cluster_option(b)
     b.set_defaults(run=run_broad)
 
     e = sub.add_parser(
@@ -100,6 +103,7 @@ def register(subparsers: Any) -> None:
     e.add_argument("--json", metavar="OUT", help="write per-flight scores and means as JSON")
     e.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
                    help="worker processes, one flight each (default %(default)s)")
+    add_cluster_option(e)
     e.set_defaults(run=run_euroc)
 
     s = sub.add_parser(
@@ -152,6 +156,33 @@ def register(subparsers: Any) -> None:
     sp.add_argument("--json", metavar="OUT", help="write every figure as JSON")
     sp.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
     sp.set_defaults(run=run_speed)
+
+    fl = sub.add_parser(
+        "fleet", help="replay and tuning throughput of many bags: here, and on a Dask "
+        "LocalCluster of 1 and 2 workers",
+        description=(
+            "Replays every bag of --data (default: simulated uav flights in a temporary "
+            "directory) with an mcap output each, and scores --candidates parameter sets on "
+            "them (one tuner pass), first in this process without Dask, then on a Dask "
+            "LocalCluster of each --workers count; prints messages/s, parameter-samples/s, the "
+            "speed-up and the figure per worker, and checks every result is identical to the "
+            "local run. Needs pip install '.[cluster]'."
+        ),
+    )
+    fl.add_argument("--data", metavar="DIR", help="directory of bags (default: simulated)")
+    fl.add_argument("--flights", type=int, default=4, metavar="N",
+                    help="simulated flights (default %(default)s)")
+    fl.add_argument("--duration", type=finite_float, default=60.0, metavar="S",
+                    help="seconds per simulated flight (default %(default)s, >= 40)")
+    fl.add_argument("--rate", type=finite_float, default=400.0, metavar="HZ",
+                    help="IMU rate of the simulated flights (default %(default)s)")
+    fl.add_argument("--workers", default="1,2", metavar="LIST",
+                    help="LocalCluster sizes to run, comma-separated (default %(default)s)")
+    fl.add_argument("--candidates", type=int, default=16, metavar="N",
+                    help="parameter sets scored per bag (default %(default)s)")
+    fl.add_argument("--json", metavar="OUT", help="write every figure as JSON")
+    fl.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
+    fl.set_defaults(run=run_fleet)
 
 
 def _add_peers_option(parser: Any) -> None:
@@ -221,10 +252,17 @@ def run_broad(args: Any) -> int:
         if not args.quiet:
             print(f"[{i}/{n}] {name} ({time.monotonic() - start:.0f} s)", file=sys.stderr)
 
+    from cf_estimator.cluster import ClusterError, make_engine
+
     try:
-        result = evaluate_all(paths, info, params, peers, jobs=args.jobs, progress=progress)
+        with make_engine(args.cluster, args.jobs) as engine:
+            engine.check_paths([str(Path(p).absolute()) for p in paths])
+            result = evaluate_all([Path(p).absolute() for p in paths] if args.cluster else paths,
+                                  info, params, peers, jobs=engine, progress=progress)
     except broad.BroadDataError as exc:
         raise CliError(str(exc)) from None
+    except ClusterError as exc:
+        raise CliError(str(exc), 2) from None
     algos = ", ".join(["cf_estimator", "cf_estimator_offline"]
                       + [q for p in peers for q in ((p, "vqf_offline") if p == "vqf" else (p,))])
     print(f"BROAD: {len(paths)} trial(s) from {args.data}; RMSE [deg] over movement samples, "
@@ -291,7 +329,13 @@ def run_euroc(args: Any) -> int:
             flights = euroc.load_flights(args.data)
     except euroc.EurocDataError as exc:
         raise CliError(str(exc), 2) from None
-    result = ev.run_euroc(flights, params, peers, args.settle, jobs=args.jobs)
+    from cf_estimator.cluster import ClusterError, make_engine
+
+    try:  # on a cluster the flights (read here from their CSV files) travel once each
+        with make_engine(args.cluster, args.jobs) as engine:
+            result = ev.run_euroc(flights, params, peers, args.settle, jobs=engine)
+    except ClusterError as exc:
+        raise CliError(str(exc), 2) from None
     print(f"EuRoC: {len(result.flights)} flight(s) from {args.data}; 6-D inclination error "
           f"[deg] vs ground truth after the first {args.settle:g} s: RMS / max")
     print(f"cf_estimator parameters: {args.params or 'shipped defaults'}")
@@ -378,6 +422,42 @@ def run_speed(args: Any) -> int:
                                 "batched_param_samples_per_s": batched_json,
                                 "bag_throughput": dataclasses.asdict(bag)})
     return 0
+
+
+def run_fleet(args: Any) -> int:
+    """``bench fleet``: exit 1 when a cluster result differs from the local one."""
+    from cf_estimator.bench import fleet
+    from cf_estimator.cluster import ClusterError
+
+    _check_outputs(args, "json")
+    if args.data is not None:
+        check_input_path(args.data, "bag directory", want_dir=True)
+    try:
+        workers = tuple(int(x) for x in _csv(args.workers))
+    except ValueError:
+        raise CliError(f"--workers: not integers: {args.workers!r}", 2) from None
+    if any(w < 1 for w in workers) or args.flights < 1 or args.candidates < 1:
+        raise CliError("--workers, --flights and --candidates must be >= 1", 2)
+    if args.data is None and args.duration < 40:
+        raise CliError("--duration must be >= 40 s (the uav scenario)", 2)
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        raise CliError("bench fleet needs Dask distributed: pip install "
+                       "'cf_estimator[cluster]'", 2) from None
+    try:
+        result = fleet.run_fleet_bench(
+            args.data, flights=args.flights, duration_s=args.duration, rate_hz=args.rate,
+            workers=workers, candidates=args.candidates,
+            log=lambda text: print(f"bench fleet: {text}", file=sys.stderr, flush=True))
+    except ClusterError as exc:
+        raise CliError(str(exc), 2) from None
+    except ValueError as exc:
+        raise CliError(str(exc).splitlines()[0], 1) from None
+    print(fleet.format_fleet_bench(result), end="")
+    if args.json:
+        _write_json(args.json, fleet.to_json(result))
+    return 0 if all(r.identical is not False for r in result.runs) else 1
 
 
 def _bag_throughput(args: Any) -> BagThroughput:

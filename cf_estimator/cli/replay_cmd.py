@@ -1,9 +1,11 @@
-"""``cf-estimator replay``: run a recorded bag through the node's pipeline, without ROS.
+"""``cf-estimator replay``: run recorded bags through the node's pipeline, without ROS.
 
 Input: a ROS 1 ``.bag`` or a ROS 2 bag directory (sqlite3 or mcap). Output: a ROS 2 bag
 (Jazzy definitions) with ``/imu/data``, ``/imu/rpy`` and ``/diagnostics`` as the live node
 publishes them, optionally the input topics (``--copy-inputs``); a JSON summary; PNG plots.
-See docs/replay.md.
+Several bags, or a directory of them (a fleet, :mod:`cf_estimator.bag.fleet`): one output per
+bag under ``-o DIR``, a table and one JSON with every bag; ``--cluster`` runs them on Dask.
+See docs/replay.md and docs/cluster.md.
 """
 
 from __future__ import annotations
@@ -40,9 +42,13 @@ def register(subparsers: Any) -> None:
             "message type when there is exactly one of each."
         ),
     )
-    p.add_argument("bag", metavar="BAG", help="input bag: ROS 1 .bag file or ROS 2 bag directory")
+    p.add_argument("bag", metavar="BAG", nargs="+",
+                   help="input bag: ROS 1 .bag file or ROS 2 bag directory; several, or a "
+                   "directory of bags (searched recursively, ROS 1 and ROS 2 mixed), replay a "
+                   "fleet: one output per bag, a summary table and one JSON")
     p.add_argument("-o", "--output", metavar="OUT",
-                   help="output ROS 2 bag directory (written atomically; see --overwrite)")
+                   help="output ROS 2 bag directory (written atomically; see --overwrite); for "
+                   "a fleet, the directory that receives one bag per input, OUT/<name>")
     add_params_options(p, "the one the node reads with --params-file")
     p.add_argument("--imu-topic", metavar="TOPIC", help="sensor_msgs/Imu input (default: detect)")
     p.add_argument("--mag-topic", metavar="TOPIC",
@@ -69,6 +75,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--overwrite", action="store_true",
                    help="replace an existing output bag and JSON file, write into an existing "
                    "plot directory")
+    from cf_estimator.cluster import add_cluster_option
+
+    add_cluster_option(p)
     prog = p.add_mutually_exclusive_group()
     prog.add_argument("--progress", dest="progress", action="store_true", default=None,
                       help="always show a progress bar on stderr")
@@ -166,9 +175,93 @@ def print_summary(s: dict[str, Any], out: Any = None) -> None:
     print(f"speed   {s['messages_per_s']:.0f} messages/s ({s['wall_time_s']:.2f} s)", file=out)
 
 
+def _is_fleet(args: argparse.Namespace) -> bool:
+    """Several inputs, a directory that is not itself a bag, or --cluster."""
+    if len(args.bag) > 1 or args.cluster is not None:
+        return True
+    p = Path(args.bag[0])
+    if not p.is_dir() or (p / "metadata.yaml").is_file() or any(p.glob("*.mcap")) or \
+            any(p.glob("*.db3")):
+        return False
+    from cf_estimator.bag.fleet import find_bags
+
+    return bool(find_bags([p]))  # a directory without bags: the single-bag error says why
+
+
+def _options(args: argparse.Namespace) -> ReplayOptions:
+    return ReplayOptions(
+        imu_topic=args.imu_topic, mag_topic=args.mag_topic, reference_topic=args.reference_topic,
+        storage=args.storage, copy_inputs=args.copy_inputs, overwrite=args.overwrite,
+        heading_alignment=args.heading_alignment, progress=args.progress,
+        offline=args.offline,
+    )
+
+
+#: Exit status of a fleet replay is the number of bags that failed, at most this.
+MAX_FAILED_EXIT = 100
+
+
+def run_fleet(args: argparse.Namespace) -> int:
+    """Replay several bags: one output each, a table, one JSON; exit = number failed."""
+    from cf_estimator.bag import fleet
+    from cf_estimator.cluster import ClusterError, make_engine
+
+    for b in args.bag:
+        check_input_path(b, "input bag")
+    bags = fleet.find_bags(args.bag)
+    if not bags:
+        raise CliError(f"no bags found in {', '.join(args.bag)} (ROS 1 *.bag files or ROS 2 "
+                       "bag directories with metadata.yaml)", 2)
+    check_output_dir(args.output, overwrite=args.overwrite, option="-o")
+    check_output_file(args.json, overwrite=args.overwrite, option="--json")
+    check_output_dir(args.plot, overwrite=args.overwrite, option="--plot")
+    fparams, pparams = load_params(args.params, args.node_name)
+    opts = _options(args)
+    if opts.storage not in io.STORAGES:
+        raise CliError(f"unknown storage {opts.storage!r}", 2)
+    tasks = fleet.make_tasks(bags, args.output, args.plot, fparams, pparams, opts)
+    if args.output is not None:
+        try:
+            Path(args.output).mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise CliError(f"-o {args.output}: cannot create: {exc.strerror or exc}", 2) from None
+    for t in tasks:
+        if t.output is not None:
+            try:
+                io.check_output_path(Path(t.output), overwrite=args.overwrite,
+                                     inputs=[Path(x.bag) for x in tasks])
+            except io.BagError as exc:
+                raise CliError(str(exc), exc.code) from None
+    try:
+        with make_engine(args.cluster) as engine:
+            writable = [d for d in (args.output, args.plot) if d is not None]
+            engine.check_paths([t.bag for t in tasks], writable=writable)
+            result = fleet.replay_fleet(tasks, engine, progress=args.progress)
+    except ClusterError as exc:
+        raise CliError(str(exc), 2) from None
+    for s in result["bags"]:
+        s["params_file"] = args.params
+        s["node_name"] = args.node_name
+        mag_warning = heading_warning(s)
+        if mag_warning:
+            s["warnings"].append(mag_warning)
+        for text in s["warnings"]:
+            warn(f"{s['name']}: {text}")
+    if args.json is not None:
+        write_json(args.json, result)
+    if args.json != "-":
+        print(fleet.format_table(result), end="")
+        if args.json is not None:
+            print(f"json    {args.json}")
+    return min(result["fleet"]["failed"], MAX_FAILED_EXIT)
+
+
 def run(args: argparse.Namespace) -> int:
     if args.output is None and args.json is None and args.plot is None:
         raise CliError("nothing to write: give -o OUT, --json FILE or --plot DIR", 2)
+    if _is_fleet(args):
+        return run_fleet(args)
+    args.bag = args.bag[0]
     check_input_path(args.bag, "input bag")
     check_output_file(args.json, overwrite=args.overwrite, option="--json")
     check_output_dir(args.plot, overwrite=args.overwrite, option="--plot")
@@ -179,12 +272,7 @@ def run(args: argparse.Namespace) -> int:
         except io.BagError as exc:
             raise CliError(str(exc), exc.code) from None
     fparams, pparams = load_params(args.params, args.node_name)
-    opts = ReplayOptions(
-        imu_topic=args.imu_topic, mag_topic=args.mag_topic, reference_topic=args.reference_topic,
-        storage=args.storage, copy_inputs=args.copy_inputs, overwrite=args.overwrite,
-        heading_alignment=args.heading_alignment, progress=args.progress,
-        offline=args.offline,
-    )
+    opts = _options(args)
     try:
         result = replay_bag(args.bag, args.output, fparams, pparams, opts)
     except io.BagError as exc:

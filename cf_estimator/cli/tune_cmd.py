@@ -8,12 +8,16 @@ many candidates per pass, on (optionally decimated) data; optional thesis-scenar
 the peak tilt error; prints before/after and writes a ROS 2 parameter YAML that the node's
 ``--params-file``, ``replay --params`` and ``bench broad --params`` load unchanged.
 
-Data: ``--data DIR`` (BROAD ``*.hdf5`` trials) or ``--bag PATH`` (IMU, optional magnetometer and a
-reference topic: :mod:`cf_estimator.bench.bagtrial` says how it is read and scored).
+Data: ``--data DIR`` (BROAD ``*.hdf5`` trials) or ``--bag PATH...`` (IMU, optional magnetometer
+and a reference topic: :mod:`cf_estimator.bench.bagtrial` says how it is read and scored); several
+bags, or directories of them, are tuned together (the mean objective over the recordings). A bag
+that cannot be read is reported on one line and left out; the exit status is how many were.
+``--cluster`` scores the candidates on Dask (docs/cluster.md).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from collections.abc import Callable, Sequence
@@ -59,9 +63,10 @@ def register(subparsers: Any) -> None:
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--data", metavar="PATH",
                      help="directory of BROAD *.hdf5 files, or one trial file")
-    src.add_argument("--bag", metavar="PATH",
+    src.add_argument("--bag", metavar="PATH", nargs="+",
                      help="ROS 1 .bag or ROS 2 bag directory with IMU, optional magnetometer and "
-                     "a reference orientation topic")
+                     "a reference orientation topic; several, or directories of bags (searched "
+                     "recursively): one parameter set tuned over all of them")
     p.add_argument("--trials", metavar="LIST",
                    help="with --data: trials to tune on (names, prefixes, patterns)")
     b = p.add_argument_group("bag input (--bag)")
@@ -114,6 +119,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--force", action="store_true",
                    help="write --out even when the tuned set loses on a validation case (a loud "
                    "warning instead of a refusal)")
+    from cf_estimator.cluster import add_cluster_option
+
+    add_cluster_option(p)
     p.add_argument("--out", metavar="YAML",
                    help="write the best parameters here, at full precision (a complete ROS 2 "
                    "parameter file)")
@@ -184,9 +192,10 @@ class _Source:
     label: str
     has_mag: bool
     confirm: Callable[[Any, Any], None]
+    failed: int = 0  #: recordings left out (unreadable)
 
 
-def _broad_source(args: Any) -> _Source:
+def _broad_source(args: Any, engine: Any) -> _Source:
     from cf_estimator.bench import broad
 
     check_input_path(args.data, "BROAD data")
@@ -203,36 +212,94 @@ def _broad_source(args: Any) -> _Source:
         from cf_estimator.bench.evaluate import run_broad
 
         for label, p in (("before", base), ("after", best)):
-            res = run_broad(paths, info, p, (), jobs=args.jobs)
+            res = run_broad(paths, info, p, (), jobs=engine)
             print(f"\nfull rate, {label}:")
             print(broad.format_tables(res), end="")
 
     return _Source(full, f"{len(paths)} BROAD trial(s) from {args.data}", True, confirm)
 
 
-def _bag_source(args: Any) -> _Source:
+@dataclass
+class _BagLoad:
+    """What a worker needs to read one bag into a trial (by path: shared storage)."""
+
+    path: str
+    name: str
+    reference: str
+    imu_topic: str | None
+    mag_topic: str | None
+    score_after: float
+
+
+def _load_bag(task: _BagLoad) -> tuple[Any, str | None, int]:
+    """(trial, None, 0) or (None, one-line error, exit code): a bad bag never stops the
+    others."""
     from cf_estimator.bag.io import BagError
+    from cf_estimator.bench import bagtrial
+
+    try:
+        trial = bagtrial.load_bag_trial(task.path, task.reference, imu_topic=task.imu_topic,
+                                        mag_topic=task.mag_topic,
+                                        score_after_s=task.score_after)
+    except BagError as exc:
+        return None, str(exc).splitlines()[0], exc.code
+    except Exception as exc:  # noqa: BLE001 - anything else a broken bag raises: one line
+        return None, f"{task.path}: {type(exc).__name__}: {str(exc).splitlines()[0]}", 1
+    return dataclasses.replace(trial, name=task.name), None, 0
+
+
+def _bag_source(args: Any, engine: Any) -> _Source:
+    from pathlib import Path
+
+    from cf_estimator.bag.fleet import find_bags, output_names
     from cf_estimator.bench import bagtrial, tuning
 
-    check_input_path(args.bag, "input bag")
+    for b in args.bag:
+        check_input_path(b, "input bag")
+    bags = find_bags(args.bag)
+    if not bags:
+        raise CliError(f"no bags found in {', '.join(args.bag)}", 2)
+    engine.check_paths([str(b.absolute()) for b in bags])
     reference = args.reference_topic or bagtrial.DEFAULT_REFERENCE_TOPIC
     score_after = bagtrial.DEFAULT_SCORE_AFTER_S if args.score_after is None else args.score_after
-    try:
-        trial = bagtrial.load_bag_trial(args.bag, reference, imu_topic=args.imu_topic,
-                                        mag_topic=args.mag_topic, score_after_s=score_after)
-    except BagError as exc:
-        raise CliError(str(exc), exc.code) from None
-    topics = ", ".join(f"{k} {v or '(none)'}" for k, v in trial.topics.items())
-    print(f"bag {args.bag}: {trial.describe()}; {topics}", flush=True)
+    loads = [_BagLoad(str(Path(b).absolute()), n, reference, args.imu_topic, args.mag_topic,
+                      score_after) for b, n in zip(bags, output_names(bags), strict=True)]
+    loaded = engine.map(_load_bag, loads)
+    trials = [t for t, _e, _c in loaded if t is not None]
+    errors = [e for _t, e, _c in loaded if e is not None]
+    single = len(bags) == 1 and len(args.bag) == 1
+    if single and errors:  # one bag: its problem is the command's error, as before
+        raise CliError(errors[0].replace(loads[0].path, args.bag[0]), loaded[0][2])
+    for e in errors:
+        print(f"FAILED  {e}", flush=True)
+    if not trials:
+        raise CliError(f"none of the {len(bags)} bag(s) could be read", 1)
+    for b, t in zip([ld for (t, _e, _c), ld in zip(loaded, loads, strict=True)
+                     if t is not None], trials, strict=True):
+        topics = ", ".join(f"{k} {v or '(none)'}" for k, v in t.topics.items())
+        shown = args.bag[0] if single else b.path
+        print(f"bag {shown}: {t.describe()}; {topics}", flush=True)
+    mags = {t.has_mag for t in trials}
+    if len(mags) > 1:
+        without = ", ".join(t.name for t in trials if not t.has_mag)
+        raise CliError(f"some bags have magnetometer samples and some not ({without}): tune "
+                       "them separately, or all without (--mag-topic none)", 2)
 
     def confirm(base: Any, best: Any) -> None:
-        total, incl = tuning.score_candidates([base, best], [trial], jobs=args.jobs)[trial.name]
+        scores = tuning.score_candidates([base, best], trials, jobs=engine)
         print("\nfull rate [deg]:        total RMSE   inclination RMSE")
         for i, label in enumerate(("before", "after")):
-            print(f"  {label:<20} {total[i]:10.3f}   {incl[i]:16.3f}")
+            total = np.mean([scores[t.name][0][i] for t in trials])
+            incl = np.mean([scores[t.name][1][i] for t in trials])
+            print(f"  {label:<20} {total:10.3f}   {incl:16.3f}")
 
-    label = f"bag {args.bag} (reference {trial.topics['reference']})"
-    return _Source([trial], label, trial.has_mag, confirm)
+    if single:
+        label = f"bag {args.bag[0]} (reference {trials[0].topics['reference']})"
+    else:
+        label = f"{len(trials)} bag(s) from {', '.join(args.bag)} (reference {reference})"
+    src = _Source(trials, label, trials[0].has_mag, confirm)
+    src.failed = len(errors)
+    return src
 
 
 def _objective(args: Any, source: _Source) -> str:
@@ -293,7 +360,7 @@ def _decimated(source: _Source, factor: int) -> list:
 
 
 # -- search and report -------------------------------------------------------------------------
-def _scenario_check(result: Any, base: Any, limits: dict[str, float], jobs: int) -> Any:
+def _scenario_check(result: Any, base: Any, limits: dict[str, float], jobs: Any) -> Any:
     """The best of the 16 best candidates that meets every scenario limit; the start point if
     none does (and it does); CliError when not even the start point meets them."""
     from cf_estimator.bench import tuning
@@ -332,15 +399,25 @@ def _write(path: str, best: Any, header: str) -> None:
 
 
 def run(args: Any) -> int:
-    """``tune``."""
-    from cf_estimator.bench import tuning
+    """``tune``: exit 0, or the number of bags left out because they could not be read."""
+    from cf_estimator.cluster import ClusterError, make_engine
 
     _check_args(args)
     check_output_file(args.out, overwrite=args.overwrite, option="--out")
     space = _search_space(args)
     limits = _scenario_limits(args.scenario_limit)
     base = load_params(args.params, args.node_name)[0]
-    source = _bag_source(args) if args.bag is not None else _broad_source(args)
+    try:
+        with make_engine(args.cluster, args.jobs) as engine:
+            return _run(args, engine, space, limits, base)
+    except ClusterError as exc:
+        raise CliError(str(exc), 2) from None
+
+
+def _run(args: Any, engine: Any, space: Any, limits: dict[str, float], base: Any) -> int:
+    from cf_estimator.bench import tuning
+
+    source = _bag_source(args, engine) if args.bag is not None else _broad_source(args, engine)
     objective = _objective(args, source)
     space, dropped = tuning.for_objective(space, objective)
     if dropped:
@@ -356,10 +433,10 @@ def run(args: Any) -> int:
         print(f"  {line}  ({time.monotonic() - start:.0f} s)", flush=True)
 
     def evaluate(cands: Sequence[Any]) -> np.ndarray:
-        scores = tuning.score_candidates(cands, trials, jobs=args.jobs)
+        scores = tuning.score_candidates(cands, trials, jobs=engine)
         values = tuning.objective_values(scores, objective)
         if "acceleration" in limits:  # cheap (200 Hz): screen every candidate of every pass
-            peak = tuning.scenario_peaks(cands, ("acceleration",), jobs=args.jobs)[:, 0]
+            peak = tuning.scenario_peaks(cands, ("acceleration",), jobs=engine)[:, 0]
             values = np.where(peak <= limits["acceleration"], values, np.inf)
         return values
 
@@ -373,7 +450,7 @@ def run(args: Any) -> int:
                            seed=args.seed, log=log)
     best = result.best  # full precision: what was scored is what is written
     if limits:
-        best = _scenario_check(result, base, limits, args.jobs)
+        best = _scenario_check(result, base, limits, engine)
     final = evaluate([base, best])  # inf = fails the acceleration-scenario screen
     rate = "full rate" if args.decimate == 1 else f"decimated x{args.decimate}"
     print(f"objective ({objective}, {rate}): before {final[0]:.4f}  after {final[1]:.4f}")
@@ -401,4 +478,7 @@ def run(args: Any) -> int:
         _write(args.out, best, f"# cf-estimator tune: objective {objective} on {source.label}; "
                f"before {final[0]:.4f}, after {final[1]:.4f} (decimate {args.decimate}); "
                f"scenario limits: {limit_text}\n" + loss_text)
-    return 0
+    if source.failed:
+        print(f"{source.failed} bag(s) could not be read and were left out (exit status "
+              f"{min(source.failed, 100)})")
+    return min(source.failed, 100)

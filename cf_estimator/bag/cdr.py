@@ -1,0 +1,323 @@
+"""Bulk decoding of ``sensor_msgs/Imu`` and ``MagneticField``, and fast encoding of the outputs.
+
+Decoding: a message's bytes are a header (stamp, ``frame_id``) followed by a fixed block of
+float64 — 37 for an Imu (orientation 4, its covariance 9, angular velocity 3, covariance 9,
+linear acceleration 3, covariance 9), 12 for a MagneticField (field 3, covariance 9). Messages
+whose ``frame_id`` has the same length share one layout: they are stacked into a 2-D byte array
+and read with NumPy views, all at once. Both serializations rosbags hands out are handled:
+ROS 2 CDR little-endian (4-byte encapsulation header, string length counting its NUL, doubles
+aligned to 8) and ROS 1 (``seq`` first, no NUL, no alignment). Anything else — big-endian CDR,
+a length that does not match the layout, a ``frame_id`` that is not UTF-8 — is left to rosbags'
+own deserializer, so unusual messages decode exactly as before.
+
+The decoded messages are light objects with the sensor_msgs field names (what the pipeline
+reads), holding the same values as rosbags' message objects: the pipeline's results are the
+same, bit for bit.
+
+Encoding: :func:`imu_cdr` / :func:`vector3_stamped_cdr` build the Jazzy CDR bytes of the
+replay's ``/imu/data`` and ``/imu/rpy`` outputs with one ``struct`` call each — the bytes rosbags'
+``serialize_cdr`` gives for the same message object (tested).
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+IMU_DOUBLES = 37
+MAG_DOUBLES = 12
+_CDR_LE = b"\x00\x01\x00\x00"
+_ZERO9 = np.zeros(9)
+
+
+class Stamp:
+    __slots__ = ("sec", "nanosec")
+
+    def __init__(self, sec: int, nanosec: int) -> None:
+        self.sec, self.nanosec = sec, nanosec
+
+
+class Header:
+    __slots__ = ("stamp", "frame_id")
+
+    def __init__(self, stamp: Stamp, frame_id: str) -> None:
+        self.stamp, self.frame_id = stamp, frame_id
+
+
+class Vector:
+    """geometry_msgs Vector3 / Quaternion fields (``w`` only for a quaternion)."""
+
+    __slots__ = ("x", "y", "z", "w")
+
+    def __init__(self, x: float, y: float, z: float, w: float = 0.0) -> None:
+        self.x, self.y, self.z, self.w = x, y, z, w
+
+
+class ImuView:
+    """A decoded sensor_msgs/Imu: the fields the pipeline and the replay read [SI units]."""
+
+    __slots__ = ("header", "orientation", "orientation_covariance", "angular_velocity",
+                 "angular_velocity_covariance", "linear_acceleration",
+                 "linear_acceleration_covariance")
+
+
+class MagView:
+    """A decoded sensor_msgs/MagneticField [T]."""
+
+    __slots__ = ("header", "magnetic_field", "magnetic_field_covariance")
+
+
+def _layout(raw: bytes, ros2: bool) -> tuple[int, int] | None:
+    """(end of the frame id bytes, offset of the first float64) or None when unusual; the
+    frame id starts at byte 16 in both serializations."""
+    if len(raw) < 16 or (ros2 and raw[:4] != _CDR_LE):
+        return None
+    n = int.from_bytes(raw[12:16], "little")  # ROS 2: includes the NUL
+    if not ros2:
+        return 16 + n, 16 + n
+    if n < 1:
+        return None
+    end = 16 + n
+    return end - 1, end + (-(end - 4) % 8)  # doubles aligned to 8 after the encapsulation
+
+
+class Block:
+    """Messages of one type decoded into arrays (row k = message k of the raws given).
+
+    ``plain[k]``: row k was decoded from the plain layout (``values``, ``sec``, ``nsec``,
+    ``frame`` hold it); otherwise ``objects[k]`` is rosbags' message. :meth:`message` gives
+    either as an object with the sensor_msgs field names.
+    """
+
+    def __init__(self, n: int, imu: bool) -> None:
+        self.imu = imu
+        self.n = n
+        d = IMU_DOUBLES if imu else MAG_DOUBLES
+        self.values = np.zeros((n, d))
+        self.sec: list[int] = [0] * n
+        self.nsec: list[int] = [0] * n
+        self.frame: list[str | None] = [None] * n
+        self.plain: list[bool] = [False] * n
+        self.objects: list[Any] = [None] * n
+
+    def message(self, k: int) -> Any:
+        """Message k as an object (a light view, or rosbags' message for an unusual one)."""
+        if not self.plain[k]:
+            return self.objects[k]
+        v = self.values[k].tolist()
+        header = Header(Stamp(self.sec[k], self.nsec[k]), self.frame[k] or "")
+        if self.imu:
+            m = ImuView()
+            m.header = header
+            m.orientation = Vector(v[0], v[1], v[2], v[3])
+            m.orientation_covariance = self.values[k, 4:13]
+            m.angular_velocity = Vector(v[13], v[14], v[15])
+            m.angular_velocity_covariance = self.values[k, 16:25]
+            m.linear_acceleration = Vector(v[25], v[26], v[27])
+            m.linear_acceleration_covariance = self.values[k, 28:37]
+            return m
+        m = MagView()
+        m.header = header
+        m.magnetic_field = Vector(v[0], v[1], v[2])
+        m.magnetic_field_covariance = self.values[k, 3:12]
+        return m
+
+
+def decode_block(raws: Sequence[bytes], msgtype: str, ros2: bool,
+                 fallback: Callable[[bytes, str], Any]) -> Block:
+    """Decode ``raws`` (one type) into a :class:`Block`: NumPy views where the layout is the
+    plain one, ``fallback(raw, msgtype)`` (rosbags' deserializer) for the others."""
+    from cf_estimator.bag import io
+
+    imu = msgtype == io.IMU_TYPE
+    n_doubles = IMU_DOUBLES if imu else MAG_DOUBLES
+    block = Block(len(raws), imu)
+    if _decode_uniform(block, raws, ros2, n_doubles):
+        return block
+    groups: dict[tuple[int, int, int], list[int]] = {}
+    for i, raw in enumerate(raws):
+        lay = _layout(raw, ros2)
+        if lay is None or len(raw) != lay[1] + 8 * n_doubles:
+            block.objects[i] = fallback(raw, msgtype)
+            continue
+        groups.setdefault((len(raw), *lay), []).append(i)
+    for (size, frame_end, body), idx in groups.items():
+        buf = np.frombuffer(b"".join(raws[i] for i in idx), dtype=np.uint8).reshape(-1, size)
+        stamps = np.ascontiguousarray(buf[:, 4:12]).view("<u4").reshape(-1, 2)
+        # ROS 2 builtin_interfaces/Time.sec is int32; ROS 1 time.secs is uint32
+        secs = np.ascontiguousarray(stamps[:, 0]).view("<i4") if ros2 else stamps[:, 0]
+        values = np.ascontiguousarray(buf[:, body:]).view("<f8").astype(np.float64)
+        frames = buf[:, 16:frame_end]
+        # one frame id string per distinct byte pattern (usually one for the whole bag)
+        if frames.shape[1] == 0:
+            uniq, inverse = np.zeros((1, 0), dtype=np.uint8), np.zeros(len(idx), dtype=int)
+        elif bool(np.all(frames == frames[0])):
+            uniq, inverse = frames[:1], np.zeros(len(idx), dtype=int)
+        else:
+            uniq, inverse = np.unique(frames, axis=0, return_inverse=True)
+        texts = [_utf8(bytes(u)) for u in uniq]  # None: not UTF-8, left to rosbags
+        nul_ok = (buf[:, frame_end] == 0).tolist() if ros2 else [True] * len(idx)
+        inverse = inverse.reshape(-1).tolist()
+        sec_list, nsec_list = secs.tolist(), stamps[:, 1].tolist()
+        rows = np.asarray(idx)
+        block.values[rows] = values
+        for k, i in enumerate(idx):
+            frame = texts[inverse[k]]
+            if frame is None or not nul_ok[k]:  # the NUL terminator must be there too
+                block.objects[i] = fallback(raws[i], msgtype)
+                continue
+            block.sec[i] = sec_list[k]
+            block.nsec[i] = nsec_list[k]
+            block.frame[i] = frame
+            block.plain[i] = True
+    return block
+
+
+def _decode_uniform(block: Block, raws: Sequence[bytes], ros2: bool, n_doubles: int) -> bool:
+    """The common case at NumPy speed: every message has the plain layout, one size and one
+    frame id. False (nothing written) when that is not so."""
+    n = len(raws)
+    if n == 0:
+        return False
+    lay = _layout(raws[0], ros2)
+    size = len(raws[0])
+    if lay is None or size != lay[1] + 8 * n_doubles:
+        return False
+    buf = np.frombuffer(b"".join(raws), dtype=np.uint8)
+    if buf.shape[0] != n * size:
+        return False  # sizes differ
+    buf = buf.reshape(n, size)
+    frame_end, body = lay
+    # same header prefix after the stamp (encapsulation, frame id length, frame id, its NUL)
+    ref = buf[0]
+    if not (bool(np.all(buf[:, 12:body] == ref[12:body])) and (
+            not ros2 or bool(np.all(buf[:, 0:4] == ref[0:4])))):
+        return False
+    if ros2 and ref[frame_end] != 0:
+        return False
+    frame = _utf8(bytes(ref[16:frame_end]))
+    if frame is None:
+        return False
+    stamps = np.ascontiguousarray(buf[:, 4:12]).view("<u4").reshape(n, 2)
+    secs = np.ascontiguousarray(stamps[:, 0]).view("<i4") if ros2 else stamps[:, 0]
+    block.values = np.ascontiguousarray(buf[:, body:]).view("<f8").astype(np.float64)
+    block.sec, block.nsec = secs.tolist(), stamps[:, 1].tolist()
+    block.frame = [frame] * n
+    block.plain = [True] * n
+    return True
+
+
+def decode(raws: Sequence[bytes], msgtype: str, ros2: bool,
+           fallback: Callable[[bytes, str], Any]) -> list[Any]:
+    """Decode every message of ``raws`` (one type) into objects: light views where the layout
+    is the plain one, ``fallback(raw, msgtype)`` (rosbags' deserializer) for the others."""
+    block = decode_block(raws, msgtype, ros2, fallback)
+    return [block.message(k) for k in range(block.n)]
+
+
+def _utf8(b: bytes) -> str | None:
+    try:
+        return b.decode("utf-8")
+    except UnicodeDecodeError:
+        return None
+
+
+# -- encoding --------------------------------------------------------------------------------
+_structs: dict[tuple[str, int], struct.Struct] = {}
+
+
+def _header_struct(kind: str, frame: bytes, n_doubles: int) -> struct.Struct:
+    key = (kind, len(frame))
+    s = _structs.get(key)
+    if s is None:
+        end = 16 + len(frame) + 1
+        pad = -(end - 4) % 8
+        s = struct.Struct(f"<4siII{len(frame) + 1}s{pad}x{n_doubles}d")
+        _structs[key] = s
+    return s
+
+
+def _cov(c: Any) -> tuple[float, ...]:
+    if type(c) is tuple and len(c) == 9:  # the pipeline's covariances: tuples of floats
+        return c
+    if c is None:
+        return (0.0,) * 9
+    t = tuple(float(x) for x in c)
+    if len(t) != 9:
+        raise ValueError("a covariance has 9 elements")
+    return t
+
+
+def imu_cdr(out: Any) -> bytes:
+    """The Jazzy CDR bytes of :func:`cf_estimator.bag.io.imu_from_output` for ``out``."""
+    return imu_cdr_fields(out.stamp_sec, out.stamp_nanosec, out.frame_id, out.orientation_xyzw,
+                          out.orientation_covariance, out.angular_velocity,
+                          out.angular_velocity_covariance, out.linear_acceleration,
+                          out.linear_acceleration_covariance)
+
+
+def imu_cdr_fields(sec: int, nanosec: int, frame_id: str, xyzw: Sequence[float],
+                   orientation_cov: Any, g: Sequence[float], g_cov: Any, a: Sequence[float],
+                   a_cov: Any) -> bytes:
+    """The Jazzy CDR bytes of a sensor_msgs/Imu from its fields (quaternion in ROS order)."""
+    frame = str(frame_id).encode("utf-8")
+    s = _header_struct("imu", frame, IMU_DOUBLES)
+    ox, oy, oz, ow = xyzw
+    return s.pack(_CDR_LE, int(sec), int(nanosec), len(frame) + 1, frame,
+                  float(ox), float(oy), float(oz), float(ow), *_cov(orientation_cov),
+                  float(g[0]), float(g[1]), float(g[2]), *_cov(g_cov),
+                  float(a[0]), float(a[1]), float(a[2]), *_cov(a_cov))
+
+
+def vector3_stamped_cdr(sec: int, nanosec: int, frame_id: str, v: Sequence[float]) -> bytes:
+    """The Jazzy CDR bytes of a geometry_msgs/Vector3Stamped."""
+    frame = str(frame_id).encode("utf-8")
+    s = _header_struct("v3", frame, 3)
+    return s.pack(_CDR_LE, int(sec), int(nanosec), len(frame) + 1, frame,
+                  float(v[0]), float(v[1]), float(v[2]))
+
+
+# -- bulk encoding -----------------------------------------------------------------------------
+def _header_rows(sec: np.ndarray, nsec: np.ndarray, frame: bytes, n_doubles: int
+                 ) -> tuple[np.ndarray, int]:
+    """(n, header bytes) uint8: encapsulation, stamp, frame id with NUL, padding to 8."""
+    n = sec.shape[0]
+    end = 16 + len(frame) + 1
+    size = end + (-(end - 4) % 8)
+    head = np.zeros((n, size), dtype=np.uint8)
+    head[:, 0:4] = np.frombuffer(_CDR_LE, dtype=np.uint8)
+    head[:, 4:8] = sec.astype("<i4").view(np.uint8).reshape(n, 4)
+    head[:, 8:12] = nsec.astype("<u4").view(np.uint8).reshape(n, 4)
+    head[:, 12:16] = np.frombuffer(struct.pack("<I", len(frame) + 1), dtype=np.uint8)
+    if frame:
+        head[:, 16:16 + len(frame)] = np.frombuffer(frame, dtype=np.uint8)
+    return head, size + 8 * n_doubles
+
+
+def imu_cdr_rows(sec: np.ndarray, nsec: np.ndarray, frame_id: str, q_xyzw: np.ndarray,
+                 orientation_cov: Sequence[float], gyro: np.ndarray, gyro_cov: Sequence[float],
+                 accel: np.ndarray, accel_cov: Sequence[float]) -> np.ndarray:
+    """(n, size) uint8: row k = :func:`imu_cdr_fields` of message k (one frame id for all)."""
+    frame = str(frame_id).encode("utf-8")
+    head, _size = _header_rows(sec, nsec, frame, IMU_DOUBLES)
+    n = sec.shape[0]
+    body = np.empty((n, IMU_DOUBLES), dtype="<f8")
+    body[:, 0:4] = q_xyzw
+    body[:, 4:13] = np.asarray(orientation_cov, dtype=np.float64)
+    body[:, 13:16] = gyro
+    body[:, 16:25] = np.asarray(gyro_cov, dtype=np.float64)
+    body[:, 25:28] = accel
+    body[:, 28:37] = np.asarray(accel_cov, dtype=np.float64)
+    return np.concatenate([head, body.view(np.uint8)], axis=1)
+
+
+def vector3_stamped_rows(sec: np.ndarray, nsec: np.ndarray, frame_id: str, v: np.ndarray
+                         ) -> np.ndarray:
+    """(n, size) uint8: row k = :func:`vector3_stamped_cdr` of message k."""
+    frame = str(frame_id).encode("utf-8")
+    head, _size = _header_rows(sec, nsec, frame, 3)
+    body = np.ascontiguousarray(v, dtype="<f8")
+    return np.concatenate([head, body.view(np.uint8)], axis=1)

@@ -1,0 +1,415 @@
+"""The pipeline over arrays: a run of ordinary messages through :class:`ImuPipeline` at once.
+
+:meth:`ImuPipeline.on_imu` / ``on_mag`` handle one message with every rule of the pipeline. Most
+of a recording is ordinary — an initialised filter, valid values, increasing stamps, the same
+frame ids and covariances, a magnetometer that is valid — and for such a run the rules reduce to
+bookkeeping. :func:`scan` walks the messages from a position and stops at the first one that is
+not ordinary (or at ``limit_log_ns``: the replay's next diagnostics tick); :func:`commit` then
+runs the filter over the run's rows with :meth:`ComplementaryFilter.run_rows` (the same step
+as ``update``, sample by sample, through the kernel interface) and updates the pipeline's
+counters, statistics and state exactly as the per-message calls would have. Everything that is
+not ordinary is left to ``on_imu`` / ``on_mag``: rejections, resets, gaps beyond the reset
+threshold, first samples, warnings.
+
+Equality with the per-message path (same outputs, counters, diagnostics, bit for bit) is tested
+on real and hostile bags (test/test_bulk_pipeline.py). It relies on: ``run_rows`` = repeated
+``update`` (a magnetometer row of NaN = no sample), the extra columns of
+:func:`cf_estimator.core.filter.state_extras`, and the error norm being
+``sqrt(ex² + ey² + ez²)`` of the error vector (core/step.py).
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from time import perf_counter
+from typing import Any
+
+import numpy as np
+
+from cf_estimator.core.filter import EXTRA_COLUMNS
+from cf_estimator.core.step import MAG_DISABLED, MAG_REJECTED, MAG_USED
+from cf_estimator.pipeline import checks
+from cf_estimator.pipeline.pipeline import _ACCEL_MAX2, _GYRO_MAX2, _TWO_PI, ImuPipeline
+
+IMU, MAG, OTHER = 0, 1, 2  #: event kinds; OTHER (e.g. a reference) passes through
+_GYRO_WARN2 = checks.GYRO_IMPLAUSIBLE_RAD_S**2
+
+
+@dataclass
+class Scan:
+    """What :func:`scan` found: the ordinary run's rows and the state after it (uncommitted)."""
+
+    end: int  #: index of the first event not in the run
+    n_events: int = 0
+    t_ns: list[int] = field(default_factory=list)
+    sec: list[int] = field(default_factory=list)
+    nsec: list[int] = field(default_factory=list)
+    log_ns: list[int] = field(default_factory=list)
+    rows: list[int] = field(default_factory=list)  #: row of each message in ``values``
+    values: Any = None  #: the IMU block's (n, 37) values: gyro columns 13:16, accel 25:28
+    mag: list[tuple[float, float, float] | None] = field(default_factory=list)
+    mag_t_ns: list[int] = field(default_factory=list)  #: stamp of the row's mag sample
+    dt: list[float] = field(default_factory=list)
+    frame: str = ""
+    state: dict[str, Any] = field(default_factory=dict)  #: pipeline fields to write back
+
+    @property
+    def n(self) -> int:
+        return len(self.t_ns)
+
+
+def _ordinary_start(pipe: ImuPipeline) -> bool:
+    f = pipe._filter  # noqa: SLF001 - this module is the pipeline's own bulk path
+    return (f.initialized and pipe._last_ns is not None and not pipe._pending_warnings
+            and pipe._acc_n >= checks.ACCEL_CHECK_SAMPLES)
+
+
+def _imu_ok(v: np.ndarray, sec: np.ndarray, nsec: np.ndarray) -> np.ndarray:
+    """``on_imu``'s value checks, vectorized with its own arithmetic (same results)."""
+    gx, gy, gz, ax, ay, az = (v[:, j] for j in (13, 14, 15, 25, 26, 27))
+    with np.errstate(over="ignore", invalid="ignore"):
+        finite = np.all(np.isfinite(v[:, [13, 14, 15, 25, 26, 27]]), axis=1)
+        a2 = ax * ax + ay * ay + az * az
+        g2 = gx * gx + gy * gy + gz * gz
+        return (finite & ~((sec == 0) & (nsec == 0)) & (a2 != 0.0) & (g2 <= _GYRO_MAX2)
+                & (a2 <= _ACCEL_MAX2) & (g2 <= _GYRO_WARN2))
+
+
+def _mag_ok(v: np.ndarray, sec: np.ndarray, nsec: np.ndarray) -> np.ndarray:
+    """``on_mag``'s validity checks, vectorized with its own arithmetic."""
+    mx, my, mz = v[:, 0], v[:, 1], v[:, 2]
+    with np.errstate(over="ignore", invalid="ignore"):
+        n2 = mx * mx + my * my + mz * mz
+        return ((sec * 1_000_000_000 + nsec) != 0) & np.isfinite(n2) & (n2 != 0.0)
+
+
+class Events:
+    """Consecutive IMU, magnetometer and other messages in log order, as arrays.
+
+    ``kind[i]`` (:data:`IMU`, :data:`MAG`, :data:`OTHER`), ``log_ns[i]``, ``row[i]`` = its row
+    in ``imu`` / ``mag`` (blocks of decoded messages: ``values`` (n, 37 | 12) float64,
+    ``sec``, ``nsec``, ``frame``, ``plain`` per row; see :class:`cf_estimator.bag.cdr.Block`);
+    ``message(i)``: message i as an object, for the per-message path.
+    """
+
+    def __init__(self, kind: Sequence[int], log_ns: Sequence[int], row: Sequence[int],
+                 imu: Any, mag: Any, message: Callable[[int], Any]) -> None:
+        self.kind, self.log_ns, self.row = kind, log_ns, row
+        self.imu, self.mag, self.message = imu, mag, message
+        self._cols: dict[str, list[float]] = {}
+        self._cov: dict[tuple[int, bytes | None], list[bool]] = {}
+        self._static: dict[str, np.ndarray] | None = None
+        self._frames: dict[tuple[int, str | None], np.ndarray] = {}
+
+    def column(self, name: str) -> list[float]:
+        """``gx gy gz ax ay az`` (IMU) or ``mx my mz`` (magnetometer) as a list of floats."""
+        col = self._cols.get(name)
+        if col is None:
+            j = {"gx": 13, "gy": 14, "gz": 15, "ax": 25, "ay": 26, "az": 27,
+                 "mx": 0, "my": 1, "mz": 2}[name]
+            block = self.mag if name[0] == "m" else self.imu
+            col = self._cols[name] = block.values[:, j].tolist()
+        return col
+
+    def static(self) -> dict[str, np.ndarray]:
+        """Per-event arrays that do not depend on the pipeline's state (computed once):
+        ``imu_ok`` (plain layout, non-zero stamp, finite, plausible and non-zero vectors — the
+        checks of ``on_imu`` in its own arithmetic), ``mag_ok`` (``on_mag``'s validity),
+        ``t_ns`` (header stamps [ns] of IMU and magnetometer events), per event."""
+        st = self._static
+        if st is not None:
+            return st
+        n = len(self.kind)
+        kind = np.asarray(self.kind, dtype=np.int8)
+        row = np.asarray(self.row, dtype=np.intp)
+        ok = np.zeros(n, dtype=bool)
+        t_ns = np.zeros(n, dtype=np.int64)
+        for blk, k, check in ((self.imu, IMU, _imu_ok), (self.mag, MAG, _mag_ok)):
+            if blk is None:
+                continue
+            sel = np.flatnonzero(kind == k)
+            r = row[sel]
+            sec = np.asarray(blk.sec, dtype=np.int64)[r]
+            nsec = np.asarray(blk.nsec, dtype=np.int64)[r]
+            t_ns[sel] = sec * 1_000_000_000 + nsec
+            plain = np.asarray(blk.plain, dtype=bool)[r]
+            ok[sel] = plain & check(blk.values[r], sec, nsec)
+        self._static = st = {"kind": kind, "ok": ok, "t_ns": t_ns}
+        return st
+
+    def frame_is(self, kind: int, frame: str | None) -> np.ndarray:
+        """Per event: of ``kind`` and with header frame id ``frame``."""
+        key = (kind, frame)
+        out = self._frames.get(key)
+        if out is None:
+            blk = self.imu if kind == IMU else self.mag
+            out = np.zeros(len(self.kind), dtype=bool)
+            if blk is not None:
+                same = [f == frame for f in blk.frame]
+                for i, (k, r) in enumerate(zip(self.kind, self.row, strict=True)):
+                    if k == kind:
+                        out[i] = same[r]
+            self._frames[key] = out
+        return out
+
+    def same_covariance(self, start: int, raw: bytes | None) -> list[bool]:
+        """Per IMU row: its covariance starting at column ``start`` has the bytes ``raw``."""
+        key = (start, raw)
+        same = self._cov.get(key)
+        if same is None:
+            cov = np.ascontiguousarray(self.imu.values[:, start:start + 9]).view(np.uint8)
+            if raw is None or len(raw) != 72:
+                same = [False] * self.imu.n
+            else:
+                same = np.all(cov == np.frombuffer(raw, dtype=np.uint8), axis=1).tolist()
+            self._cov[key] = same
+        return same
+
+
+def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = None) -> Scan:
+    """The longest run of ordinary events from ``ev`` index ``start``, stopping before an
+    event logged at or after ``limit_log_ns``. Nothing of ``pipe`` changes.
+
+    Where the run ends is found with NumPy (the static checks, the frame ids, covariances and
+    stamp order); the bookkeeping that is sequential by nature (the mean interval, gaps,
+    pairing magnetometer samples with IMU messages) runs over the run's messages in order.
+    """
+    p = pipe
+    out = Scan(start)
+    if not _ordinary_start(p):
+        return out
+    heading = bool(p._filter._state.heading_initialized)  # noqa: SLF001
+    pending = p._pending_mag
+    if pending is not None and not heading:
+        return out
+    st = ev.static()
+    n_ev = len(ev.kind)
+    stop = n_ev
+    if limit_log_ns is not None:
+        # log times are sorted in a chunk (the reader merges by log time)
+        stop = bisect.bisect_left(ev.log_ns, limit_log_ns, start, n_ev)
+    if stop <= start:
+        return out
+    kind = st["kind"][start:stop]
+    good = np.ones(stop - start, dtype=bool)
+    is_imu = kind == IMU
+    is_mag = kind == MAG
+    ok = st["ok"][start:stop]
+    if ev.imu is not None and is_imu.any():
+        good &= ~is_imu | (ok & ev.frame_is(IMU, p._imu_frame)[start:stop])
+        av = np.asarray(ev.same_covariance(16, p._av_cov.raw), dtype=bool)
+        la = np.asarray(ev.same_covariance(28, p._la_cov.raw), dtype=bool)
+        rows = np.asarray(ev.row[start:stop], dtype=np.intp)
+        imu_pos = np.flatnonzero(is_imu)
+        cov_ok = np.ones(stop - start, dtype=bool)
+        cov_ok[imu_pos] = av[rows[imu_pos]] & la[rows[imu_pos]]
+        good &= cov_ok
+        # stamps increase from message to message, without a gap that resets the filter
+        t = st["t_ns"][start:stop][imu_pos]
+        d = np.diff(t, prepend=np.int64(p._last_ns))
+        t_ok = d > 0
+        if p._reset_gap_on:
+            t_ok &= d <= p._reset_gap_ns
+        seq_ok = np.ones(stop - start, dtype=bool)
+        seq_ok[imu_pos] = t_ok
+        good &= seq_ok
+    if is_mag.any():
+        if not (p._use_mag and heading and p._mag_n >= checks.MAG_CHECK_SAMPLES):
+            good &= ~is_mag
+        else:
+            good &= ~is_mag | (ok & ev.frame_is(MAG, p._mag_frame)[start:stop])
+    bad = np.flatnonzero(~good)
+    end = start + (int(bad[0]) if bad.size else stop - start)
+    if end <= start:
+        return out
+    # -- the sequential bookkeeping over the run, in the pipeline's order ---------------------
+    kinds, rows_l, t_all = ev.kind, ev.row, st["t_ns"]
+    max_dt_ns, timeout = p._max_dt_ns, p._mag_timeout_ns
+    dt_mean, gaps = p._dt_mean, p._gaps
+    dropped = stale = n_mag = 0
+    w = p._window
+    dt_min, dt_max, dt_sum, n_dt = w.dt_min, w.dt_max, w.dt_sum, w.n_dt
+    last = p._last_ns
+    mag_block = ev.mag
+    if mag_block is not None:
+        mxs, mys, mzs = ev.column("mx"), ev.column("my"), ev.column("mz")
+    t_list = t_all[start:end].tolist()
+    logs = ev.log_ns
+    imu_sec = ev.imu.sec if ev.imu is not None else []
+    imu_nsec = ev.imu.nsec if ev.imu is not None else []
+    max_dt_fallback = min(p._pp.max_dt_s, 0.01)
+    o_rows, o_t, o_sec, o_nsec, o_log = out.rows, out.t_ns, out.sec, out.nsec, out.log_ns
+    o_mag, o_mag_t, o_dt = out.mag, out.mag_t_ns, out.dt
+    for i in range(start, end):
+        kd = kinds[i]
+        if kd == OTHER:
+            continue
+        k = rows_l[i]
+        t_ns = t_list[i - start]
+        if kd == MAG:
+            if pending is not None:
+                dropped += 1
+            pending = (t_ns, mxs[k], mys[k], mzs[k])
+            n_mag += 1
+            continue
+        d_ns = t_ns - last
+        dt = d_ns * 1e-9
+        if n_dt == 0 or dt < dt_min:
+            dt_min = dt
+        if dt > dt_max:
+            dt_max = dt
+        dt_sum += dt
+        n_dt += 1
+        if d_ns > max_dt_ns:
+            gaps += 1
+            dt = dt_mean if dt_mean > 0.0 else max_dt_fallback
+        elif dt_mean > 0.0:
+            dt_mean += 0.05 * (dt - dt_mean)
+        else:
+            dt_mean = dt
+        if pending is not None:
+            if abs(t_ns - pending[0]) <= timeout:
+                o_mag.append((pending[1], pending[2], pending[3]))
+                o_mag_t.append(pending[0])
+            else:
+                stale += 1
+                o_mag.append(None)
+                o_mag_t.append(0)
+            pending = None
+        else:
+            o_mag.append(None)
+            o_mag_t.append(0)
+        o_rows.append(k)
+        o_t.append(t_ns)
+        o_sec.append(imu_sec[k])
+        o_nsec.append(imu_nsec[k])
+        o_log.append(logs[i])
+        o_dt.append(dt)
+        last = t_ns
+    out.end = end
+    out.n_events = end - start
+    out.frame = str(p._imu_frame)
+    out.values = ev.imu.values if ev.imu is not None else None
+    out.state = {
+        "_last_ns": last, "_dt_mean": dt_mean, "_gaps": gaps, "_pending_mag": pending,
+        "dropped": dropped, "stale": stale, "n_mag": n_mag,
+        "window": (dt_min, dt_max, dt_sum, n_dt),
+    }
+    return out
+
+
+@dataclass
+class Committed:
+    """The run's outputs (one row per IMU message), as ``on_imu`` would have returned them."""
+
+    q_wxyz: np.ndarray  #: (n, 4) q_world_from_sensor
+    rpy: list[tuple[float, float, float]]
+    extra: np.ndarray  #: (n, EXTRA_COLUMNS): state_extras after each sample
+    error_norm: list[float]
+    covariance: tuple[float, ...]  #: orientation covariance of every row
+    av_cov: tuple[float, ...]
+    la_cov: tuple[float, ...]
+    gyro: np.ndarray  #: (n, 3) the rows the filter got [rad/s] (= the output's input copy)
+    accel: np.ndarray  #: (n, 3) [m/s²]
+
+
+def commit(pipe: ImuPipeline, run: Scan, marks: Sequence[int] = (),
+           on_mark: Callable[[int], None] | None = None) -> Committed:
+    """Run the filter over ``run`` and update ``pipe`` as the per-message calls would.
+
+    ``marks``: row indices after which ``on_mark(row)`` is called with the filter in the state
+    it has after that row (the replay samples the bias estimate there).
+    """
+    t0 = perf_counter()
+    p = pipe
+    n = run.n
+    f = p._filter  # noqa: SLF001
+    sel = run.values[np.asarray(run.rows, dtype=np.intp)]
+    gyro = np.ascontiguousarray(sel[:, 13:16])
+    acc = np.ascontiguousarray(sel[:, 25:28])
+    has_mag = any(m is not None for m in run.mag)
+    mag = None
+    if has_mag:
+        mag = np.full((n, 3), np.nan)
+        for k, m in enumerate(run.mag):
+            if m is not None:
+                mag[k] = m
+    dt = np.array(run.dt, dtype=np.float64)
+    q = np.empty((n, 4))
+    extra = np.empty((n, EXTRA_COLUMNS))
+    a = 0
+    marked = set(marks)
+    for b in [*(m + 1 for m in marks), n]:
+        if b <= a:
+            continue
+        f.run_rows(gyro[a:b], acc[a:b], None if mag is None else mag[a:b], dt[a:b], 0,
+                   q[a:b], extra[a:b])
+        if on_mark is not None and b - 1 in marked:
+            on_mark(b - 1)
+        a = b
+    # -- counters and statistics ------------------------------------------------------------
+    st = run.state
+    status = extra[:, 9].tolist()
+    for k, m in enumerate(run.mag):
+        if m is None:
+            continue
+        ms = status[k]
+        if ms == MAG_USED:
+            p._mag_used += 1
+            p._last_mag_used_ns = run.mag_t_ns[k]
+        elif ms == MAG_REJECTED:
+            p._mag_rejected += 1
+        elif ms == MAG_DISABLED:
+            p._mag_disabled += 1
+    p._mag_dropped += st["dropped"]
+    p._mag_stale += st["stale"]
+    p._received_mag += st["n_mag"]
+    p._pending_mag = st["_pending_mag"]
+    p._last_ns, p._dt_mean, p._gaps = st["_last_ns"], st["_dt_mean"], st["_gaps"]
+    p._received_imu += n
+    p._processed += n
+    w = p._window
+    w.dt_min, w.dt_max, w.dt_sum, w.n_dt = st["window"]
+    ex, ey, ez = extra[:, 0], extra[:, 1], extra[:, 2]
+    en = np.sqrt(ex * ex + ey * ey + ez * ez).tolist()
+    err_sum, err_max = w.err_sum, w.err_max
+    for e in en:
+        err_sum += e
+        if e > err_max:
+            err_max = e
+    w.err_sum, w.err_max = err_sum, err_max
+    w.n_err += n
+    w.n_clipped += int(np.count_nonzero(extra[:, 6]))
+    if w.n == 0:
+        w.first_ns = run.t_ns[0]
+    w.n += n
+    w.last_ns = run.t_ns[-1]
+    # -- outputs ------------------------------------------------------------------------------
+    heading = bool(f._state.heading_initialized)  # noqa: SLF001 - constant over the run
+    cov = p._cov_referenced if heading else p._cov_unreferenced
+    atan2, asin = math.atan2, math.asin
+    unwrap = p._pp.rpy_unwrap
+    prev = p._unwrap_prev
+    rpy = []
+    for qw, qx, qy, qz in q.tolist():
+        roll = atan2(2.0 * (qw * qx + qy * qz), 1.0 - 2.0 * (qx * qx + qy * qy))
+        sp = 2.0 * (qw * qy - qz * qx)
+        pitch = asin(1.0 if sp > 1.0 else (-1.0 if sp < -1.0 else sp))
+        yaw = atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+        if unwrap:
+            if prev is not None:
+                roll += _TWO_PI * round((prev[0] - roll) / _TWO_PI)
+                yaw += _TWO_PI * round((prev[2] - yaw) / _TWO_PI)
+            prev = (roll, pitch, yaw)
+        rpy.append((roll, pitch, yaw))
+    if unwrap:
+        p._unwrap_prev = prev
+    p._last_rpy = rpy[-1]
+    elapsed = perf_counter() - t0  # the run's processing time, shared by its messages
+    w.proc_sum += elapsed
+    if elapsed / n > w.proc_max:
+        w.proc_max = elapsed / n
+    return Committed(q, rpy, extra, en, cov, p._av_cov.value, p._la_cov.value, gyro, acc)
