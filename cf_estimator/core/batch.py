@@ -161,7 +161,6 @@ def run_aided(f: ComplementaryFilter, aiding: VelocityAiding, gyro: np.ndarray, 
     m_rows = mg.tolist() if mg is not None else None
     ts = t.tolist()
     dts = np.diff(t, prepend=t[0]).tolist()
-    state = f._state  # noqa: SLF001 - read-only
     for i in range(len(ts)):
         while jv < nv and arrival[jv] <= ts[i]:
             aiding.add_velocity(tv_rows[jv], v_rows[jv])
@@ -184,7 +183,7 @@ def run_aided(f: ComplementaryFilter, aiding: VelocityAiding, gyro: np.ndarray, 
         if accel_out is not None:
             accel_out[i] = a_in
         if extra_out is not None:
-            extra_out[i] = state_extras(state)
+            extra_out[i] = state_extras(f._state)  # noqa: SLF001 - read-only
 
 
 def estimate(

@@ -66,6 +66,7 @@ class VelocityStatus:
     """What the aiding did (diagnostics; counts since construction or the last reset)."""
 
     active: bool  #: the last IMU sample was aided
+    mode: str  #: 'off' | 'aided'
     received: int  #: velocity samples offered
     used: int  #: accepted into the velocity window
     stale_samples: int  #: IMU samples that found the velocity older than velocity_timeout_s
@@ -230,8 +231,7 @@ class VelocityAiding:
                 del self._bs[:self._b0]
                 self._b0 = 0
         m = self._m
-        self._active = (m is not None and t_s - self._m_t <= self._timeout
-                        and (self._hd.known or not self._auto))
+        self._active = m is not None and t_s - self._m_t <= self._timeout
         if not self._active:
             if self._m is not None:
                 self._stale += 1
@@ -319,6 +319,8 @@ class VelocityAiding:
                 self._hd = self._heading.update(t, (fwx, fwy), (ax, ay), new)
             else:
                 self._hd = HeadingOffset(0.0, 0.0, True)
+            if not self._hd.known:
+                continue  # heading unknown: no aiding (see VelocityAiding.mode)
             c, sn = math.cos(self._hd.offset_rad), math.sin(self._hd.offset_rad)
             awx, awy = c * ax - sn * ay, sn * ax + c * ay
             # gravity measurement (specific force minus acceleration), world → P
@@ -328,14 +330,22 @@ class VelocityAiding:
     # -- status --------------------------------------------------------------------------------
     @property
     def active(self) -> bool:
-        """True when the last IMU sample was aided."""
+        """True when the last IMU sample was aided (vertically or fully)."""
         return self._active
+
+    @property
+    def mode(self) -> str:
+        """Aiding of the last IMU sample: 'off', or 'aided'. (A vertical-only mode before the
+        heading is known — the vertical acceleration needs no heading — was measured and
+        dropped: the step's stillness detector, fed the aided specific force, then takes steady
+        flight for rest and learns a wrong bias; see docs and the report of issue 17.)"""
+        return "aided" if self._active else "off"
 
     def status(self, t_s: float | None = None) -> VelocityStatus:
         """Counters and state (``t_s``: IMU stamp for the age; default the last one)."""
         now = t_s if t_s is not None else (self._bt[-1] if self._bt else math.nan)
         return VelocityStatus(
-            active=self._active, received=self._received, used=self._used,
+            active=self._active, mode=self.mode, received=self._received, used=self._used,
             stale_samples=self._stale, aided_samples=self._aided, rejected=dict(self.rejected),
             reanchors=self._reanchors, heading_offset_rad=self._hd.offset_rad,
             heading_sigma_rad=self._hd.sigma_rad,
