@@ -18,6 +18,10 @@ module builds that aided specific force for the unchanged filter step, outside i
   the step gets ``Pᵀ·(m_P + f_P − F̄_P,hp)``: gravity from the velocity window, plus the
   specific force's content faster than :data:`HIGHPASS_WINDOW_S` (vibration, impacts: what the
   step's detectors and saturation expect to see).
+- **Horizontal only.** Only a_v's horizontal part is taken out: a vertical acceleration is
+  along gravity and tilts nothing, and left in, it keeps the step's stillness and
+  linear-acceleration detectors seeing the vehicle's vertical motion (taken out, steady flight
+  passed for rest on phantom4 and a wrong bias was learned: measured, then dropped).
 - **Heading.** a_v is in the velocity's frame; the filter's world frame may be turned about the
   vertical by δ (6-D: arbitrary heading). ``velocity_heading='auto'`` estimates δ from the two
   accelerations (:mod:`cf_estimator.core.heading_offset`) and aids only once it is known;
@@ -310,7 +314,7 @@ class VelocityAiding:
             t0, v0, s0 = hist[0]
             span = t - t0
             mx, my, mz = ((s[0] - s0[0]) / span, (s[1] - s0[1]) / span, (s[2] - s0[2]) / span)
-            ax, ay, az = (v[0] - v0[0]) / span, (v[1] - v0[1]) / span, (v[2] - v0[2]) / span
+            ax, ay = (v[0] - v0[0]) / span, (v[1] - v0[1]) / span
             # mean specific force in the filter's world frame: its horizontal part is the
             # acceleration as the filter sees it (heading offset δ from the velocity's)
             fwx, fwy, fwz = _rot(ww, wx, wy, wz, mx, my, mz)
@@ -324,7 +328,7 @@ class VelocityAiding:
             c, sn = math.cos(self._hd.offset_rad), math.sin(self._hd.offset_rad)
             awx, awy = c * ax - sn * ay, sn * ax + c * ay
             # gravity measurement (specific force minus acceleration), world → P
-            self._m = _rot(ww, -wx, -wy, -wz, fwx - awx, fwy - awy, fwz - az)
+            self._m = _rot(ww, -wx, -wy, -wz, fwx - awx, fwy - awy, fwz)
             self._m_t = t
 
     # -- status --------------------------------------------------------------------------------
