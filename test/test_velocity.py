@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from cf_estimator.bench import euroc
 from cf_estimator.bench.scenarios import peak_rms_arcmin, scenario_masks
+from cf_estimator.cli.main import main
 from cf_estimator.core.batch import estimate
 from cf_estimator.core.heading_offset import HeadingOffsetEstimator
 from cf_estimator.core.params import FilterParams
@@ -246,3 +250,55 @@ def test_aiding_counts_every_sample_it_is_offered():
     assert st.rejected["backwards"] == 1 and st.rejected["nonfinite"] == 2
     assert st.rejected["frame"] == 1
     assert not st.active and st.mode == "off"
+
+
+# -- bench euroc with the ground truth's velocity (real flights) -----------------------------
+EUROC = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "euroc"
+PHANTOM4 = EUROC.parent / "phantom4"
+
+
+@pytest.mark.skipif(not EUROC.is_dir(), reason=f"EuRoC flights not present in {EUROC}")
+def test_euroc_ground_truth_velocity_asl_columns_and_differentiated_tum_positions():
+    f4 = euroc.load_flight(EUROC / "MH_04_difficult")
+    f3 = euroc.load_flight(EUROC / "MH_03_medium")  # TUM: positions only
+    for f in (f4, f3):
+        assert f.velocity_m_s is not None and f.velocity_m_s.shape == (f.velocity_t_s.size, 3)
+        assert np.all(np.isfinite(f.velocity_m_s))
+        assert 0.3 < np.percentile(np.linalg.norm(f.velocity_m_s, axis=1), 90) < 5.0
+
+
+@pytest.mark.skipif(not EUROC.is_dir(), reason=f"EuRoC flights not present in {EUROC}")
+def test_cli_bench_euroc_aided_gnss_quality_velocity_beats_unaided(tmp_path, capsys):
+    out = tmp_path / "e.json"
+    assert main(["bench", "euroc", "--data", str(EUROC / "MH_05_difficult"), "--peers", "none",
+                 "--velocity", "--velocity-rate", "10", "--velocity-noise", "0.1",
+                 "--velocity-latency", "0.1", "--json", str(out), "--jobs", "1"]) == 0
+    text = capsys.readouterr().out
+    assert "velocity aiding: ground-truth velocity, 10 Hz, noise 0.1 m/s, latency 0.1 s" in text
+    doc = json.loads(out.read_text())
+    mean = doc["mean"]
+    assert mean["cf_estimator_aided"]["inclination_rms_deg"] < 1.2
+    assert (mean["cf_estimator_aided"]["inclination_rms_deg"]
+            < 0.8 * mean["cf_estimator"]["inclination_rms_deg"])
+    assert doc["meta"]["velocity"] == {"rate_hz": 10.0, "noise_m_s": 0.1, "latency_s": 0.1}
+
+
+@pytest.mark.skipif(not EUROC.is_dir(), reason=f"EuRoC flights not present in {EUROC}")
+def test_cli_bench_euroc_velocity_flag_errors(capsys):
+    base = ["bench", "euroc", "--data", str(EUROC / "MH_05_difficult"), "--peers", "none"]
+    assert main(base + ["--velocity-rate", "10"]) == 2
+    assert "need --velocity" in capsys.readouterr().err
+    assert main(base + ["--velocity", "--velocity-rate", "0"]) == 2
+    assert "--velocity-rate must be > 0" in capsys.readouterr().err
+    assert main(base + ["--start", "1000"]) == 2
+    assert "leaves no IMU data" in capsys.readouterr().err
+
+
+@pytest.mark.skipif(not EUROC.is_dir(), reason=f"EuRoC flights not present in {EUROC}")
+def test_mid_air_start_crops_and_rebases_the_flight():
+    f = euroc.load_flight(EUROC / "MH_05_difficult")
+    c = euroc.crop_flight(f, 30.0)
+    assert c.t_s[0] == 0.0 and abs(c.n_samples - int((f.t_s >= 30.0).sum())) == 0
+    assert c.velocity_t_s[0] >= 0.0
+    k = int(np.searchsorted(f.t_s, 30.0))
+    assert np.array_equal(c.gyro_rad_s[0], f.gyro_rad_s[k])

@@ -374,6 +374,28 @@ def load_flight(path: str | os.PathLike, groundtruth: str | os.PathLike | None =
                   gt_path, tuple(notes), vel_t, vel)
 
 
+def crop_flight(flight: Flight, start_s: float) -> Flight:
+    """The flight from ``start_s`` [s] on (a mid-air start: the estimators see nothing
+    earlier), times re-based so the first kept IMU sample is 0 (EurocDataError if fewer than 2
+    samples remain)."""
+    keep = flight.t_s >= start_s
+    if int(keep.sum()) < 2:
+        raise EurocDataError(f"{flight.name}: --start {start_s:g} s leaves no IMU data "
+                             f"(flight {flight.t_s[-1]:.1f} s long)")
+    t0 = float(flight.t_s[keep][0])
+    vt = vel = None
+    if flight.velocity_t_s is not None and flight.velocity_m_s is not None:
+        vk = flight.velocity_t_s >= t0
+        vt, vel = flight.velocity_t_s[vk] - t0, flight.velocity_m_s[vk]
+    import dataclasses
+
+    return dataclasses.replace(
+        flight, t_s=flight.t_s[keep] - t0, gyro_rad_s=flight.gyro_rad_s[keep],
+        accel_m_s2=flight.accel_m_s2[keep], q_ref=flight.q_ref[keep],
+        t0_ns=flight.t0_ns + round(t0 * 1e9), velocity_t_s=vt, velocity_m_s=vel,
+        notes=flight.notes + (f"started at {start_s:g} s (mid-air start)",))
+
+
 def load_flights(data: str | os.PathLike, **kwargs) -> list[Flight]:
     """Every flight below ``data`` (see :func:`find_flights`), named relative to it."""
     root = Path(data)

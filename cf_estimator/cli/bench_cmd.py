@@ -93,6 +93,20 @@ def register(subparsers: Any) -> None:
     e.add_argument("--json", metavar="OUT", help="write per-flight scores and means as JSON")
     e.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
                    help="worker processes, one flight each (default %(default)s)")
+    e.add_argument("--start", type=finite_float, default=0.0, metavar="S",
+                   help="drop each flight's first S seconds before running anything (a "
+                   "mid-air start; --settle counts from there; default %(default)s)")
+    e.add_argument("--velocity", action="store_true",
+                   help="also run our filter aided by the ground truth's velocity (ASL v_RS_R "
+                   "columns, else differentiated positions), degraded by the flags below: "
+                   "columns cf_estimator_aided and cf_estimator_aided_offline")
+    e.add_argument("--velocity-rate", type=finite_float, metavar="HZ",
+                   help="resample the velocity to this rate (default: as given)")
+    e.add_argument("--velocity-noise", type=finite_float, default=0.0, metavar="M_S",
+                   help="white noise added per axis [m/s] (seeded per flight; default 0)")
+    e.add_argument("--velocity-latency", type=finite_float, default=0.0, metavar="S",
+                   help="each velocity sample reaches the filter this long after its stamp "
+                   "(default 0)")
     e.set_defaults(run=run_euroc)
 
     s = sub.add_parser(
@@ -263,6 +277,7 @@ def run_euroc(args: Any) -> int:
     if args.settle < 0:
         raise CliError(f"--settle must be >= 0 (got {args.settle:g})", 2)
     params = _load_params(args.params)
+    velocity = _velocity_input(args)
     try:
         if args.groundtruth:
             folders = euroc.find_flights(args.data)
@@ -272,12 +287,25 @@ def run_euroc(args: Any) -> int:
             flights = [euroc.load_flight(folders[0], args.groundtruth)]
         else:
             flights = euroc.load_flights(args.data)
+        if args.start > 0.0:
+            flights = [euroc.crop_flight(f, args.start) for f in flights]
     except euroc.EurocDataError as exc:
         raise CliError(str(exc), 2) from None
-    result = ev.run_euroc(flights, params, peers, args.settle, jobs=args.jobs)
+    if velocity is not None:
+        missing = [f.name for f in flights if f.velocity_t_s is None]
+        if missing:
+            raise CliError(f"--velocity: no ground-truth velocity for {missing[0]}", 2)
+    result = ev.run_euroc(flights, params, peers, args.settle, jobs=args.jobs,
+                          velocity=velocity)
     print(f"EuRoC: {len(result.flights)} flight(s) from {args.data}; 6-D inclination error "
           f"[deg] vs ground truth after the first {args.settle:g} s: RMS / max")
     print(f"cf_estimator parameters: {args.params or 'shipped defaults'}")
+    if args.start > 0.0:
+        print(f"mid-air start: each flight from {args.start:g} s on")
+    if velocity is not None:
+        rate = f"{velocity.rate_hz:g} Hz" if velocity.rate_hz else "rate as given"
+        print(f"velocity aiding: ground-truth velocity, {rate}, noise {velocity.noise_m_s:g} "
+              f"m/s, latency {velocity.latency_s:g} s")
     for name, info in result.info.items():
         for line in info["notes"]:
             print(f"  note: {name}: {line}")
@@ -288,11 +316,31 @@ def run_euroc(args: Any) -> int:
         doc["meta"] = {
             "data": str(args.data), "peers": peers, "peers_skipped": skipped,
             "params_file": args.params, "cf_estimator_params": as_dict(params),
+            "start_s": args.start,
+            "velocity": None if velocity is None else dataclasses.asdict(velocity),
             "metrics": "inclination error: angle between estimated and true up in the sensor "
                        "frame [deg]; RMS and max over samples with ground truth, t >= settle_s",
         }
         _write_json(args.json, doc)
     return 0
+
+
+def _velocity_input(args: Any) -> Any:
+    """``bench euroc``'s velocity flags as a VelocityInput (None without --velocity)."""
+    from cf_estimator.bench.euroc_eval import VelocityInput
+
+    given = (args.velocity_rate is not None or args.velocity_noise != 0.0
+             or args.velocity_latency != 0.0)
+    if not args.velocity:
+        if given:
+            raise CliError("--velocity-rate/--velocity-noise/--velocity-latency need --velocity",
+                           2)
+        return None
+    if args.velocity_rate is not None and not args.velocity_rate > 0.0:
+        raise CliError(f"--velocity-rate must be > 0 (got {args.velocity_rate:g})", 2)
+    if args.velocity_noise < 0.0 or args.velocity_latency < 0.0:
+        raise CliError("--velocity-noise and --velocity-latency must be >= 0", 2)
+    return VelocityInput(args.velocity_rate, args.velocity_noise, args.velocity_latency)
 
 
 def run_scenarios(args: Any) -> int:

@@ -6,11 +6,13 @@ accelerates horizontally, the same acceleration is seen twice: by the IMU (mean 
 rotated into the filter's world frame: a_f = F̄_w − g, horizontal part) and by the velocity
 (its difference over the same stamps, a_v, in the velocity's frame)::
 
-    a_f,xy ≈ Rz(δ)·a_v,xy          (as complex numbers: z_f = e^{iδ}·z_v + noise)
+    a_f,xy ≈ Rz(δ)·a_v,xy + c      (as complex numbers: z_f = e^{iδ}·z_v + c + noise)
 
-The least-squares angle is δ̂ = arg Σ w·z_f·conj(z_v); its variance ≈ σ_n² / (2 Σ w·|z_v|²)
-with σ_n² = Σ w·|z_f − e^{iδ̂}·z_v|² / Σ w (the observed scatter: velocity noise, tilt error,
-vibration). Sums fade with a memory τ [s] because the 6-D filter's heading drifts. Weights are
+c: the filter's own tilt error seen as a horizontal specific force (g·ε), about constant over
+the memory. With centred sums (means removed, which fits c), the least-squares angle is
+δ̂ = arg Σ w·(z_f − z̄_f)·conj(z_v − z̄_v); its variance ≈ σ_n² / (2 Σ w·|z_v − z̄_v|²) with
+σ_n² the scatter left (velocity noise, a varying tilt error, vibration). Sums fade with a
+memory τ [s] because the 6-D filter's heading drifts. Weights are
 the share of new information of each overlapping window (interval / window length), so that
 σ counts independent windows. Known once σ < the required accuracy and at least
 :data:`MIN_WINDOWS` independent windows have been seen.
@@ -49,6 +51,8 @@ class HeadingOffsetEstimator:
         self._c = 0j  # Σ w·z_f·conj(z_v)
         self._svv = 0.0  # Σ w·|z_v|²
         self._sff = 0.0  # Σ w·|z_f|²
+        self._sf = 0j  # Σ w·z_f
+        self._sv = 0j  # Σ w·z_v
         self._n = 0.0  # Σ w
         self._t: float | None = None
 
@@ -61,6 +65,8 @@ class HeadingOffsetEstimator:
             self._c *= fade
             self._svv *= fade
             self._sff *= fade
+            self._sf *= fade
+            self._sv *= fade
             self._n *= fade
         self._t = t_s
         zf = complex(filter_xy[0], filter_xy[1])
@@ -69,16 +75,26 @@ class HeadingOffsetEstimator:
         self._c += w * zf * zv.conjugate()
         self._svv += w * (zv.real * zv.real + zv.imag * zv.imag)
         self._sff += w * (zf.real * zf.real + zf.imag * zf.imag)
+        self._sf += w * zf
+        self._sv += w * zv
         self._n += w
         return self.estimate()
 
     def estimate(self) -> HeadingOffset:
         """The current δ, σ and known flag."""
-        if self._svv <= 0.0 or self._c == 0j:
+        n = self._n
+        if n <= 0.0:
             return HeadingOffset(0.0, math.inf, False)
-        offset = cmath.phase(self._c)
-        residual = max(self._sff + self._svv - 2.0 * abs(self._c), 0.0)
-        noise2 = residual / max(self._n, 1e-12)
-        sigma = math.sqrt(noise2 / (2.0 * self._svv))
+        # centred sums: a constant horizontal offset of z_f (a tilt error g·ε of the filter,
+        # steady over the memory) is fitted, not taken for scatter or for heading
+        c = self._c - self._sf * self._sv.conjugate() / n
+        svv = self._svv - abs(self._sv) ** 2 / n
+        sff = self._sff - abs(self._sf) ** 2 / n
+        if svv <= 0.0 or c == 0j:
+            return HeadingOffset(0.0, math.inf, False)
+        offset = cmath.phase(c)
+        residual = max(sff + svv - 2.0 * abs(c), 0.0)
+        noise2 = residual / max(n - 1.0, 1e-12)
+        sigma = math.sqrt(noise2 / (2.0 * svv))
         known = self._n >= MIN_WINDOWS and sigma < self.required_sigma_rad
         return HeadingOffset(offset, sigma, known)
