@@ -62,7 +62,7 @@ BUFFER_MARGIN_S = 0.5
 #: Velocity samples awaiting the IMU stamps to pass them (older ones are dropped, counted).
 MAX_PENDING = 1000
 
-REJECT_REASONS = ("nonfinite", "stamp", "backwards", "too_old", "jump", "frame")
+REJECT_REASONS = ("nonfinite", "stamp", "backwards", "too_old", "jump", "frame", "malformed")
 
 
 @dataclass(frozen=True)
