@@ -15,9 +15,9 @@ module builds that aided specific force for the unchanged filter step, outside i
   the gyro alone (P ← P ⊗ Exp((ω − b̂)·dt), b̂ the filter's bias estimate): m_P = F̄_P − a_v(in
   P) is then a gravity measurement that stays valid in P while time passes (only gyro
   integration over the delay, not the filter's own corrections, lies between it and now), and
-  the step gets ``Pᵀ·(m_P + f_P − F̄_P,hp)``: gravity from the velocity window, plus the
-  specific force's content faster than :data:`HIGHPASS_WINDOW_S` (vibration, impacts: what the
-  step's detectors and saturation expect to see).
+  the step gets ``Pᵀ·(m_P + f_P − lowpass(f_P))``: gravity from the velocity window, plus
+  the specific force's content faster than :data:`HIGHPASS_TIME_CONSTANT_S` (vibration,
+  impacts: what the step's detectors and saturation expect to see).
 - **Horizontal only.** Only a_v's horizontal part is taken out: a vertical acceleration is
   along gravity and tilts nothing, and left in, it keeps the step's stillness and
   linear-acceleration detectors seeing the vehicle's vertical motion (taken out, steady flight
@@ -49,9 +49,10 @@ from typing import Any
 from cf_estimator.core.heading_offset import HeadingOffset, HeadingOffsetEstimator
 from cf_estimator.core.params import FilterParams
 
-#: Window [s] of the specific force's fast content passed through while aided (vibration,
-#: impacts): slower content is replaced by the velocity-aided gravity measurement.
-HIGHPASS_WINDOW_S = 0.1
+#: Time constant [s] of the low-pass whose complement (the specific force's fast content:
+#: vibration, impacts) is passed through while aided: slower content is replaced by the
+#: velocity-aided gravity measurement.
+HIGHPASS_TIME_CONSTANT_S = 0.05
 #: Allowed IMU prediction error of the velocity change [m/s per s of interval] in the jump gate
 #: (a tilt error of about 0.2 rad times g).
 IMU_PREDICTION_M_S2 = 2.0
@@ -140,6 +141,7 @@ class VelocityAiding:
         self._bs: list[tuple[float, float, float]] = []  # Σ f_P·dt up to that stamp [m/s]
         self._b0 = 0  # first live index of the buffer lists
         self._sum = (0.0, 0.0, 0.0)
+        self._lp = (0.0, 0.0, 0.0)  # low-pass of f_P (HIGHPASS_TIME_CONSTANT_S)
         self._pending: list[tuple[float, tuple[float, float, float]]] = []
         self._hist: list[tuple[float, tuple[float, float, float], tuple[float, float, float]]
                          ] = []  # accepted (t, v, Σ f_P at t)
@@ -200,54 +202,69 @@ class VelocityAiding:
                     ) -> Sequence[float]:
         """The accelerometer sample to give the filter at IMU stamp t_s [s]: aided when a fresh
         velocity window and the heading are known, else ``accel_m_s2`` itself (same object)."""
-        qw, qx, qy, qz = q_filter
         # queued samples the buffer covers, with P and q_filter both at the last IMU stamp
-        if self._pending and self._bt and self._pending[0][0] <= self._bt[-1]:
-            self._take_pending(self._bt[-1], q_filter)
+        bt = self._bt
+        if self._pending and bt and self._pending[0][0] <= bt[-1]:
+            self._take_pending(bt[-1], q_filter)
+        ax, ay, az = float(accel_m_s2[0]), float(accel_m_s2[1]), float(accel_m_s2[2])
         if self._p is None:
-            self._p = (qw, qx, qy, qz)
+            pw, px, py, pz = (float(c) for c in q_filter)
         else:
+            aw, bx, by, bz = self._p
             hx = 0.5 * (gyro_rad_s[0] - bias_rad_s[0]) * dt_s
             hy = 0.5 * (gyro_rad_s[1] - bias_rad_s[1]) * dt_s
             hz = 0.5 * (gyro_rad_s[2] - bias_rad_s[2]) * dt_s
             n = math.sqrt(hx * hx + hy * hy + hz * hz)
-            s = math.sin(n) / n if n > 1e-12 else 1.0
-            pw, px, py, pz = _mul(*self._p, math.cos(n), hx * s, hy * s, hz * s)
+            c = math.cos(n)
+            sn = math.sin(n) / n if n > 1e-12 else 1.0
+            hx, hy, hz = hx * sn, hy * sn, hz * sn
+            pw = aw * c - bx * hx - by * hy - bz * hz
+            px = aw * hx + bx * c + by * hz - bz * hy
+            py = aw * hy - bx * hz + by * c + bz * hx
+            pz = aw * hz + bx * hy - by * hx + bz * c
             inv = 1.0 / math.sqrt(pw * pw + px * px + py * py + pz * pz)
-            self._p = (pw * inv, px * inv, py * inv, pz * inv)
-        pw, px, py, pz = self._p
-        fx, fy, fz = _rot(pw, px, py, pz, float(accel_m_s2[0]), float(accel_m_s2[1]),
-                          float(accel_m_s2[2]))
-        if self._bt and t_s <= self._bt[-1]:  # not after the last stamp: nothing to add
-            self._active = False
-            return accel_m_s2
-        sx, sy, sz = self._sum
-        if self._bt:
-            d = t_s - self._bt[-1]
+            pw, px, py, pz = pw * inv, px * inv, py * inv, pz * inv
+        self._p = (pw, px, py, pz)
+        # f_P = P ⊗ f ⊗ P*
+        tx, ty, tz = 2.0 * (py * az - pz * ay), 2.0 * (pz * ax - px * az), 2.0 * (px * ay - py * ax)
+        fx = ax + pw * tx + py * tz - pz * ty
+        fy = ay + pw * ty + pz * tx - px * tz
+        fz = az + pw * tz + px * ty - py * tx
+        if bt:
+            d = t_s - bt[-1]
+            if d <= 0.0:  # not after the last stamp: nothing to add
+                self._active = False
+                return accel_m_s2
+            sx, sy, sz = self._sum
             self._sum = (sx + fx * d, sy + fy * d, sz + fz * d)
-        self._bt.append(t_s)
+            k = d / (HIGHPASS_TIME_CONSTANT_S + d)
+            lx, ly, lz = self._lp
+            self._lp = lp = (lx + k * (fx - lx), ly + k * (fy - ly), lz + k * (fz - lz))
+        else:
+            self._lp = lp = (fx, fy, fz)
+        bt.append(t_s)
         self._bs.append(self._sum)
-        start = t_s - self._span
-        if self._bt[self._b0] < start:
-            self._b0 = bisect.bisect_left(self._bt, start, self._b0)
-            if self._b0 > 4096:
-                del self._bt[:self._b0]
-                del self._bs[:self._b0]
-                self._b0 = 0
+        if not len(bt) & 127:  # drop history older than the span now and then
+            start = t_s - self._span
+            if bt[self._b0] < start:
+                self._b0 = bisect.bisect_left(bt, start, self._b0)
+                if self._b0 > 4096:
+                    del bt[:self._b0]
+                    del self._bs[:self._b0]
+                    self._b0 = 0
         m = self._m
-        self._active = m is not None and t_s - self._m_t <= self._timeout
-        if not self._active:
-            if self._m is not None:
+        if m is None or t_s - self._m_t > self._timeout:
+            self._active = False
+            if m is not None:
                 self._stale += 1
             return accel_m_s2
+        self._active = True
         self._aided += 1
-        hx, hy, hz = self._at(t_s - HIGHPASS_WINDOW_S)
-        w = 1.0 / (t_s - max(t_s - HIGHPASS_WINDOW_S, self._bt[self._b0]) or 1.0)
-        sx, sy, sz = self._sum
-        gx = m[0] + fx - (sx - hx) * w  # type: ignore[index]
-        gy = m[1] + fy - (sy - hy) * w  # type: ignore[index]
-        gz = m[2] + fz - (sz - hz) * w  # type: ignore[index]
-        return _rot(pw, -px, -py, -pz, gx, gy, gz)
+        # Pᵀ·(m_P + f_P − lowpass(f_P)): gravity from the velocity window, fast content kept
+        gx, gy, gz = m[0] + fx - lp[0], m[1] + fy - lp[1], m[2] + fz - lp[2]
+        tx, ty, tz = 2.0 * (pz * gy - py * gz), 2.0 * (px * gz - pz * gx), 2.0 * (py * gx - px * gy)
+        return (gx + pw * tx - py * tz + pz * ty, gy + pw * ty - pz * tx + px * tz,
+                gz + pw * tz - px * ty + py * tx)
 
     def _at(self, t: float) -> tuple[float, float, float]:
         """Σ f_P·dt at stamp t (linear between IMU stamps; clamped to the buffer)."""
