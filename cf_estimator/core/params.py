@@ -350,6 +350,17 @@ class FilterParams:
         minimum_exclusive=True,
         group="velocity aiding",
     )
+    velocity_noise_m_s: float = param(
+        0.1,
+        "m/s",
+        "Velocity aiding: noise (standard deviation per axis) of the velocity input. A "
+        "horizontal acceleration within its differentiation noise is taken out only in part "
+        "(none below it), so a noisy velocity adds no tilt noise in steady flight "
+        "(0 = always take it out in full).",
+        minimum=0.0,
+        maximum=10.0,
+        group="velocity aiding",
+    )
     velocity_heading: str = param(
         "auto",
         "",

@@ -22,6 +22,9 @@ module builds that aided specific force for the unchanged filter step, outside i
   along gravity and tilts nothing, and left in, it keeps the step's stillness and
   linear-acceleration detectors seeing the vehicle's vertical motion (taken out, steady flight
   passed for rest on phantom4 and a wrong bias was learned: measured, then dropped).
+- **Noise.** A horizontal acceleration within the differentiation noise (from
+  ``velocity_noise_m_s``) is shrunk towards 0 (factor 1 − noise²/|a_h|², never below 0): in
+  steady flight a noisy velocity adds no tilt noise, in a manoeuvre it is taken out in full.
 - **Heading.** a_v is in the velocity's frame; the filter's world frame may be turned about the
   vertical by δ (6-D: arbitrary heading). ``velocity_heading='auto'`` estimates δ from the two
   accelerations (:mod:`cf_estimator.core.heading_offset`) and aids only once it is known;
@@ -343,7 +346,12 @@ class VelocityAiding:
             if not self._hd.known:
                 continue  # heading unknown: no aiding (see VelocityAiding.mode)
             c, sn = math.cos(self._hd.offset_rad), math.sin(self._hd.offset_rad)
-            awx, awy = c * ax - sn * ay, sn * ax + c * ay
+            # shrinkage: an acceleration within the differentiation noise (2 axes of variance
+            # 2·σ_v²/span²) is mostly noise and taken out only in part (none when below it)
+            h2 = ax * ax + ay * ay
+            noise2 = 4.0 * (self._params.velocity_noise_m_s / span) ** 2
+            keep = max(0.0, 1.0 - noise2 / h2) if h2 > 0.0 else 0.0
+            awx, awy = keep * (c * ax - sn * ay), keep * (sn * ax + c * ay)
             # gravity measurement (specific force minus acceleration), world → P
             self._m = _rot(ww, -wx, -wy, -wz, fwx - awx, fwy - awy, fwz)
             self._m_t = t
