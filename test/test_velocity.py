@@ -302,3 +302,20 @@ def test_mid_air_start_crops_and_rebases_the_flight():
     assert c.velocity_t_s[0] >= 0.0
     k = int(np.searchsorted(f.t_s, 30.0))
     assert np.array_equal(c.gyro_rad_s[0], f.gyro_rad_s[k])
+
+
+def test_ned_world_frame_with_ned_velocity_matches_enu(uav):
+    """The aiding works in the filter's world frame: NED params + NED velocity = ENU run."""
+    from cf_estimator.core import quaternion as quat
+
+    vd = measure_velocity(uav.truth, VelocityModel(10.0, 0.1, 0.1), np.random.default_rng(0))
+    v_ned = vd.v_world_m_s[:, [1, 0, 2]] * np.array([1.0, 1.0, -1.0])
+    imu = uav.imu
+    r_enu = estimate(imu.gyro_rad_s, imu.accel_m_s2, timestamps_s=imu.t_s, params=P6,
+                     velocity=(vd.t_s, vd.v_world_m_s), velocity_latency_s=0.1)
+    p_ned = FilterParams(use_mag=False, world_frame="ned")
+    r_ned = estimate(imu.gyro_rad_s, imu.accel_m_s2, timestamps_s=imu.t_s, params=p_ned,
+                     velocity=(vd.t_s, v_ned), velocity_latency_s=0.1)
+    assert r_ned.velocity_aided.mean() > 0.7
+    d = quat.angle_between(quat.ned_to_enu(r_ned.quaternion), r_enu.quaternion)
+    assert np.nanmax(d) < 1e-3
