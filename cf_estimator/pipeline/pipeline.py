@@ -162,17 +162,17 @@ class ImuPipeline:
 
     def _prepare(self, changes: Mapping[str, Any]) -> tuple[FilterParams, PipelineParams]:
         fchanges, pchanges = split_by_owner(changes, (FilterParams, PipelineParams))
-        pairs = ((FilterParams, self._fp, fchanges), (PipelineParams, self._pp, pchanges))
-        for cls, current, ch in pairs:
-            for spec in specs_of(cls):
-                if spec.read_only and spec.name in ch:
-                    value = spec.check(ch[spec.name])
-                    if value != getattr(current, spec.name):
-                        raise ParameterError(
-                            f"{spec.name} is read-only at run time (restart the node to change it)"
-                        )
+        # the schema first (the same one-line reason as at start-up, read-only values included)
         fp = FilterParams(**{**as_dict(self._fp), **fchanges}) if fchanges else self._fp
         pp = PipelineParams(**{**as_dict(self._pp), **pchanges}) if pchanges else self._pp
+        pairs = ((FilterParams, self._fp, fp, fchanges), (PipelineParams, self._pp, pp, pchanges))
+        for cls, current, new, ch in pairs:
+            for spec in specs_of(cls):
+                if spec.read_only and spec.name in ch and \
+                        getattr(new, spec.name) != getattr(current, spec.name):
+                    raise ParameterError(
+                        f"{spec.name} is read-only at run time (restart the node to change it)"
+                    )
         return fp, pp
 
     def validate_changes(self, changes: Mapping[str, Any]) -> tuple[bool, str]:
