@@ -176,6 +176,31 @@ def _applicable_values(
     return values, warnings
 
 
+def unapplied_file_warning(path: str | Path, node_name: str) -> str | None:
+    """One line when no section of the parameter file ``path`` applies to the node
+    ``node_name`` (fully qualified), so rclpy silently runs it with the defaults; else None.
+
+    Unreadable or non-parameter files are the start-up checks' business: None here.
+    """
+    path = Path(path)
+    try:
+        doc = _read_doc(path)
+        keys = [str(k) for k in doc]
+        if any(node_key_matches(k, node_name) for k in keys):
+            return None
+    except ParameterError:
+        return None
+    fqn = fully_qualified_node_name(node_name)
+    short = fqn.rsplit("/", 1)[-1]
+    hint = ""
+    if any(k.lstrip("/").rsplit("/", 1)[-1].endswith("_node") for k in keys):
+        hint = (f" ('{keys[0]}' looks like the executable's name; the node is named "
+                f"'{short}')")
+    return (f"parameter file {path}: none of its sections ({', '.join(keys)}) is for this node "
+            f"'{fqn}'{hint}: NONE of its parameters are in force, the node runs with the "
+            f"defaults; name the section '/**:' or '{short}:'")
+
+
 def unknown_keys(path: str | Path, node_name: str = DEFAULT_NODE_NAME) -> list[str]:
     """The parameter names in the sections of ``path`` that apply to ``node_name`` and that
     the node does not know (sorted); ParameterError when the file is not a parameter file."""

@@ -172,7 +172,10 @@ def test_strong_vibration_at_rest_does_not_reach_the_attitude():
     on = t >= 3.0  # the rotors start after the start-up phase, as on a real vehicle
     accel = accel + np.outer(on * 6.0 * G * np.sin(2 * np.pi * np.cumsum(freq) / rate), d)
     res = estimate(gyro, accel, rate_hz=rate, params=FilterParams(use_mag=False))
-    assert res.at_rest[int(5 * rate):].mean() > 0.9, "vibration does not make it move"
+    # vibration widens the stillness tolerance by at most REST_NOISE_CAP times the thresholds
+    # (else a vibrating flight passes for rest): 6 g leaves enough of itself in some block means
+    # to break rest at times, but the sensor is still found at rest most of the time
+    assert res.at_rest[int(5 * rate):].mean() > 0.5, "vibration does not make it move"
     up = quat.rotate(quat.conjugate(res.quaternion), np.array([0.0, 0.0, 1.0]))
     tilt_deg = np.degrees(np.arccos(np.clip(up[:, 2], -1.0, 1.0)))
     assert tilt_deg[int(3 * rate):].max() < 1.0

@@ -366,7 +366,8 @@ def test_real_euroc_flights_load_and_agree_at_rest():
 
 def test_ours_is_the_first_column_and_uses_6d():
     assert next(iter(ev.ALGORITHMS)) == "cf_estimator" and ev.ALGORITHMS["cf_estimator"].ours
-    assert ev.peer_names() == ["vqf", "vqf_offline", "madgwick", "fusion", "riann"]
+    assert ev.peer_names() == ["vqf", "vqf_offline", "madgwick", "fusion", "complementary",
+                             "riann"]
     _s, w, acc, _q = _flight_truth(duration_s=1.0)
     f = euroc.Flight("x", np.arange(200) / 200.0, w, acc, np.full((200, 4), np.nan), 0, Path("."))
     q = ev.ALGORITHMS["cf_estimator"].run(f, FilterParams(use_mag=True))  # forced to 6-D

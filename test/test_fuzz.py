@@ -594,7 +594,8 @@ def change_sets(draw, valid: bool) -> dict[str, Any]:
             changes[draw(st.sampled_from(["k4", "K1", "imu_topic", "", "k1 "]))] = 1.0
         elif how == "read_only":
             spec = draw(st.sampled_from(READ_ONLY))
-            other = {"bool": lambda d: not d, "str": lambda d: "ned" if d == "enu" else "enu",
+            other = {"bool": lambda d: not d,
+                     "str": lambda d, c=spec.choices: next(x for x in c if x != d),
                      "float": lambda d: 2.0 * d}[spec.kind](spec.default)
             changes[spec.name] = other
         else:
@@ -717,11 +718,22 @@ def test_valid_parameter_changes_apply_at_the_next_sample_without_reset(changes,
     if dt is not None:
         w, x, y, z = ref.update(gyro, accel, dt, None)
         assert out.orientation_xyzw == (x, y, z, w)
+    # the covariance model (docs/ros_interface.md) with the new floors: tilt = floor + the
+    # error norm squared while settling (+ the clipped drift while clipped)
     cov = out.orientation_covariance
-    assert cov[0] == cov[4] == pp_new.orientation_covariance_rad2
-    heading = pipe.filter.status().heading_initialized
-    assert cov[8] == (pp_new.yaw_covariance_rad2 if heading
-                      else pp_new.unreferenced_yaw_covariance_rad2)
+    status = pipe.filter.status()
+    settling = status.phase in ("startup", "recovering")
+    floor = pp_new.orientation_covariance_rad2
+    tilt = min(floor + (status.error_norm_rad**2 if settling else 0.0), max(math.pi**2, floor))
+    assert cov[0] == cov[4]
+    if status.clipped:
+        assert cov[0] >= tilt * (1.0 - 1e-12)
+    else:
+        assert cov[0] == pytest.approx(tilt, rel=1e-12, abs=0.0)
+    if status.heading_initialized:
+        assert cov[8] >= pp_new.yaw_covariance_rad2
+    else:
+        assert cov[8] == pp_new.unreferenced_yaw_covariance_rad2
 
 
 @profile("read_only")

@@ -109,12 +109,12 @@ def test_whole_recording_agrees_with_the_reference(name):
     assert np.max(np.abs(ref.gyro_bias_sigma_rad_s[ok] - out.gyro_bias_sigma_rad_s[ok])) < 1e-12
 
 
-def test_a_steady_turn_is_not_rest_until_it_lasts_then_the_bias_is_relearned():
-    """Still with bias b, then the gyro reads b + 0.1 rad/s on z for 20 s with a constant
-    accelerometer (a constant-rate turn, or the bias changed): gated out as motion for
-    REST_GATE_OVERRIDE_S, then taken as the new bias. Both backends, bit for bit."""
+def test_a_steady_turn_from_a_known_bias_is_never_rest_however_long_it_lasts():
+    """Still with bias b, then the gyro reads b + 0.1 rad/s on z for 30 s with a constant
+    accelerometer (a constant-rate turn): gated out as motion for the whole turn (biases drift,
+    they do not jump), the bias stays b. Both backends, bit for bit."""
     rate, b = 200.0, np.array([0.01, -0.02, 0.03])
-    n1, n2 = int(5 * rate), int(20 * rate)
+    n1, n2 = int(5 * rate), int(30 * rate)
     rng = np.random.default_rng(0)
     gyro = np.vstack([np.tile(b, (n1, 1)), np.tile(b + [0.0, 0.0, 0.1], (n2, 1))])
     gyro += rng.normal(0.0, 0.002, gyro.shape)
@@ -126,10 +126,9 @@ def test_a_steady_turn_is_not_rest_until_it_lasts_then_the_bias_is_relearned():
     assert np.array_equal(res["python"].at_rest, res["compiled"].at_rest)
     r = res["compiled"]
     assert np.allclose(r.gyro_bias_rad_s[n1 - 1], b, atol=0.002)
-    turn = slice(n1 + int(1 * rate), n1 + int((step.REST_GATE_OVERRIDE_S - 0.5) * rate))
+    turn = slice(n1 + int(1 * rate), n1 + n2)
     assert not r.at_rest[turn].any(), "a steady turn away from a known bias is not rest"
-    assert np.allclose(r.gyro_bias_rad_s[turn.stop], b, atol=0.005)
-    assert r.at_rest[-1] and abs(r.gyro_bias_rad_s[-1, 2] - (b[2] + 0.1)) < 0.003
+    assert np.allclose(r.gyro_bias_rad_s[-1], b, atol=0.002)
 
 
 def test_states_agree_field_by_field_after_a_recording():

@@ -57,6 +57,14 @@ def _shade(ax: Any, windows: Sequence[tuple[float, float, str]], t0: float) -> N
                 ha="center", va="bottom", fontsize=7, color="0.4")
 
 
+def alignment_label(alignment: str | None) -> str:
+    """Legend suffix of the estimate against a reference: what the console reports too
+    (``none``: the raw estimate; ``first``/``mean``: heading-aligned that way)."""
+    if alignment in (None, "none"):
+        return ""
+    return f" (heading-aligned: {alignment})"
+
+
 def plot_replay(
     result: Any, directory: str | Path, *, title: str = "",
     windows: Sequence[tuple[float, float, str]] = (),
@@ -85,11 +93,12 @@ def plot_replay(
         est_rpy = np.degrees(quat.to_euler(scored["q_est_aligned"]))
     offline = s.online_rpy_rad.shape[0] == t.size  # an offline replay: show the online too
     kind = "offline estimate" if offline else "estimate"
+    aligned = alignment_label(result.summary.get("reference", {}).get("heading_alignment"))
     for i, ax in enumerate(axes):
         if ref_rpy is not None:
             tr = scored["t_s"] - t0
             ax.plot(tr, ref_rpy[:, i], color="k", lw=1.0, label="reference")
-            ax.plot(tr, est_rpy[:, i], color="C0", lw=0.8, label=f"{kind} (heading-aligned)")
+            ax.plot(tr, est_rpy[:, i], color="C0", lw=0.8, label=f"{kind}{aligned}")
         else:
             ax.plot(t, np.degrees(s.rpy_rad[:, i]), color="C0", lw=0.8, label=kind)
         if offline:

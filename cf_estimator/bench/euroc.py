@@ -91,6 +91,23 @@ class Flight:
         """(N,) bool: samples with a ground-truth orientation."""
         return np.all(np.isfinite(self.q_ref), axis=1)
 
+    def cropped(self, start_s: float) -> Flight:
+        """The flight from ``start_s`` [s] after its first sample on (a mid-air start: the node
+        restarted in flight, a bag that begins in the air), times re-based to 0 there; named
+        ``<name>@<start_s>s``. ValueError if fewer than two samples are left."""
+        i = int(np.searchsorted(self.t_s, start_s))
+        if self.n_samples - i < 2:
+            raise ValueError(f"{self.name}: nothing left after {start_s:g} s "
+                             f"(the flight lasts {float(self.t_s[-1]):.1f} s)")
+        t0 = float(self.t_s[i])
+        vt = vel = None
+        if self.velocity_t_s is not None and self.velocity_m_s is not None:
+            keep = self.velocity_t_s >= t0  # the velocity from the new start on, re-based too
+            vt, vel = self.velocity_t_s[keep] - t0, self.velocity_m_s[keep]
+        return Flight(f"{self.name}@{start_s:g}s", self.t_s[i:] - t0, self.gyro_rad_s[i:],
+                      self.accel_m_s2[i:], self.q_ref[i:], self.t0_ns + int(round(t0 * 1e9)),
+                      self.path, self.groundtruth_path, self.notes, vt, vel)
+
 
 # -- text tables -------------------------------------------------------------------------------
 def _stamp_ns(token: str, unit_s: bool) -> int:
@@ -372,28 +389,6 @@ def load_flight(path: str | os.PathLike, groundtruth: str | os.PathLike | None =
     t_s = (t_ns - t_ns[0]) * 1e-9
     return Flight(name or flight_name(folder), t_s, gyro, acc, q_ref, int(t_ns[0]), folder,
                   gt_path, tuple(notes), vel_t, vel)
-
-
-def crop_flight(flight: Flight, start_s: float) -> Flight:
-    """The flight from ``start_s`` [s] on (a mid-air start: the estimators see nothing
-    earlier), times re-based so the first kept IMU sample is 0 (EurocDataError if fewer than 2
-    samples remain)."""
-    keep = flight.t_s >= start_s
-    if int(keep.sum()) < 2:
-        raise EurocDataError(f"{flight.name}: --start {start_s:g} s leaves no IMU data "
-                             f"(flight {flight.t_s[-1]:.1f} s long)")
-    t0 = float(flight.t_s[keep][0])
-    vt = vel = None
-    if flight.velocity_t_s is not None and flight.velocity_m_s is not None:
-        vk = flight.velocity_t_s >= t0
-        vt, vel = flight.velocity_t_s[vk] - t0, flight.velocity_m_s[vk]
-    import dataclasses
-
-    return dataclasses.replace(
-        flight, t_s=flight.t_s[keep] - t0, gyro_rad_s=flight.gyro_rad_s[keep],
-        accel_m_s2=flight.accel_m_s2[keep], q_ref=flight.q_ref[keep],
-        t0_ns=flight.t0_ns + round(t0 * 1e9), velocity_t_s=vt, velocity_m_s=vel,
-        notes=flight.notes + (f"started at {start_s:g} s (mid-air start)",))
 
 
 def load_flights(data: str | os.PathLike, **kwargs) -> list[Flight]:

@@ -77,6 +77,8 @@ def _peer(name: str) -> Runner:
             return peers.run_fusion(g, a, None, r)
         if name == "madgwick":
             return peers.run_madgwick(g, a, None, r)
+        if name == "complementary":
+            return peers.run_complementary(g, a, None, r)
         if name == "riann":
             return peers.run_riann(g, a, r)
         raise ValueError(f"no runner for peer {name!r}")
@@ -95,7 +97,7 @@ def register(algorithm: Algorithm) -> None:
 register(Algorithm("cf_estimator", _ours_online, ours=True))
 register(Algorithm("cf_estimator_offline", _ours_offline, ours=True))
 for _name, _package in (("vqf", "vqf"), ("vqf_offline", "vqf"), ("madgwick", "ahrs"),
-                        ("fusion", "imufusion"), ("riann", "riann")):
+                        ("fusion", "imufusion"), ("complementary", None), ("riann", "riann")):
     register(Algorithm(_name, _peer(_name), _package))
 
 
@@ -138,6 +140,47 @@ def score_flight(flight: Flight, q_est: np.ndarray, settle_s: float = SETTLE_S
     mask = (flight.t_s >= settle_s) & flight.has_reference
     rms, peak, n = metrics.rms_max(err, mask)
     return {"inclination_rms_deg": rms, "inclination_max_deg": peak, "n_scored": n}
+
+
+#: Scored windows [s after the start] of a mid-air start: the first seconds, then the rest.
+MIDAIR_WINDOWS = ((2.0, 12.0), (12.0, math.inf))
+MIDAIR_SCORES = ("early_rms_deg", "late_rms_deg")
+
+
+def score_windows(flight: Flight, q_est: np.ndarray,
+                  windows: Sequence[tuple[float, float]] = MIDAIR_WINDOWS) -> dict[str, float]:
+    """Inclination RMS [deg] in each window ``[t0, t1)`` of the flight's time (with a ground
+    truth), keys :data:`MIDAIR_SCORES` for the two default windows."""
+    err = metrics.inclination_error_deg(q_est, flight.q_ref)
+    out: dict[str, float] = {}
+    for key, (t0, t1) in zip(MIDAIR_SCORES, windows, strict=True):
+        mask = (flight.t_s >= t0) & (flight.t_s < t1) & flight.has_reference
+        out[key] = metrics.rms_max(err, mask)[0]
+    return out
+
+
+def _midair_worker(task: tuple) -> dict[str, dict[str, float]]:
+    flight, params, peers, velocity = task
+    algos = [a for a in ALGORITHMS.values() if a.ours]
+    if velocity is not None:
+        algos += aided_algorithms(velocity)
+    algos += [ALGORITHMS[n] for n in peers]
+    return {a.name: score_windows(flight, a.run(flight, params)) for a in algos}
+
+
+def run_midair(flights: Sequence[Flight], params: FilterParams, start_s: float,
+               peers: Sequence[str] = (), jobs: int = 1, velocity: VelocityInput | None = None
+               ) -> EurocResult:
+    """Every flight cropped to start ``start_s`` after its first sample (:meth:`Flight.cropped`)
+    and scored in :data:`MIDAIR_WINDOWS` (keys :data:`MIDAIR_SCORES`); flights too short for
+    the later window are left out. ``velocity``: ours aided too (as in :func:`run_euroc`)."""
+    crops = [f.cropped(start_s) for f in flights if f.t_s[-1] - start_s > MIDAIR_WINDOWS[1][0]]
+    tasks = [(f, params, tuple(peers), velocity) for f in crops]
+    result = EurocResult(settle_s=MIDAIR_WINDOWS[0][0])
+    for flight, scores in zip(crops, run_tasks(_midair_worker, tasks, jobs), strict=True):
+        result.flights[flight.name] = scores
+        result.info[flight.name] = flight_info(flight)
+    return result
 
 
 # -- velocity aiding (issue 17) ------------------------------------------------------------
@@ -222,7 +265,9 @@ class EurocResult:
         """``{"settle_s", "flights": {...}, "mean": {algorithm: {score: deg}}, "info": {...}}``."""
         flights = {f: {a: {k: _json(v) for k, v in s.items()} for a, s in per.items()}
                    for f, per in self.flights.items()}
-        mean = {a: {s: _json(self.mean(a, s)) for s in SCORES} for a in self.algorithms()}
+        keys = list(dict.fromkeys(k for per in self.flights.values() for sc in per.values()
+                                  for k in sc if k != "n_scored"))
+        mean = {a: {s: _json(self.mean(a, s)) for s in keys} for a in self.algorithms()}
         return {"settle_s": self.settle_s, "flights": flights, "mean": mean, "info": self.info}
 
 
@@ -258,8 +303,9 @@ def run_euroc(flights: Sequence[Flight], params: FilterParams, peers: Sequence[s
     return result
 
 
-def format_table(result: EurocResult) -> str:
-    """Flights × algorithms, cells ``RMS / max`` [deg], then the mean over flights."""
+def format_table(result: EurocResult, scores: tuple[str, str] = SCORES) -> str:
+    """Flights × algorithms, cells ``a / b`` [deg] of the two ``scores`` (default RMS / max),
+    then the mean over flights."""
     algos = result.algorithms()
     names = list(result.flights)
     w = max([len(n) for n in names] + [len("mean")])
@@ -274,8 +320,8 @@ def format_table(result: EurocResult) -> str:
     for n in names:
         per = result.flights[n]
         lines.append(f"  {n:<{w}}" + "".join(
-            cell(per.get(a, {}).get(SCORES[0], math.nan), per.get(a, {}).get(SCORES[1], math.nan))
+            cell(per.get(a, {}).get(scores[0], math.nan), per.get(a, {}).get(scores[1], math.nan))
             for a in algos))
     lines.append(f"  {'mean':<{w}}" + "".join(
-        cell(result.mean(a, SCORES[0]), result.mean(a, SCORES[1])) for a in algos))
+        cell(result.mean(a, scores[0]), result.mean(a, scores[1])) for a in algos))
     return "\n".join(lines) + "\n"

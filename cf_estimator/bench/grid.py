@@ -24,6 +24,7 @@ import numpy as np
 
 from cf_estimator.bench import broad, tuning
 from cf_estimator.core.params import FilterParams
+from cf_estimator.schema import ParameterError
 
 #: Half A of the shipped 18 BROAD trials (every other trial by number); B = the others.
 DEFAULT_SPLIT = ("02", "05", "09", "11", "15", "21", "27", "30", "34")
@@ -94,16 +95,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--sort", choices=("inclination", "total"), default="inclination")
     ap.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1))
     args = ap.parse_args(argv)
-    from cf_estimator.cli.bench_cmd import _load_params
-    from cf_estimator.cli.main import CliError
+    from cf_estimator.params_file import load_params_file  # pipeline-level: lazily
 
     try:
-        base = _load_params(args.params)
+        base = FilterParams()
+        if args.params is not None:
+            base, _pp, warnings = load_params_file(args.params)
+            for text in warnings:
+                print(f"grid: warning: {text}", file=sys.stderr)
         info = broad.read_trial_info(args.data)
         trials = [broad.load_trial(p, info) for p in broad.list_trials(args.data, None)]
-    except (CliError, broad.BroadDataError) as exc:  # one line, as the CLI's errors
-        print(f"grid: {exc}", file=sys.stderr)
-        return getattr(exc, "code", 1)
+    except (OSError, ParameterError, broad.BroadDataError) as exc:  # one line, as the CLI's
+        text = getattr(exc, "strerror", None) or str(exc).splitlines()[0]
+        print(f"grid: {text}", file=sys.stderr)
+        return 1 if isinstance(exc, broad.BroadDataError) else 2
     values = dict(args.set)
     points = grid_points(base, values)
     if not points:

@@ -11,13 +11,27 @@ filter and the BROAD reference. Units and frames of each peer (see docs/peers.md
   3 s start-up gain ramp, rejection off since the recovery period is 0): gyro **deg/s**, acc
   **g**, mag any; quaternion (w, x, y, z) sensor-to-earth in **NWU** → q_ENU = Rz(+90°) ⊗ q.
   The sample period is set to 1/rate (its default assumes 100 Hz). Starts at identity.
-- ``madgwick`` (``ahrs`` 0.4 ``ahrs.filters.Madgwick``, default gains 0.041 MARG / 0.033 IMU):
-  gyro rad/s, acc and mag any unit (normalised); quaternion (w, x, y, z) sensor-to-earth in
-  **NWU** (gravity +z, field in the x–z plane) → q_ENU = Rz(+90°) ⊗ q. Its batch mode starts
-  the MARG filter from an NED e-compass quaternion, which does not match its own NWU frame
-  (a 180° start error that gain 0.041 takes about a minute to remove), so we start it as the
-  BROAD example code does: from the first accelerometer (and magnetometer) sample, then call
-  its ``updateMARG``/``updateIMU`` per sample.
+- ``madgwick`` (``ahrs`` 0.4 ``ahrs.filters.Madgwick`` at the gain the ROS package
+  imu_filter_madgwick ships, ``gain: 0.1``, ``zeta: 0.0`` (no gyro-drift term), the same gain
+  for the IMU and MARG updates; ahrs' own defaults, 0.033 IMU / 0.041 MARG, are not what a ROS
+  user runs): gyro rad/s, acc and mag any unit (normalised); quaternion (w, x, y, z)
+  sensor-to-earth in **NWU** (gravity +z, field in the x–z plane) → q_ENU = Rz(+90°) ⊗ q.
+  Its batch mode starts the MARG filter from an NED e-compass quaternion, which does not match
+  its own NWU frame (a 180° start error that a small gain takes minutes to remove), so we start
+  it as the BROAD example code does: from the first accelerometer (and magnetometer) sample,
+  then call its ``updateMARG``/``updateIMU`` per sample (imu_filter_madgwick also starts from
+  the first accelerometer and magnetometer sample).
+- ``complementary`` (imu_complementary_filter of imu_tools, Valenti, Dryanovski, Xiao,
+  "Keeping a Good Attitude", Sensors 15(8), 2015; not on PyPI: :func:`run_complementary` is a
+  line-by-line port of its ``ComplementaryFilter`` (CCNYRoboticsLab/imu_tools,
+  imu_complementary_filter/src/complementary_filter.cpp) at the defaults its ROS node sets
+  (complementary_filter_ros.cpp): ``gain_acc`` 0.01, ``gain_mag`` 0.01, ``bias_alpha`` 0.01,
+  ``do_bias_estimation`` true, ``do_adaptive_gain`` true; 9-D whenever a magnetometer sample is
+  given (its node's ``use_mag`` defaults to false), the IMU-only update on rows without one, as
+  its node does for NaN fields. Gyro rad/s, acc **m/s²** (its steady-state and adaptive-gain
+  tests compare |a| with 9.81), mag any unit; state q_sensor_from_world, output its inverse
+  q_NWU_from_sensor → q_ENU = Rz(+90°) ⊗ q. Its node uses the first message only to start the
+  clock; here the first sample initialises the filter (one sample earlier).
 """
 
 from __future__ import annotations
@@ -34,8 +48,13 @@ STANDARD_GRAVITY = 9.80665
 #: q_ENU_from_NWU: a rotation of +90° about z (NWU x = north → ENU y).
 Q_ENU_FROM_NWU = np.array([math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5)])
 
-PEERS = ("vqf", "fusion", "madgwick")
-PEER_PACKAGES = {"vqf": "vqf", "fusion": "imufusion", "madgwick": "ahrs"}
+PEERS = ("vqf", "fusion", "madgwick", "complementary")
+#: peer → PyPI package (None: ported here, always available).
+PEER_PACKAGES: dict[str, str | None] = {"vqf": "vqf", "fusion": "imufusion", "madgwick": "ahrs",
+                                        "complementary": None}
+#: imu_filter_madgwick's ROS defaults (its ``gain`` and ``zeta`` parameters).
+MADGWICK_ROS_GAIN = 0.1
+MADGWICK_ROS_ZETA = 0.0
 
 
 class PeerUnavailable(RuntimeError):
@@ -44,6 +63,8 @@ class PeerUnavailable(RuntimeError):
 
 def _require(peer: str):
     module = PEER_PACKAGES[peer]
+    if module is None:
+        return None
     try:
         return __import__(module)
     except ImportError:
@@ -83,7 +104,7 @@ def split_available(peers: list[str]) -> tuple[list[str], list[str]]:
 
 def missing_note(missing: list[str]) -> str:
     """One line naming the skipped peers and how to install them."""
-    names = ", ".join(f"{p} (PyPI {PEER_PACKAGES[p]})" for p in missing)
+    names = ", ".join(f"{p} (PyPI {PEER_PACKAGES[p]})" for p in missing)  # never a port
     return f"peers not installed, skipped: {names}; pip install '.[bench]' adds them"
 
 
@@ -149,7 +170,8 @@ def initial_nwu(acc0: np.ndarray, mag0: np.ndarray | None) -> np.ndarray:
 
 def run_madgwick(gyro: np.ndarray, acc: np.ndarray, mag: np.ndarray | None, rate_hz: float
                  ) -> np.ndarray:
-    """Madgwick (``ahrs`` package) at its default gains, started from the first sample."""
+    """Madgwick (``ahrs`` package) at imu_filter_madgwick's ROS default gain 0.1 (zeta 0),
+    started from the first sample."""
     _require("madgwick")
     from ahrs.filters import Madgwick
 
@@ -157,9 +179,8 @@ def run_madgwick(gyro: np.ndarray, acc: np.ndarray, mag: np.ndarray | None, rate
     a = np.asarray(acc, dtype=float)
     n = g.shape[0]
     m = None if mag is None else np.asarray(mag, dtype=float)
-    filt = Madgwick(frequency=rate_hz) if m is None else Madgwick(frequency=rate_hz, gain=0.041)
-    # the default gain is chosen from the presence of mag at construction: set it explicitly
-    filt.gain = filt.gain_imu if m is None else filt.gain_marg
+    filt = Madgwick(frequency=rate_hz, gain=MADGWICK_ROS_GAIN)
+    filt.gain = MADGWICK_ROS_GAIN  # ahrs picks gain_imu/gain_marg otherwise; one gain, as ROS
     first_mag = m[0] if m is not None and np.all(np.isfinite(m[0])) else None
     q = initial_nwu(a[0], first_mag)
     out = np.empty((n, 4))
@@ -170,6 +191,150 @@ def run_madgwick(gyro: np.ndarray, acc: np.ndarray, mag: np.ndarray | None, rate
         else:
             q = filt.updateIMU(q, g[i], a[i])
         out[i] = q
+    return quat.multiply(Q_ENU_FROM_NWU, out)
+
+
+# -- imu_complementary_filter (port) ----------------------------------------------------------
+#: imu_complementary_filter's ROS defaults (complementary_filter_ros.cpp initializeParams).
+COMPLEMENTARY_ROS_DEFAULTS = {"gain_acc": 0.01, "gain_mag": 0.01, "bias_alpha": 0.01,
+                              "do_bias_estimation": True, "do_adaptive_gain": True}
+_CF_GRAVITY = 9.81  # kGravity
+_CF_W_THRESHOLD = 0.2  # kAngularVelocityThreshold [rad/s]
+_CF_A_THRESHOLD = 0.1  # kAccelerationThreshold [m/s^2]
+_CF_DW_THRESHOLD = 0.01  # kDeltaAngularVelocityThreshold [rad/s]
+
+
+def _cf_mul(p, q):
+    p0, p1, p2, p3 = p
+    q0, q1, q2, q3 = q
+    return (p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3, p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2,
+            p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1, p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0)
+
+
+def _cf_norm4(q):
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
+
+
+def _cf_rotate(x, y, z, q0, q1, q2, q3):
+    return ((q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3) * x + 2 * (q1 * q2 - q0 * q3) * y
+            + 2 * (q1 * q3 + q0 * q2) * z,
+            2 * (q1 * q2 + q0 * q3) * x + (q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3) * y
+            + 2 * (q2 * q3 - q0 * q1) * z,
+            2 * (q1 * q3 - q0 * q2) * x + 2 * (q2 * q3 + q0 * q1) * y
+            + (q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3) * z)
+
+
+def _cf_scale(gain, dq):
+    """scaleQuaternion: slerp from identity below dq0 = 0.9, else lerp; normalised."""
+    dq0, dq1, dq2, dq3 = dq
+    if dq0 <= 0.9:
+        angle = math.acos(dq0)
+        a = math.sin(angle * (1.0 - gain)) / math.sin(angle)
+        b = math.sin(angle * gain) / math.sin(angle)
+        out = (a + b * dq0, b * dq1, b * dq2, b * dq3)
+    else:
+        out = ((1.0 - gain) + gain * dq0, gain * dq1, gain * dq2, gain * dq3)
+    return _cf_norm4(out)
+
+
+def _cf_acc_quat(ax, ay, az):
+    """getMeasurement's q_acc from a normalised accelerometer vector."""
+    if az >= 0:
+        q0 = math.sqrt((az + 1) * 0.5)
+        return (q0, -ay / (2.0 * q0), ax / (2.0 * q0), 0.0)
+    x = math.sqrt((1 - az) * 0.5)
+    return (-ay / (2.0 * x), x, 0.0, ax / (2.0 * x))
+
+
+def _cf_heading_dq(lx, ly):
+    """The delta quaternion about z that turns (lx, ly) onto +x (north)."""
+    gamma = lx * lx + ly * ly
+    beta = math.sqrt(gamma + lx * math.sqrt(gamma))
+    return (beta / math.sqrt(2.0 * gamma), 0.0, 0.0, ly / (math.sqrt(2.0) * beta))
+
+
+def _cf_unit(x, y, z):
+    n = math.sqrt(x * x + y * y + z * z)
+    return x / n, y / n, z / n
+
+
+def run_complementary(gyro: np.ndarray, acc: np.ndarray, mag: np.ndarray | None, rate_hz: float,
+                      **overrides: float | bool) -> np.ndarray:
+    """imu_complementary_filter (port, see the module docstring) at its ROS defaults
+    (``overrides``: gain_acc, gain_mag, bias_alpha, do_bias_estimation, do_adaptive_gain).
+    Returns q_ENU_from_sensor (N, 4)."""
+    cfg = {**COMPLEMENTARY_ROS_DEFAULTS, **overrides}
+    gain_acc, gain_mag, bias_alpha = cfg["gain_acc"], cfg["gain_mag"], cfg["bias_alpha"]
+    do_bias, adaptive = bool(cfg["do_bias_estimation"]), bool(cfg["do_adaptive_gain"])
+    g = np.asarray(gyro, dtype=float).tolist()
+    a = np.asarray(acc, dtype=float).tolist()
+    m = None if mag is None else np.asarray(mag, dtype=float).tolist()
+    dt = 1.0 / rate_hz
+    n = len(g)
+    out = np.empty((n, 4))
+    q = (1.0, 0.0, 0.0, 0.0)  # state: q_sensor_from_world (fixed wrt the body)
+    bx = by = bz = 0.0
+    wpx = wpy = wpz = 0.0
+    initialized = False
+    for i in range(n):
+        ax, ay, az = a[i]
+        wx, wy, wz = g[i]
+        mi = m[i] if m is not None else None
+        has_mag = mi is not None and all(math.isfinite(c) for c in mi)
+        if not initialized:
+            qa = _cf_acc_quat(*_cf_unit(ax, ay, az))
+            if has_mag:
+                mx, my, mz = mi
+                q0a, q1a, q2a, _q3a = qa
+                lx = ((q0a * q0a + q1a * q1a - q2a * q2a) * mx + 2.0 * (q1a * q2a) * my
+                      - 2.0 * (q0a * q2a) * mz)
+                ly = (2.0 * (q1a * q2a) * mx + (q0a * q0a - q1a * q1a + q2a * q2a) * my
+                      + 2.0 * (q0a * q1a) * mz)
+                q = _cf_mul(qa, _cf_heading_dq(lx, ly))
+            else:
+                q = qa
+            initialized = True
+        else:
+            if do_bias:  # updateBiases / checkState
+                steady = (abs(math.sqrt(ax * ax + ay * ay + az * az) - _CF_GRAVITY)
+                          <= _CF_A_THRESHOLD
+                          and abs(wx - wpx) <= _CF_DW_THRESHOLD
+                          and abs(wy - wpy) <= _CF_DW_THRESHOLD
+                          and abs(wz - wpz) <= _CF_DW_THRESHOLD
+                          and abs(wx - bx) <= _CF_W_THRESHOLD
+                          and abs(wy - by) <= _CF_W_THRESHOLD
+                          and abs(wz - bz) <= _CF_W_THRESHOLD)
+                if steady:
+                    bx += bias_alpha * (wx - bx)
+                    by += bias_alpha * (wy - by)
+                    bz += bias_alpha * (wz - bz)
+                wpx, wpy, wpz = wx, wy, wz
+            # getPrediction
+            ux, uy, uz = wx - bx, wy - by, wz - bz
+            q0, q1, q2, q3 = q
+            pred = _cf_norm4((q0 + 0.5 * dt * (ux * q1 + uy * q2 + uz * q3),
+                              q1 + 0.5 * dt * (-ux * q0 - uy * q3 + uz * q2),
+                              q2 + 0.5 * dt * (ux * q3 - uy * q0 - uz * q1),
+                              q3 + 0.5 * dt * (-ux * q2 + uy * q1 - uz * q0)))
+            # getAccCorrection
+            nx, ny, nz = _cf_unit(ax, ay, az)
+            p0, p1, p2, p3 = pred
+            gx, gy, gz = _cf_rotate(nx, ny, nz, p0, -p1, -p2, -p3)
+            dq0 = math.sqrt((gz + 1) * 0.5)
+            dq = (dq0, -gy / (2.0 * dq0), gx / (2.0 * dq0), 0.0)
+            alpha = gain_acc
+            if adaptive:  # getAdaptiveGain
+                err = abs(math.sqrt(ax * ax + ay * ay + az * az) - _CF_GRAVITY) / _CF_GRAVITY
+                factor = 1.0 if err < 0.1 else ((-10.0 * err + 2.0) if err < 0.2 else 0.0)
+                alpha = factor * gain_acc
+            q = _cf_mul(pred, _cf_scale(alpha, dq))
+            if has_mag:  # getMagCorrection
+                t0, t1, t2, t3 = q
+                lx, ly, _lz = _cf_rotate(mi[0], mi[1], mi[2], t0, -t1, -t2, -t3)
+                q = _cf_mul(q, _cf_scale(gain_mag, _cf_heading_dq(lx, ly)))
+            q = _cf_norm4(q)
+        out[i] = (q[0], -q[1], -q[2], -q[3])  # getOrientation: the inverse of the state
     return quat.multiply(Q_ENU_FROM_NWU, out)
 
 
@@ -190,7 +355,8 @@ def runners() -> dict[str, Callable[..., dict[str, np.ndarray]]]:
             return res
         return run
 
-    return {"vqf": vqf, "fusion": single(run_fusion), "madgwick": single(run_madgwick)}
+    return {"vqf": vqf, "fusion": single(run_fusion), "madgwick": single(run_madgwick),
+            "complementary": single(run_complementary)}
 
 
 def run_vqf_offline(gyro: np.ndarray, acc: np.ndarray, mag: np.ndarray | None, rate_hz: float

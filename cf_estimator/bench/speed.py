@@ -69,13 +69,20 @@ def per_sample_rates(n: int = 20000, peers: tuple[str, ...] = ("vqf", "fusion", 
     if "madgwick" in peers:
         from ahrs.filters import Madgwick
 
-        mw = Madgwick(frequency=rate_hz, gain=0.041)
+        mw = Madgwick(frequency=rate_hz, gain=0.1)  # imu_filter_madgwick's default
         q = np.array([1.0, 0.0, 0.0, 0.0])
         m = min(n, 5000)  # pure Python: fewer samples are enough
         t0 = time.perf_counter()
         for i in range(m):
             q = mw.updateMARG(q, gyro[i], acc[i], mag[i])
         out["madgwick"] = m / (time.perf_counter() - t0)
+    if "complementary" in peers:  # the port runs a whole array (one Python loop inside)
+        from cf_estimator.bench.peers import run_complementary
+
+        m = min(n, 5000)
+        t0 = time.perf_counter()
+        run_complementary(gyro[:m], acc[:m], mag[:m], rate_hz)
+        out["complementary"] = m / (time.perf_counter() - t0)
     return out
 
 

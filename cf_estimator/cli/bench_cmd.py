@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 import sys
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from cf_estimator.cli.base import CliError, finite_float
 from cf_estimator.cli.common import (
     add_params_options,
     check_input_path,
@@ -23,7 +25,6 @@ from cf_estimator.cli.common import (
     load_params,
     note,
 )
-from cf_estimator.cli.main import CliError, finite_float
 
 if TYPE_CHECKING:
     from cf_estimator.bench.speed import BagThroughput
@@ -36,7 +37,8 @@ def _csv(text: str) -> list[str]:
 def register(subparsers: Any) -> None:
     """Add ``bench`` and its sub-commands."""
     p = subparsers.add_parser(
-        "bench", help="accuracy and speed benchmarks (BROAD, thesis scenarios, speed) vs peers",
+        "bench", help="accuracy and speed benchmarks vs peers (bench broad, euroc, scenarios, "
+        "speed)",
         description="Benchmarks of the filter against VQF, x-io Fusion and Madgwick.",
     )
     sub = p.add_subparsers(dest="bench_command", required=True, metavar="BENCHMARK")
@@ -86,16 +88,18 @@ def register(subparsers: Any) -> None:
     e.add_argument("--settle", type=finite_float, default=10.0, metavar="S",
                    help="seconds after the first IMU sample before scoring (default %(default)s)")
     e.add_argument("--peers", default="all", metavar="LIST",
-                   help="comma-separated: vqf,vqf_offline,madgwick,fusion,riann, 'all' "
+                   help="comma-separated: vqf,vqf_offline,madgwick,fusion,complementary,riann, "
+                   "'all' "
                    "(default: those installed) or 'none'")
     e.add_argument("--params", metavar="YAML", help="ROS 2 parameter file for our filter "
                    "(default: the shipped defaults, FilterParams())")
+    e.add_argument("--start-at", metavar="LIST",
+                   help="comma-separated seconds, e.g. 20,40,60: also crop every flight to start "
+                   "there (a mid-air start: node restarted in flight) and score 2-12 s and "
+                   "12 s-end after that start, beside the full (ground) start")
     e.add_argument("--json", metavar="OUT", help="write per-flight scores and means as JSON")
     e.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
                    help="worker processes, one flight each (default %(default)s)")
-    e.add_argument("--start", type=finite_float, default=0.0, metavar="S",
-                   help="drop each flight's first S seconds before running anything (a "
-                   "mid-air start; --settle counts from there; default %(default)s)")
     e.add_argument("--velocity", action="store_true",
                    help="also run our filter aided by the ground truth's velocity (ASL v_RS_R "
                    "columns, else differentiated positions), degraded by the flags below: "
@@ -168,7 +172,8 @@ def register(subparsers: Any) -> None:
 def _add_peers_option(parser: Any) -> None:
     """``--peers``, the same in every bench command."""
     parser.add_argument("--peers", default="all", metavar="LIST",
-                        help="peers at their defaults: comma-separated vqf,fusion,madgwick, "
+                        help="peers at their defaults (ROS peers: their ROS packages' defaults): "
+                        "comma-separated vqf,fusion,madgwick,complementary, "
                         "'all' or 'none' (default all; peers not installed are skipped with a "
                         "note: pip install '.[bench]')")
 
@@ -280,6 +285,15 @@ def run_euroc(args: Any) -> int:
         raise CliError("--jobs must be >= 1", 2)
     if args.settle < 0:
         raise CliError(f"--settle must be >= 0 (got {args.settle:g})", 2)
+    starts: list[float] = []
+    for token in _csv(args.start_at or ""):
+        try:
+            value = float(token)
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and value > 0):
+            raise CliError(f"--start-at takes seconds > 0, got {token!r}", 2)
+        starts.append(value)
     params = _load_params(args.params)
     velocity = _velocity_input(args)
     try:
@@ -291,8 +305,6 @@ def run_euroc(args: Any) -> int:
             flights = [euroc.load_flight(folders[0], args.groundtruth)]
         else:
             flights = euroc.load_flights(args.data)
-        if args.start > 0.0:
-            flights = [euroc.crop_flight(f, args.start) for f in flights]
     except euroc.EurocDataError as exc:
         raise CliError(str(exc), 2) from None
     if velocity is not None:
@@ -304,8 +316,6 @@ def run_euroc(args: Any) -> int:
     print(f"EuRoC: {len(result.flights)} flight(s) from {args.data}; 6-D inclination error "
           f"[deg] vs ground truth after the first {args.settle:g} s: RMS / max")
     print(f"cf_estimator parameters: {args.params or 'shipped defaults'}")
-    if args.start > 0.0:
-        print(f"mid-air start: each flight from {args.start:g} s on")
     if velocity is not None:
         rate = f"{velocity.rate_hz:g} Hz" if velocity.rate_hz else "rate as given"
         print(f"velocity aiding: ground-truth velocity, {rate}, noise {velocity.noise_m_s:g} "
@@ -315,12 +325,22 @@ def run_euroc(args: Any) -> int:
             print(f"  note: {name}: {line}")
     print()
     print(ev.format_table(result), end="")
+    midair = {}
+    for start in starts:
+        mid = ev.run_midair(flights, params, start, peers, jobs=args.jobs, velocity=velocity)
+        midair[f"{start:g}"] = mid
+        print()
+        w0, w1 = ev.MIDAIR_WINDOWS
+        print(f"Mid-air start {start:g} s into each flight: inclination RMS [deg] "
+              f"{w0[0]:g}-{w0[1]:g} s / {w1[0]:g} s-end after that start "
+              f"({len(mid.flights)} flight(s) long enough)")
+        print(ev.format_table(mid, ev.MIDAIR_SCORES), end="")
     if args.json:
         doc = result.to_json()
+        doc["midair"] = {k: v.to_json() for k, v in midair.items()}
         doc["meta"] = {
             "data": str(args.data), "peers": peers, "peers_skipped": skipped,
             "params_file": args.params, "cf_estimator_params": as_dict(params),
-            "start_s": args.start,
             "velocity": None if velocity is None else dataclasses.asdict(velocity),
             "metrics": "inclination error: angle between estimated and true up in the sensor "
                        "frame [deg]; RMS and max over samples with ground truth, t >= settle_s",

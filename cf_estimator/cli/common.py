@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from cf_estimator.cli.main import CliError
+from cf_estimator.cli.base import CliError
 from cf_estimator.core.params import FilterParams
 from cf_estimator.pipeline.params import PipelineParams
 from cf_estimator.schema import ParameterError

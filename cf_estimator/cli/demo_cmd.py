@@ -27,8 +27,8 @@ import numpy as np
 from cf_estimator.bag import io
 from cf_estimator.bag.replay import ReplayOptions, ReplayVariant, replay_variants
 from cf_estimator.bag.simulate import TRUTH_TOPIC, write_scenario_bag
+from cf_estimator.cli.base import CliError
 from cf_estimator.cli.common import check_output_dir
-from cf_estimator.cli.main import CliError
 from cf_estimator.core.params import FilterParams
 from cf_estimator.pipeline import PipelineParams
 from cf_estimator.scenarios import make_scenario

@@ -16,7 +16,7 @@ import json
 import math
 from typing import Any
 
-from cf_estimator.cli.main import CliError, finite_float
+from cf_estimator.cli.base import CliError, finite_float
 from cf_estimator.core import design
 from cf_estimator.core.params import FilterParams
 

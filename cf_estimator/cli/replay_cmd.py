@@ -17,6 +17,7 @@ from typing import Any
 
 from cf_estimator.bag import io
 from cf_estimator.bag.replay import HEADING_ALIGNMENTS, ReplayError, ReplayOptions, replay_bag
+from cf_estimator.cli.base import CliError
 from cf_estimator.cli.common import (
     add_params_options,
     check_input_path,
@@ -25,7 +26,6 @@ from cf_estimator.cli.common import (
     load_params,
     warn,
 )
-from cf_estimator.cli.main import CliError
 
 
 def register(subparsers: Any) -> None:

@@ -13,7 +13,7 @@ from typing import Any
 
 from cf_estimator.bag import io
 from cf_estimator.bag.simulate import IMU_TOPIC, MAG_TOPIC, TRUTH_TOPIC, write_scenario_bag
-from cf_estimator.cli.main import CliError, finite_float
+from cf_estimator.cli.base import CliError, finite_float
 from cf_estimator.scenarios import DEFAULT_DURATION_S, DEFAULT_RATE_HZ, SCENARIOS, make_scenario
 
 

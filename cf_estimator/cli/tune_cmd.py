@@ -22,13 +22,14 @@ from typing import Any
 
 import numpy as np
 
+from cf_estimator.cli.base import CliError, finite_float
 from cf_estimator.cli.common import (
     add_params_options,
     check_input_path,
     check_output_file,
     load_params,
+    warn,
 )
-from cf_estimator.cli.main import CliError, finite_float
 
 _BAG_ONLY = ("reference_topic", "imu_topic", "mag_topic", "score_after")
 #: The thesis requirement: at most 90' peak tilt error under impacts, vibration and the 25 m/s
@@ -104,6 +105,15 @@ def register(subparsers: Any) -> None:
                    help="random seed of the search (default 0; same seed, same result)")
     p.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
                    help="worker processes (default %(default)s)")
+    p.add_argument("--validate", metavar="LIST",
+                   help="held-out recordings the tuned set must not lose on (comma-separated): "
+                   "EuRoC/ASL flight folders or a directory of them (e.g. phantom4), BROAD trial "
+                   "files or directories, bags with the reference topic; always checked too: the "
+                   "built-in validation scenarios (lying still, flight, uav, started in motion, "
+                   "bad start)")
+    p.add_argument("--force", action="store_true",
+                   help="write --out even when the tuned set loses on a validation case (a loud "
+                   "warning instead of a refusal)")
     p.add_argument("--out", metavar="YAML",
                    help="write the best parameters here, at full precision (a complete ROS 2 "
                    "parameter file)")
@@ -234,6 +244,46 @@ def _objective(args: Any, source: _Source) -> str:
     return "inclination"
 
 
+def _held_out(args: Any) -> tuple[list, list]:
+    """``--validate`` → (BROAD / bag trials, EuRoC flights); CliError when one is unusable."""
+    from pathlib import Path
+
+    from cf_estimator.bag.io import BagError
+    from cf_estimator.bench import bagtrial, broad, euroc
+
+    trials: list = []
+    flights: list = []
+    for item in _csv(args.validate or ""):
+        path = check_input_path(item, "--validate recording")
+        try:
+            if path.is_dir() and (euroc.is_flight_dir(path) or not any(path.glob("*.hdf5"))
+                                  and not (path / "metadata.yaml").exists()):
+                flights += euroc.load_flights(path)
+            elif path.suffix == ".hdf5" or path.is_dir() and any(path.glob("*.hdf5")):
+                paths, info = broad.resolve_trials(str(path), None)
+                trials += [broad.load_trial(p, info) for p in paths]
+            else:
+                trials.append(bagtrial.load_bag_trial(
+                    path, args.reference_topic or bagtrial.DEFAULT_REFERENCE_TOPIC))
+        except (euroc.EurocDataError, broad.BroadDataError) as exc:
+            raise CliError(f"--validate {Path(item)}: {exc}", 2) from None
+        except BagError as exc:
+            raise CliError(f"--validate {Path(item)}: {exc}", 2) from None
+    return trials, flights
+
+
+def _validation(args: Any, base: Any, best: Any, held: tuple[list, list]) -> list:
+    """Start point vs tuned set on what the search did not see; prints the table and returns
+    the cases where the tuned set loses."""
+    from cf_estimator.bench import tuning
+
+    rows = tuning.validate(base, best, held[0], jobs=args.jobs, flights=held[1])
+    print(f"validation (not searched on; before = the start point, LOSES = worse by more than "
+          f"{(tuning.LOSS_FACTOR - 1) * 100:.0f}% + {tuning.LOSS_MARGIN_DEG:g} deg):")
+    print(tuning.format_validation(rows), end="")
+    return [r for r in rows if r.loses]
+
+
 def _decimated(source: _Source, factor: int) -> list:
     trials = [t.decimated(factor) for t in source.trials]
     for t in trials:
@@ -292,6 +342,13 @@ def run(args: Any) -> int:
     base = load_params(args.params, args.node_name)[0]
     source = _bag_source(args) if args.bag is not None else _broad_source(args)
     objective = _objective(args, source)
+    space, dropped = tuning.for_objective(space, objective)
+    if dropped:
+        print(f"  objective {objective} cannot see {', '.join(dropped)} (magnetometer channel): "
+              "not searched", flush=True)
+    if not space:
+        raise CliError(f"nothing to search for objective {objective}", 2)
+    held = _held_out(args)
     trials = _decimated(source, args.decimate)
     start = time.monotonic()
 
@@ -325,10 +382,23 @@ def run(args: Any) -> int:
         print(f"  {d.name:<28} {getattr(base, d.name):>10.5g} -> {getattr(best, d.name):<10.5g}")
     if args.confirm:
         source.confirm(base, best)
+    losses = _validation(args, base, best, held)
+    where = "; ".join(f"{r.label} {r.metric} {r.before_deg:.2f} -> {r.after_deg:.2f} deg"
+                      for r in losses[:3]) + (f"; {len(losses) - 3} more" if len(losses) > 3
+                                              else "")
+    if losses and args.out and not args.force:
+        raise CliError(f"the tuned set is worse than the start point on {len(losses)} "
+                       f"validation case(s) ({where}): {args.out} not written; check the table, "
+                       "or --force to write it anyway")
+    if losses:
+        warn(f"THE TUNED SET IS WORSE than the start point on {len(losses)} validation "
+             f"case(s): {where}" + (" (written anyway: --force)" if args.out else ""))
     if args.out:
         limit_text = (", ".join(f"{k} <= {v:g}'" for k, v in limits.items())
                       if limits else "none")
+        loss_text = (f"# WARNING: worse than the start point on: {where} (--force)\n"
+                     if losses else "# validation: not worse than the start point on any case\n")
         _write(args.out, best, f"# cf-estimator tune: objective {objective} on {source.label}; "
                f"before {final[0]:.4f}, after {final[1]:.4f} (decimate {args.decimate}); "
-               f"scenario limits: {limit_text}\n")
+               f"scenario limits: {limit_text}\n" + loss_text)
     return 0

@@ -37,8 +37,11 @@
 #define ACCEL_SPIKE_SIGMAS 4.0
 #define QUICK_LAG_TIME_CONSTANT_S 0.2
 #define REST_SAMPLE_SIGMAS 8.0
-#define REST_GATE_SIGMAS 5.0
-#define REST_GATE_OVERRIDE_S 10.0
+#define REST_GATE_SIGMAS 3.0
+#define REST_NOISE_CAP 1.0
+#define BIAS_LEARNING_MAX_ERROR_RAD 0.35
+#define REST_MAG_TOLERANCE_RAD 0.01
+#define ACCEL_DETECT_SIGMAS 3.0
 #define BIAS_RANDOM_WALK_RAD_S_SQRT_S 2e-4
 #define GRAVITY_TIME_CONSTANT_S 10.0
 #define MAG_REFERENCE_SAMPLES 20
@@ -64,11 +67,13 @@ typedef struct {
     double qw, qx, qy, qz, bx, by, bz, cx, cy, cz, lx, ly, lz, z_m, time_s, clip_timer_s,
         rest_timer_s, blk_n, blk_t, blk_gx, blk_gy, blk_gz, blk_ax, blk_ay, blk_az, blk_g2, blk_a2,
         prev_n, pgx, pgy, pgz, pax, pay, paz, blk_d, last_n, lgx, lgy, lgz, lax, lay, laz,
-        noise_g2, noise_a2, bias_var, gate_timer_s, mag_ref_norm, mag_ref_dip, mag_ref_count,
+        noise_g2, noise_a2, bias_var, blk_mx, blk_my, blk_mz, blk_mn, pmx, pmy, pmz, pm_n,
+        mag_clip_timer_s, mag_ref_norm, mag_ref_dip, mag_ref_count,
         mag_reject_timer_s, mag_last_time_s, g_ref, accel_hold, acx, acy, acz, rate_lp, ex, ey,
         ez, error_norm,
         fx, fy, fz, yaw_error_rad, recovery_count;
-    char recovering, at_rest, mag_disturbed, heading_initialized, clipped, accel_used;
+    char recovering, at_rest, mag_disturbed, heading_initialized, clipped, accel_used, moved,
+        bias_unverified, mag_recovering;
     int mag_status, phase;
 } cf_state;
 
@@ -175,12 +180,19 @@ static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int
     int first = usable && !s->heading_initialized;
     s->heading_initialized = (char)(s->heading_initialized || usable);
 
-    double r1 = fast ? maxd(p->r1, p->startup_k1) : p->r1;
+    double yaw_error = atan2(w[0], w[1]);
+    int big = maxd(yaw_error, -yaw_error) > p->mag_saturation_limit_rad;
+    if (usable) s->mag_clip_timer_s = (big && learn && !first) ? s->mag_clip_timer_s + dt_m : 0.0;
+    int enter = (p->recovery_trigger_s > 0.0) && (s->mag_clip_timer_s >= p->recovery_trigger_s);
+    int leave = usable && (maxd(yaw_error, -yaw_error) < 0.1 * p->mag_saturation_limit_rad);
+    s->mag_recovering = (char)(s->mag_recovering ? !leave : enter);
+    if (enter) s->mag_clip_timer_s = 0.0;
+    int quick = fast || s->mag_recovering;
+    double r1 = quick ? maxd(p->r1, p->startup_k1) : p->r1;
     double gain = usable ? r1 * dt_m / (1.0 + r1 * dt_m) : 0.0;
     double ldt = (usable && learn) ? dt_m : 0.0;
-    double limit = fast ? 4.0 : p->mag_saturation_limit_rad;
+    double limit = quick ? 4.0 : p->mag_saturation_limit_rad;
 
-    double yaw_error = atan2(w[0], w[1]);
     s->yaw_error_rad = usable ? yaw_error : 0.0;
     double yaw_c = mind(maxd(yaw_error, -limit), limit);
     int yaw_mode = !p->mag_full || first;
@@ -208,7 +220,7 @@ static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int
 
 /* _stillness() of step.py: block statistics, rest, bias from still blocks */
 static void stillness(cf_state *s, const cf_params *p, const double *g, const double *a,
-                      double dt)
+                      const double *mag, double dt)
 {
     double gx = g[0], gy = g[1], gz = g[2], ax = a[0], ay = a[1], az = a[2];
     s->blk_n = s->blk_n + 1.0;
@@ -232,6 +244,15 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
     s->lay = ay;
     s->laz = az;
     s->last_n = s->last_n + 1.0;
+    if (mag != NULL) {
+        double mx = mag[0], my = mag[1], mz = mag[2];
+        double mn = sqrt(mx * mx + my * my + mz * mz);
+        double use = p->use_mag ? 1.0 : 0.0;
+        s->blk_mx = s->blk_mx + use * mx / mn;
+        s->blk_my = s->blk_my + use * my / mn;
+        s->blk_mz = s->blk_mz + use * mz / mn;
+        s->blk_mn = s->blk_mn + use;
+    }
     int has_prev = s->prev_n > 0.0;
     int jump_g = sqrt(pow(gx - s->pgx, 2.0) + pow(gy - s->pgy, 2.0) + pow(gz - s->pgz, 2.0)) >
                  (p->rest_gyro_threshold_rad_s + REST_SAMPLE_SIGMAS * sqrt(s->noise_g2));
@@ -251,21 +272,32 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
     double spread = 1.0 / n + 1.0 / maxd(s->prev_n, 1.0);
     double dg = sqrt(pow(mgx - s->pgx, 2.0) + pow(mgy - s->pgy, 2.0) + pow(mgz - s->pgz, 2.0));
     double da = sqrt(pow(max_ - s->pax, 2.0) + pow(may - s->pay, 2.0) + pow(maz - s->paz, 2.0));
-    int steady = has_prev &&
-                 (dg < p->rest_gyro_threshold_rad_s + REST_NOISE_SIGMAS * sqrt(noise_g2 * spread)) &&
-                 (da < p->rest_accel_threshold_m_s2 + REST_NOISE_SIGMAS * sqrt(noise_a2 * spread)) &&
+    double tol_g = p->rest_gyro_threshold_rad_s +
+                   REST_NOISE_SIGMAS * mind(sqrt(noise_g2 * spread),
+                                            REST_NOISE_CAP * p->rest_gyro_threshold_rad_s);
+    double tol_a = p->rest_accel_threshold_m_s2 +
+                   REST_NOISE_SIGMAS * mind(sqrt(noise_a2 * spread),
+                                            REST_NOISE_CAP * p->rest_accel_threshold_m_s2);
+    int mag_seen = (s->blk_mn > 0.0) && (s->pm_n > 0.0);
+    double bm = maxd(sqrt(s->blk_mx * s->blk_mx + s->blk_my * s->blk_my + s->blk_mz * s->blk_mz),
+                     1e-300);
+    double umx = s->blk_mx / bm, umy = s->blk_my / bm, umz = s->blk_mz / bm;
+    double dm = sqrt(pow(umx - s->pmx, 2.0) + pow(umy - s->pmy, 2.0) + pow(umz - s->pmz, 2.0));
+    int turned = mag_seen &&
+                 (dm > REST_MAG_TOLERANCE_RAD + p->rest_gyro_threshold_rad_s * s->blk_t);
+    int steady = has_prev && (dg < tol_g) && (da < tol_a) && !turned &&
                  (sqrt(mgx * mgx + mgy * mgy + mgz * mgz) <
                   p->bias_limit_rad_s * 1.7320508075688772);
     double r = maxd(noise_g2 / (3.0 * n), 1e-12);
-    double innovation = sqrt(pow(mgx - s->bx, 2.0) + pow(mgy - s->by, 2.0) + pow(mgz - s->bz, 2.0));
-    int consistent = innovation < p->rest_gyro_threshold_rad_s +
-                                      REST_GATE_SIGMAS * sqrt(3.0 * (s->bias_var + r));
-    int override = s->gate_timer_s >= REST_GATE_OVERRIDE_S;
-    int still = steady && (consistent || override);
-    s->gate_timer_s = (steady && !consistent) ? s->gate_timer_s + s->blk_t : 0.0;
-    if (steady && !consistent && override) s->bias_var = pow(p->bias_prior_sigma_rad_s, 2.0);
+    double gate = p->rest_gyro_threshold_rad_s + REST_GATE_SIGMAS * sqrt(s->bias_var + r);
+    int consistent = (maxd(mgx - s->bx, s->bx - mgx) < gate) &&
+                     (maxd(mgy - s->by, s->by - mgy) < gate) &&
+                     (maxd(mgz - s->bz, s->bz - mgz) < gate);
+    int still = steady && consistent;
+    s->moved = (char)(s->moved || (has_prev && !still));
     s->rest_timer_s = still ? s->rest_timer_s + s->blk_t : 0.0;
     s->at_rest = (char)(p->rest_bias_learning && (s->rest_timer_s >= p->rest_time_s));
+    if (s->at_rest) s->bias_unverified = (char)(!s->moved && !mag_seen);
     if (s->at_rest) { /* a still block at rest measures the bias */
         double k = s->bias_var / (s->bias_var + r);
         s->bx = s->bx + k * (mgx - s->bx);
@@ -286,6 +318,14 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
     s->pay = may;
     s->paz = maz;
     s->prev_n = n;
+    if (s->blk_mn > 0.0) {
+        s->pmx = umx;
+        s->pmy = umy;
+        s->pmz = umz;
+    }
+    s->pm_n = s->blk_mn;
+    s->blk_mx = s->blk_my = s->blk_mz = 0.0;
+    s->blk_mn = 0.0;
     s->blk_n = 0.0;
     s->blk_t = 0.0;
     s->blk_d = 0.0;
@@ -319,7 +359,7 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
         double deviation = maxd(an - s->g_ref, s->g_ref - an);
         int spike = deviation > p->acceleration_threshold_m_s2 +
                                     ACCEL_SPIKE_SIGMAS * sqrt(s->noise_a2);
-        stillness(s, p, g, acc, dt);
+        stillness(s, p, g, acc, mag, dt);
         double steady_g = sqrt(s->pax * s->pax + s->pay * s->pay + s->paz * s->paz);
         int quick = fast || (s->at_rest &&
                              (maxd(steady_g - s->g_ref, s->g_ref - steady_g) <
@@ -336,7 +376,10 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
         double decayed =
             s->accel_hold * (p->acceleration_hold_s / (p->acceleration_hold_s + dt));
         s->accel_hold = maxd(level, decayed);
-        int accelerating = s->accel_hold > p->acceleration_threshold_m_s2;
+        double lp_sigma =
+            sqrt(s->noise_a2 / 3.0 * dt / (2.0 * ACCEL_LOWPASS_TIME_CONSTANT_S + dt));
+        int accelerating = s->accel_hold > p->acceleration_threshold_m_s2 +
+                                               ACCEL_DETECT_SIGMAS * lp_sigma;
         double rate =
             sqrt(pow(gx - s->bx, 2.0) + pow(gy - s->by, 2.0) + pow(gz - s->bz, 2.0));
         double lw = dt / (RATE_LOWPASS_TIME_CONSTANT_S + dt);
@@ -380,7 +423,8 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
         s->cx = s->cx + k3dt * f[0];
         s->cy = s->cy + k3dt * f[1];
         s->cz = s->cz + k3dt * f[2];
-        double ldt = learn ? dt : 0.0;
+        int small = (en < BIAS_LEARNING_MAX_ERROR_RAD) && (ux * vx + uy * vy + uz * vz > 0.0);
+        double ldt = (learn && small) ? dt : 0.0;
         s->bx = s->bx - ldt * (k2 * f[0] + s->cx);
         s->by = s->by - ldt * (k2 * f[1] + s->cy);
         s->bz = s->bz - ldt * (k2 * f[2] + s->cz);
@@ -777,7 +821,9 @@ static PyMemberDef State_members[] = {
     SD(blk_n), SD(blk_t), SD(blk_gx), SD(blk_gy), SD(blk_gz), SD(blk_ax), SD(blk_ay),
     SD(blk_az), SD(blk_g2), SD(blk_a2), SD(prev_n), SD(pgx), SD(pgy), SD(pgz), SD(pax), SD(pay),
     SD(paz), SD(blk_d), SD(last_n), SD(lgx), SD(lgy), SD(lgz), SD(lax), SD(lay), SD(laz),
-    SD(noise_g2), SD(noise_a2), SD(bias_var), SD(gate_timer_s), SB(at_rest), SD(mag_ref_norm),
+    SD(noise_g2), SD(noise_a2), SD(bias_var), SD(blk_mx), SD(blk_my), SD(blk_mz),
+    SD(blk_mn), SD(pmx), SD(pmy), SD(pmz), SD(pm_n), SB(moved), SB(bias_unverified),
+    SD(mag_clip_timer_s), SB(mag_recovering), SB(at_rest), SD(mag_ref_norm),
     SD(mag_ref_dip), SD(mag_ref_count), SB(mag_disturbed), SD(mag_reject_timer_s),
     SD(mag_last_time_s), SB(heading_initialized), SD(g_ref), SD(accel_hold), SD(acx), SD(acy), SD(acz), SD(rate_lp),
     SD(ex), SD(ey), SD(ez), SD(error_norm), SD(fx), SD(fy), SD(fz), SB(clipped),
@@ -810,11 +856,14 @@ PyMODINIT_FUNC PyInit__kernel(void)
     }
     if (PyDict_SetItemString(StateType.tp_dict, "FIELDS", fields) < 0) return NULL;
     Py_DECREF(fields);
-    PyObject *consts = Py_BuildValue("{s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:i,s:d,s:d,s:d,s:i}",
+    PyObject *consts = Py_BuildValue("{s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:i,s:d,s:d,s:d,s:i}",
                                      "ACCEL_LOWPASS_TIME_CONSTANT_S", ACCEL_LOWPASS_TIME_CONSTANT_S,
                                      "ACCEL_SPIKE_SIGMAS", ACCEL_SPIKE_SIGMAS,
                                      "REST_GATE_SIGMAS", REST_GATE_SIGMAS,
-                                     "REST_GATE_OVERRIDE_S", REST_GATE_OVERRIDE_S,
+                                     "REST_NOISE_CAP", REST_NOISE_CAP,
+                                     "BIAS_LEARNING_MAX_ERROR_RAD", BIAS_LEARNING_MAX_ERROR_RAD,
+                                     "REST_MAG_TOLERANCE_RAD", REST_MAG_TOLERANCE_RAD,
+                                     "ACCEL_DETECT_SIGMAS", ACCEL_DETECT_SIGMAS,
                                      "QUICK_LAG_TIME_CONSTANT_S", QUICK_LAG_TIME_CONSTANT_S,
                                      "RATE_LOWPASS_TIME_CONSTANT_S", RATE_LOWPASS_TIME_CONSTANT_S,
                                      "REST_NOISE_SIGMAS", REST_NOISE_SIGMAS,

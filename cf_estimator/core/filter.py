@@ -114,6 +114,11 @@ class FilterStatus:
     yaw_error_rad: float  #: last heading error seen by the magnetometer channel
     recovery_count: int
     mag_yaw_rate_correction_rad_s: float  #: integral of the heading channel, world vertical
+    #: the bias was last measured in a still phase at power-on without a magnetometer: a steady
+    #: turn then (up to REST_GATE_SIGMAS·bias_prior_sigma_rad_s per axis) cannot be told from
+    #: rest, so the heading rate is not verified until a later still phase or a magnetometer
+    heading_rate_unverified: bool = False
+    heading_recovering: bool = False  #: the heading channel is in its recovery (quick) mode
 
 
 #: Columns of :meth:`ComplementaryFilter.run_rows`'s ``extra_out``: raw error e (3, rad, sensor),
@@ -341,6 +346,8 @@ class ComplementaryFilter:
             yaw_error_rad=float(s.yaw_error_rad),
             recovery_count=int(s.recovery_count),
             mag_yaw_rate_correction_rad_s=float(s.z_m),
+            heading_rate_unverified=bool(s.bias_unverified),
+            heading_recovering=bool(s.mag_recovering),
         )
 
     def state_snapshot(self) -> Any:

@@ -279,11 +279,11 @@ class FilterParams:
         group="bias",
     )
     bias_learning_k2: float = param(
-        0.05,
+        0.8,
         "1/s^2",
         "Integral gain while the bias is uncertain (no still phase yet): the loop's k2 is "
         "raised towards this in proportion to the bias variance, and k1 to at least 2*sqrt(k2), "
-        "so a large bias is learned in flight within tens of seconds (0 = off).",
+        "so a large bias is learned in flight within about 20 s, from any start (0 = off).",
         minimum=0.0,
         maximum=10.0,
         group="bias",

@@ -20,7 +20,8 @@ One sample, in the order the code runs (world frame ENU inside; q = q_world_from
                   thesis's unit on the error)
     6. magnetom.  'yaw':  e_ψ = atan2(m_E, m_N) of the measured field in the world frame,
                   saturated; q ← Exp_z(g(r1)·e_ψ) ⊗ q; z_m ← z_m + r2·dt_m·e_ψ (heading only:
-                  a rotation about the world vertical never changes roll/pitch)
+                  a rotation about the world vertical never changes roll/pitch); saturated
+                  for recovery_trigger_s: heading recovery with startup_k1 (as the tilt's)
                   'full': e_m = m̂ × (R⁻ᵀ·m_ref) through W2 = r1 + r2/s on all axes (Ryzhkov, drift)
 
 Stillness and bias (``_stillness``): on blocks of rest_window_s, a block whose gyro and
@@ -29,8 +30,13 @@ noise measured from sample-to-sample differences: vibration-robust; a constant b
 still; rest_time_s of still blocks is rest. At rest each still block's gyro mean is a bias
 measurement, fused by variance (scalar Kalman update; σ_b = √bias_var starts at
 bias_prior_sigma_rad_s, grows by a random walk, shrinks with each measurement and, in motion,
-with the integral's learning). A steady block far from a known bias is a constant-rate turn,
-not rest (unless it stays so for REST_GATE_OVERRIDE_S).
+with the integral's learning). Vibration widens the thresholds by at most REST_NOISE_CAP times
+themselves; a turning magnetic field is motion; a steady block far from the bias estimate (on
+any axis, REST_GATE_SIGMAS) is a constant-rate turn, not rest, however long it lasts.
+
+Linear acceleration (the tight clip) is detected when the 50 ms low-passed | |a| − ‖g‖ | exceeds
+acceleration_threshold_m_s2 plus ACCEL_DETECT_SIGMAS of the vibration left in the low-pass, or
+at once for a spike (an impact).
 
 Phases: STARTUP (after initialisation, for startup_duration_s: gain startup_k1, no clip, the
 unit bypassed, no integral learning) → RUNNING → RECOVERING (error clipped without a break for
@@ -64,19 +70,34 @@ ACCEL_LOWPASS_TIME_CONSTANT_S = 0.05
 #: A single accelerometer sample this many noise standard deviations (measured by the stillness
 #: blocks) off ‖g‖ is an impact: the detector takes it at once, unfiltered.
 ACCEL_SPIKE_SIGMAS = 4.0
+#: The low-passed | |a| − ‖g‖ | must exceed acceleration_threshold_m_s2 by this many standard
+#: deviations of what vibration leaves in the low-pass: rotor vibration is not a manoeuvre.
+ACCEL_DETECT_SIGMAS = 3.0
 #: Time constant [s] of the aperiodic unit while the error bypasses it (start-up, rest, recovery).
 QUICK_LAG_TIME_CONSTANT_S = 0.2
 #: Stillness: a change of the block means within this many standard deviations of the observed
-#: noise floor is no change (the floor includes rotor vibration, so vibration is not motion).
+#: noise floor is no change (the floor includes rotor vibration, so vibration is not motion) ...
 REST_NOISE_SIGMAS = 2.0
+#: ... but the noise may widen each threshold by at most this multiple of the threshold itself:
+#: rotor vibration never widens "still" until flight fits inside it (phantom4, 3-6 m/s² of
+#: vibration: uncapped, 17 of 40 airborne recordings were taken for rest).
+REST_NOISE_CAP = 1.0
+#: Stillness with a magnetometer: the block-mean field direction (unit vector, sensor frame) may
+#: turn by at most this plus rest_gyro_threshold_rad_s × the block length [rad]; more is a turn
+#: (a steady turn looks still to the gyro and accelerometer, never to the magnetometer).
+REST_MAG_TOLERANCE_RAD = 0.01
 #: A single sample this many noise standard deviations (plus the thresholds) away from the last
 #: block mean ends a still phase at once, without waiting for the block to end.
 REST_SAMPLE_SIGMAS = 8.0
-#: A steady block whose gyro mean is this many standard deviations from the bias estimate is a
-#: steady turn, not rest ...
-REST_GATE_SIGMAS = 5.0
-#: ... unless such blocks follow each other this long [s]: then the bias changed (re-learned).
-REST_GATE_OVERRIDE_S = 10.0
+#: A steady block whose gyro mean is, on any axis, this many standard deviations (of the bias
+#: estimate and of the block mean) from the bias estimate is a steady turn, not rest — however
+#: long it lasts: biases drift (BIAS_RANDOM_WALK_RAD_S_SQRT_S), they do not jump. At power-on
+#: the prior bias_prior_sigma_rad_s bounds what a still phase may take as bias.
+REST_GATE_SIGMAS = 3.0
+#: The integral (bias) learns only while the raw error is below this [rad]: a bias within the
+#: prior leaves an error of at most a few REST_GATE_SIGMAS·bias_prior_sigma_rad_s / k1 (< 0.2
+#: rad at the defaults); more is an attitude error, which must not wind the bias up.
+BIAS_LEARNING_MAX_ERROR_RAD = 0.35
 #: Bias random walk [rad/s/sqrt(s)]: how fast the confidence in a learned bias fades.
 BIAS_RANDOM_WALK_RAD_S_SQRT_S = 2e-4
 #: The bias estimate counts as converged below this standard deviation [rad/s].
@@ -100,8 +121,12 @@ class StepState:
     correction [rad/s, world z]; e* last raw error [rad, sensor]; f* last processed error.
     Stillness: blk_* sums of the current block (gyro [rad/s], accel [m/s²], *2 sums of squared
     differences), p* means of the previous block, l* the last sample, noise_*2 the last block's
-    noise variance (sum over axes),
-    bias_var variance of the bias estimate [(rad/s)²].
+    noise variance (sum over axes), blk_m* / pm* the current / previous block's sum / mean of
+    unit magnetometer vectors (pm_n: how many samples the previous block had),
+    bias_var variance of the bias estimate [(rad/s)²] (per axis); moved: a non-still block was
+    seen since initialisation; bias_unverified: the last rest bias measurement came from a still
+    phase at power-on without a magnetometer (a steady turn then cannot be told from rest);
+    mag_clip_timer_s / mag_recovering: the heading channel's recovery (as the tilt's).
     """
 
     FIELDS = [
@@ -151,7 +176,18 @@ class StepState:
         "noise_g2",
         "noise_a2",
         "bias_var",
-        "gate_timer_s",
+        "blk_mx",
+        "blk_my",
+        "blk_mz",
+        "blk_mn",
+        "pmx",
+        "pmy",
+        "pmz",
+        "pm_n",
+        "moved",
+        "bias_unverified",
+        "mag_clip_timer_s",
+        "mag_recovering",
         "at_rest",
         "mag_ref_norm",
         "mag_ref_dip",
@@ -188,6 +224,9 @@ class StepState:
         "heading_initialized",
         "clipped",
         "accel_used",
+        "moved",
+        "bias_unverified",
+        "mag_recovering",
     )
 
     def __init__(self, zero: Any, false: Any) -> None:
@@ -258,7 +297,8 @@ def _normalize(s: StepState, o: Any) -> None:
     s.qw, s.qx, s.qy, s.qz = s.qw / n, s.qx / n, s.qy / n, s.qz / n
 
 
-def _stillness(s: StepState, p: Any, gyro: tuple, accel: tuple, dt: Any, o: Any) -> None:
+def _stillness(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple | None, dt: Any,
+               o: Any) -> None:
     """Stillness detection and bias learning at rest, on blocks of ``rest_window_s``.
 
     Still = the gyro and accelerometer block means did not change from the previous block by
@@ -269,6 +309,8 @@ def _stillness(s: StepState, p: Any, gyro: tuple, accel: tuple, dt: Any, o: Any)
     the difference. After ``rest_time_s`` of still blocks the sensor is at rest: each further
     still block is a measurement of the bias (its gyro mean, variance from its noise), fused
     with the estimate by its variance (a scalar Kalman update), and ‖g‖ follows |a| slowly.
+    The noise widens the thresholds by at most REST_NOISE_CAP times themselves; with a
+    magnetometer a turning field direction is motion (REST_MAG_TOLERANCE_RAD).
     """
     gx, gy, gz = gyro
     ax, ay, az = accel
@@ -283,6 +325,14 @@ def _stillness(s: StepState, p: Any, gyro: tuple, accel: tuple, dt: Any, o: Any)
     s.blk_d = s.blk_d + seen
     s.lgx, s.lgy, s.lgz, s.lax, s.lay, s.laz = gx, gy, gz, ax, ay, az
     s.last_n = s.last_n + 1.0
+    if mag is not None:  # unit field direction, sensor frame (any unit in)
+        mx, my, mz = mag
+        mn = o.sqrt(mx * mx + my * my + mz * mz)
+        use = o.where(p.use_mag, 1.0, 0.0)
+        s.blk_mx = s.blk_mx + use * mx / mn
+        s.blk_my = s.blk_my + use * my / mn
+        s.blk_mz = s.blk_mz + use * mz / mn
+        s.blk_mn = s.blk_mn + use
     has_prev = s.prev_n > 0.0
     # a sample far outside the noise around the last block's mean ends rest at once
     jump_g = o.sqrt((gx - s.pgx) ** 2 + (gy - s.pgy) ** 2 + (gz - s.pgz) ** 2) > (
@@ -301,29 +351,39 @@ def _stillness(s: StepState, p: Any, gyro: tuple, accel: tuple, dt: Any, o: Any)
     spread = 1.0 / n + 1.0 / o.maximum(s.prev_n, 1.0)
     dg = o.sqrt((mgx - s.pgx) ** 2 + (mgy - s.pgy) ** 2 + (mgz - s.pgz) ** 2)
     da = o.sqrt((max_ - s.pax) ** 2 + (may - s.pay) ** 2 + (maz - s.paz) ** 2)
+    tol_g = p.rest_gyro_threshold_rad_s + REST_NOISE_SIGMAS * o.minimum(
+        o.sqrt(noise_g2 * spread), REST_NOISE_CAP * p.rest_gyro_threshold_rad_s)
+    tol_a = p.rest_accel_threshold_m_s2 + REST_NOISE_SIGMAS * o.minimum(
+        o.sqrt(noise_a2 * spread), REST_NOISE_CAP * p.rest_accel_threshold_m_s2)
+    # the field direction of this block against the previous one (both with samples)
+    mag_seen = (s.blk_mn > 0.0) & (s.pm_n > 0.0)
+    bm = o.maximum(o.sqrt(s.blk_mx * s.blk_mx + s.blk_my * s.blk_my + s.blk_mz * s.blk_mz),
+                   1e-300)
+    umx, umy, umz = s.blk_mx / bm, s.blk_my / bm, s.blk_mz / bm
+    dm = o.sqrt((umx - s.pmx) ** 2 + (umy - s.pmy) ** 2 + (umz - s.pmz) ** 2)
+    turned = mag_seen & (dm > REST_MAG_TOLERANCE_RAD + p.rest_gyro_threshold_rad_s * s.blk_t)
     steady = (
         has_prev
-        & (dg < p.rest_gyro_threshold_rad_s + REST_NOISE_SIGMAS * o.sqrt(noise_g2 * spread))
-        & (da < p.rest_accel_threshold_m_s2 + REST_NOISE_SIGMAS * o.sqrt(noise_a2 * spread))
+        & (dg < tol_g)
+        & (da < tol_a)
+        & o.not_(turned)
         & (o.sqrt(mgx * mgx + mgy * mgy + mgz * mgz) < p.bias_limit_rad_s * 1.7320508075688772)
     )
-    # a steady turn at a constant rate looks still; once the bias is known, a block whose gyro
-    # mean is far from it (beyond REST_GATE_SIGMAS of the estimate's and the block's spread) is
-    # motion — unless it stays so for REST_GATE_OVERRIDE_S: then the bias itself changed
+    # a steady turn at a constant rate looks still; a block whose gyro mean is far from the bias
+    # estimate on any axis (beyond REST_GATE_SIGMAS of the estimate's and the block's spread) is
+    # motion however long it lasts
     r = o.maximum(noise_g2 / (3.0 * n), 1e-12)
-    innovation = o.sqrt((mgx - s.bx) ** 2 + (mgy - s.by) ** 2 + (mgz - s.bz) ** 2)
-    consistent = innovation < p.rest_gyro_threshold_rad_s + REST_GATE_SIGMAS * o.sqrt(
-        3.0 * (s.bias_var + r))
-    override = s.gate_timer_s >= REST_GATE_OVERRIDE_S
-    still = steady & (consistent | override)
-    s.gate_timer_s = o.where(done, o.where(steady & o.not_(consistent), s.gate_timer_s + s.blk_t,
-                                           0.0), s.gate_timer_s)
-    s.bias_var = o.where(done & steady & o.not_(consistent) & override,
-                         p.bias_prior_sigma_rad_s ** 2, s.bias_var)
+    gate = p.rest_gyro_threshold_rad_s + REST_GATE_SIGMAS * o.sqrt(s.bias_var + r)
+    consistent = ((o.maximum(mgx - s.bx, s.bx - mgx) < gate)
+                  & (o.maximum(mgy - s.by, s.by - mgy) < gate)
+                  & (o.maximum(mgz - s.bz, s.bz - mgz) < gate))
+    still = steady & consistent
+    s.moved = s.moved | (done & has_prev & o.not_(still))
     s.rest_timer_s = o.where(done, o.where(still, s.rest_timer_s + s.blk_t, 0.0), s.rest_timer_s)
     s.at_rest = p.rest_bias_learning & (s.rest_timer_s >= p.rest_time_s)
     # a still block at rest measures the bias: scalar Kalman update per axis
     measure = done & s.at_rest
+    s.bias_unverified = o.where(measure, o.not_(s.moved) & o.not_(mag_seen), s.bias_unverified)
     k = o.where(measure, s.bias_var / (s.bias_var + r), 0.0)
     s.bx, s.by, s.bz = s.bx + k * (mgx - s.bx), s.by + k * (mgy - s.by), s.bz + k * (mgz - s.bz)
     s.bias_var = s.bias_var - k * s.bias_var
@@ -337,11 +397,17 @@ def _stillness(s: StepState, p: Any, gyro: tuple, accel: tuple, dt: Any, o: Any)
     s.pax, s.pay, s.paz = (o.where(done, max_, s.pax), o.where(done, may, s.pay),
                            o.where(done, maz, s.paz))
     s.prev_n = o.where(done, n, s.prev_n)
+    has_mag = done & (s.blk_mn > 0.0)
+    s.pmx, s.pmy, s.pmz = (o.where(has_mag, umx, s.pmx), o.where(has_mag, umy, s.pmy),
+                           o.where(has_mag, umz, s.pmz))
+    s.pm_n = o.where(done, s.blk_mn, s.pm_n)
     keep = o.where(done, 0.0, 1.0)
     s.blk_n, s.blk_t, s.blk_d = s.blk_n * keep, s.blk_t * keep, s.blk_d * keep
     s.blk_gx, s.blk_gy, s.blk_gz = s.blk_gx * keep, s.blk_gy * keep, s.blk_gz * keep
     s.blk_ax, s.blk_ay, s.blk_az = s.blk_ax * keep, s.blk_ay * keep, s.blk_az * keep
     s.blk_g2, s.blk_a2 = s.blk_g2 * keep, s.blk_a2 * keep
+    s.blk_mx, s.blk_my, s.blk_mz = s.blk_mx * keep, s.blk_my * keep, s.blk_mz * keep
+    s.blk_mn = s.blk_mn * keep
 
 
 def step(
@@ -383,7 +449,7 @@ def step(
         # an impact: a single sample far above the noise of the last block (see the detector)
         spike = deviation > p.acceleration_threshold_m_s2 + ACCEL_SPIKE_SIGMAS * o.sqrt(
             s.noise_a2)
-        _stillness(s, p, gyro, accel, dt, o)
+        _stillness(s, p, gyro, accel, mag, dt, o)
         # at rest the block mean of the gyro is the bias, whatever the accelerometer says; but
         # the error path trusts the accelerometer only if |a| = ‖g‖: a steady linear
         # acceleration (constant accelerometer, still gyro: the 25 m/s manoeuvre) is not gravity
@@ -403,7 +469,10 @@ def step(
         level = o.where(spike, deviation, o.maximum(an_lp - s.g_ref, s.g_ref - an_lp))
         decayed = s.accel_hold * (p.acceleration_hold_s / (p.acceleration_hold_s + dt))
         s.accel_hold = o.maximum(level, decayed)
-        accelerating = s.accel_hold > p.acceleration_threshold_m_s2
+        # vibration left in the low-pass (white-noise approximation of the 1st-order low-pass,
+        # per axis, from the stillness blocks' noise): not a manoeuvre
+        lp_sigma = o.sqrt(s.noise_a2 / 3.0 * dt / (2.0 * ACCEL_LOWPASS_TIME_CONSTANT_S + dt))
+        accelerating = s.accel_hold > p.acceleration_threshold_m_s2 + ACCEL_DETECT_SIGMAS * lp_sigma
         rate = o.sqrt((gx - s.bx) ** 2 + (gy - s.by) ** 2 + (gz - s.bz) ** 2)
         lw = dt / (RATE_LOWPASS_TIME_CONSTANT_S + dt)
         s.rate_lp = s.rate_lp + lw * (rate - s.rate_lp)
@@ -445,7 +514,11 @@ def step(
         k1 = o.maximum(p.k1, 2.0 * o.sqrt(k2))
         k3dt = o.where(learn, p.k3 * dt, 0.0)
         s.cx, s.cy, s.cz = s.cx + k3dt * fx, s.cy + k3dt * fy, s.cz + k3dt * fz
-        ldt = o.where(learn, dt, 0.0)
+        # an error beyond BIAS_LEARNING_MAX_ERROR_RAD is an attitude error (a gyro over range, a
+        # glitch), not a bias: the integral does not learn from it (anti-windup; beyond 90° the
+        # cross product shrinks again, hence the sign of the dot product too)
+        small = (en < BIAS_LEARNING_MAX_ERROR_RAD) & (ux * vx + uy * vy + uz * vz > 0.0)
+        ldt = o.where(learn & small, dt, 0.0)
         s.bx = s.bx - ldt * (k2 * fx + s.cx)
         s.by = s.by - ldt * (k2 * fy + s.cy)
         s.bz = s.bz - ldt * (k2 * fz + s.cz)
@@ -523,13 +596,25 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
     first = usable & o.not_(s.heading_initialized)
     s.heading_initialized = s.heading_initialized | usable
 
-    r1 = o.where(fast, o.maximum(p.r1, p.startup_k1), p.r1)
+    # heading recovery (as the tilt's): a heading error saturated without a break for
+    # recovery_trigger_s of used samples is a real heading error (a compass that was wrong at
+    # start, a magnetometer that came back): corrected with startup_k1 until below 0.1 × the limit
+    yaw_error = o.atan2(wx, wy)
+    big = o.maximum(yaw_error, -yaw_error) > p.mag_saturation_limit_rad
+    s.mag_clip_timer_s = o.where(usable, o.where(big & learn & o.not_(first),
+                                                 s.mag_clip_timer_s + dt_m, 0.0),
+                                 s.mag_clip_timer_s)
+    enter = (p.recovery_trigger_s > 0.0) & (s.mag_clip_timer_s >= p.recovery_trigger_s)
+    leave = usable & (o.maximum(yaw_error, -yaw_error) < 0.1 * p.mag_saturation_limit_rad)
+    s.mag_recovering = o.where(s.mag_recovering, o.not_(leave), enter)
+    s.mag_clip_timer_s = o.where(enter, 0.0, s.mag_clip_timer_s)
+    quick = fast | s.mag_recovering
+    r1 = o.where(quick, o.maximum(p.r1, p.startup_k1), p.r1)
     gain = o.where(usable, r1 * dt_m / (1.0 + r1 * dt_m), 0.0)
     ldt = o.where(usable & learn, dt_m, 0.0)
-    limit = o.where(fast, 4.0, p.mag_saturation_limit_rad)
+    limit = o.where(quick, 4.0, p.mag_saturation_limit_rad)
 
     # 'yaw' mode (and the first heading fix of either mode): rotate about the world vertical
-    yaw_error = o.atan2(wx, wy)
     s.yaw_error_rad = o.where(usable, yaw_error, 0.0)
     yaw_c = o.minimum(o.maximum(yaw_error, -limit), limit)
     yaw_mode = o.not_(p.mag_full) | first

@@ -74,7 +74,10 @@ def main(args: list[str] | None = None) -> int:
             raise
         print(f"{PROGRAM}: " + NO_ROS.format(missing=exc.name), file=sys.stderr)
         return 2
-    return run(argv)
+    try:
+        return run(argv)
+    except KeyboardInterrupt:  # a second Ctrl-C (launch + process group) during the clean-up
+        return 0
 
 
 if __name__ == "__main__":

@@ -17,7 +17,9 @@ Run it single-threaded (``rclpy.spin``, as ``main`` does): callbacks are not loc
 
 from __future__ import annotations
 
+import signal
 import sys
+from collections.abc import Sequence
 from typing import Any
 
 import rclpy
@@ -39,7 +41,13 @@ from rclpy.qos import HistoryPolicy, QoSProfile, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import Imu, MagneticField
 
-from cf_estimator.params_file import all_specs, build_params, describe_unknown, unknown_names
+from cf_estimator.params_file import (
+    all_specs,
+    build_params,
+    describe_unknown,
+    unapplied_file_warning,
+    unknown_names,
+)
 from cf_estimator.pipeline import ImuPipeline
 from cf_estimator.pipeline.checks import RESET_CLOCK_JUMP
 from cf_estimator.pipeline.diagnostics import LEVEL_NAMES
@@ -123,7 +131,10 @@ def _sensor_qos(depth: int = qos_profile_sensor_data.depth) -> QoSProfile:
 class CfEstimatorNode(Node):
     """Attitude estimation node (see the module docstring)."""
 
-    def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
+    def __init__(self, node_name: str = NODE_NAME, *, params_files: Sequence[str] = (),
+                 **kwargs: Any) -> None:
+        """``params_files``: the ``--params-file`` paths of the command line (``run`` passes
+        them): each one none of whose sections is for this node gets a start-up warning."""
         super().__init__(node_name, **kwargs)
         log = self.get_logger()
         self._names = {s.name for s in all_specs()}
@@ -134,9 +145,11 @@ class CfEstimatorNode(Node):
             log.warning(f"unknown parameter(s), ignored: {describe_unknown(unknown)}")
         ns = self.get_namespace().rstrip("/")
         self._pipe = ImuPipeline(
-            filter_params, pipeline_params, diagnostics_name=f"{ns}/{self.get_name()}: attitude"
+            filter_params, pipeline_params, diagnostics_name=f"{ns}/{self.get_name()}: attitude",
+            imu_topic=self.resolve_topic_name(IMU_IN),
         )
         self._last_level: int | None = None
+        self._converts_axes = self._pipe.converts_axes
 
         overrides = QoSOverridingOptions.with_default_policies()
         reliable = QoSProfile(depth=PUBLISHER_DEPTH)
@@ -205,12 +218,23 @@ class CfEstimatorNode(Node):
         backend = self._pipe.filter.backend
         log.info(
             f"subscribed (sensor-data QoS) to {', '.join(topics['in'])}; publishing "
-            f"{', '.join(topics['out'])}; world frame {filter_params.world_frame}; filter step: "
+            f"{', '.join(topics['out'])}; world frame {filter_params.world_frame}, body frame "
+            f"{pipeline_params.body_frame}; filter step: "
             + ("compiled kernel" if backend == "compiled"
                else "Python reference (no compiled kernel: slower)")
         )
+        self.warn_unapplied_params_files(params_files)
         effective = {**as_dict(filter_params), **as_dict(pipeline_params)}
         log.info("parameters: " + ", ".join(f"{k}={v}" for k, v in effective.items()))
+
+    def warn_unapplied_params_files(self, paths: Sequence[str]) -> list[str]:
+        """Warn (once, at start-up) for every ``--params-file`` none of whose sections is for
+        this node: rclpy ignores such a file silently. Returns the warnings."""
+        texts = [t for t in (unapplied_file_warning(p, self.get_fully_qualified_name())
+                             for p in paths) if t]
+        for text in texts:
+            self.get_logger().warning(text)
+        return texts
 
     def _declare(self, spec: ParamSpec) -> Any:
         """Declare one schema parameter; a value of the wrong type → ParameterError, one line."""
@@ -237,6 +261,13 @@ class CfEstimatorNode(Node):
             q = msg.orientation
             q.x, q.y, q.z, q.w = out.orientation_xyzw
             msg.orientation_covariance = out.orientation_covariance
+            if self._converts_axes:  # body_frame: the vectors in the output's convention too
+                v = msg.angular_velocity
+                v.x, v.y, v.z = out.angular_velocity
+                v = msg.linear_acceleration
+                v.x, v.y, v.z = out.linear_acceleration
+                msg.angular_velocity_covariance = out.angular_velocity_covariance
+                msg.linear_acceleration_covariance = out.linear_acceleration_covariance
             self._pub_imu.publish(msg)
             if self._pub_rpy is not None and out.rpy_rad is not None:
                 rpy = Vector3Stamped()
@@ -370,10 +401,12 @@ def run(args: list[str]) -> int:
         text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         print(f"{NODE_NAME}: cannot start: {text}", file=sys.stderr)
         return 2
+    from cf_estimator.node.cf_estimator_node import params_files
+
     node = None
     code = 0
     try:
-        node = CfEstimatorNode()
+        node = CfEstimatorNode(params_files=params_files(args))
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -385,7 +418,13 @@ def run(args: list[str]) -> int:
         get_logger(NODE_NAME).fatal(f"{kind}: {text}")
         code = 2
     finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+        # `ros2 launch` signals the node and Ctrl-C the whole process group: a second SIGINT
+        # must not interrupt the clean-up (a traceback from destroy_node, "exit code -2")
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
+        except KeyboardInterrupt:
+            pass
     return code

@@ -111,18 +111,25 @@ def mag_units_warning(mean_norm: float) -> tuple[str, str] | None:
     if lo <= mean_norm <= hi:
         return None
     if 0.1 <= mean_norm <= 1.0:
-        guess = "Gauss"
+        guess, fix = "Gauss", "multiply by 1e-4 (1 G = 1e-4 T)"
     elif 10.0 <= mean_norm <= 100.0:
-        guess = "microtesla"
+        guess, fix = "microtesla", "multiply by 1e-6"
     elif mean_norm > 100.0:
-        guess = "raw counts or nanotesla"
+        guess, fix = "raw counts or nanotesla", "apply the sensor's scale (nT: 1e-9)"
     else:
-        guess = "an unexpected scale"
+        guess, fix = "an unexpected scale", "check the driver's scale"
     return (
         "mag_units",
         f"|magnetic_field| averages {mean_norm:.3g}, expected 25e-6..65e-6 T: looks like "
-        f"{guess}. Heading still works (only directions are used)",
+        f"{guess}. Heading still works (only directions are used), so /diagnostics stays OK; "
+        f"to fix the driver's scale (sensor_msgs/MagneticField is Tesla): {fix}",
     )
+
+
+#: Input warnings that do not affect the estimate: reported once in the log and under
+#: ``input_warning.<tag>`` in /diagnostics, without raising its level (a Gauss magnetometer
+#: would otherwise keep /diagnostics at WARN for ever).
+INFORMATIONAL_WARNINGS = frozenset({"mag_units"})
 
 
 def mag_frame_warning(mag_frame: str, imu_frame: str) -> tuple[str, str]:

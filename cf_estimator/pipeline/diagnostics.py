@@ -13,6 +13,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from cf_estimator.pipeline.checks import INFORMATIONAL_WARNINGS
+
 OK, WARN, ERROR = 0, 1, 2
 LEVEL_NAMES = {OK: "OK", WARN: "WARN", ERROR: "ERROR"}
 
@@ -101,13 +103,15 @@ def compose_report(
     mag_age_s: float | None,
     mag_timeout_s: float,
     filter_backend: str = "",
+    imu_topic: str = "",
 ) -> DiagnosticsReport:
     """Build the report of one period from cumulative ``counters`` and their ``previous`` copy.
 
     ``status`` is the filter's :class:`~cf_estimator.core.filter.FilterStatus` (None before
     initialisation); ``mag_age_s`` the stamp difference between the last processed IMU message
     and the last magnetometer sample the filter used; ``filter_backend`` which implementation
-    runs the filter step ('compiled' or 'python', see :mod:`cf_estimator.core.kernel`).
+    runs the filter step ('compiled' or 'python', see :mod:`cf_estimator.core.kernel`);
+    ``imu_topic`` the topic the IMU messages are awaited on (named in "no IMU" errors).
     Undefined figures are ``"nan"``, never empty.
     """
     errors: list[str] = []
@@ -120,11 +124,12 @@ def compose_report(
     d_mag = {k: counters[k] - previous.get(k, 0) for k in
              ("received_mag", "mag_used", "mag_rejected", "mag_stale", "mag_invalid")}
 
+    on = f" on {imu_topic}" if imu_topic else ""
     if counters["received_imu"] == 0:
-        errors.append("no IMU messages received yet")
+        errors.append(f"no IMU messages received yet{on}")
     elif d_recv == 0:
         since = f"in the last {period_s:.3g} s" if period_s else "since the last report"
-        errors.append(f"no IMU messages {since}")
+        errors.append(f"no IMU messages{on} {since}")
     elif d_proc == 0:
         errors.append(f"all {d_recv} IMU messages rejected ({_reasons(d_rej)})")
     elif d_rej:
@@ -155,8 +160,9 @@ def compose_report(
                 f"magnetic disturbance: {d_mag['mag_rejected']} of {seen} magnetometer samples "
                 "rejected"
             )
-    if input_warnings:
-        warns.append("suspicious input: " + ", ".join(input_warnings))
+    serious = [tag for tag in input_warnings if tag not in INFORMATIONAL_WARNINGS]
+    if serious:
+        warns.append("suspicious input: " + ", ".join(serious))
 
     if errors:
         level, message = ERROR, "; ".join(errors + warns)
@@ -203,6 +209,9 @@ def compose_report(
         ("gyro_bias_sigma_rad_s", _f(status.gyro_bias_sigma_rad_s if initialized else None)),
         ("gyro_bias_converged", str(bool(initialized and status.gyro_bias_converged)).lower()),
         ("at_rest", str(bool(initialized and status.at_rest)).lower()),
+        ("heading_rate_unverified",
+         str(bool(initialized and status.heading_rate_unverified)).lower()),
+        ("heading_recovering", str(bool(initialized and status.heading_recovering)).lower()),
         ("recovery_count", str(status.recovery_count if initialized else 0)),
     ]
     r = rpy_rad if rpy_rad is not None else (None, None, None)

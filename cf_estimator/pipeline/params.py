@@ -11,19 +11,35 @@ from dataclasses import dataclass
 
 from cf_estimator.schema import ParameterError, param, validate_fields
 
+#: ``body_frame`` choices: the message axes as they are, or one of the two conventions.
+BODY_FRAMES = ("sensor", "flu", "frd")
+
 
 @dataclass(frozen=True)
 class PipelineParams:
     """Parameters of :class:`cf_estimator.pipeline.ImuPipeline` (units in each description)."""
 
+    body_frame: str = param(
+        "sensor", "", "Axes convention of the IMU and magnetometer messages: 'flu' (REP-103: x "
+        "forward, y left, z up; ROS drivers, MAVROS imu/data_raw) or 'frd' (x forward, y right, "
+        "z down; PX4 sensor_combined, ulog). The output is then the body's orientation in the "
+        "convention paired with world_frame: FLU in 'enu' (REP-103), FRD in 'ned' (PX4's roll, "
+        "pitch, yaw from either source); the vectors copied to the output are converted alike. "
+        "'sensor': no convention assumed, the orientation of the message axes as they are (as "
+        "imu_filter_madgwick).",
+        choices=BODY_FRAMES, read_only=True, group="frames",
+    )
     orientation_covariance_rad2: float = param(
-        0.0003, "rad^2", "Variance reported for roll and pitch (diagonal of "
-        "orientation_covariance, rotation about the world x/y axes); about (1 deg)^2.",
+        0.0003, "rad^2", "Floor of the variance reported for roll and pitch (diagonal "
+        "of orientation_covariance, rotation about the world x/y axes) once the filter has "
+        "converged, about (1 deg)^2; start-up, recovery and clipped stretches add to it (see "
+        "docs/ros_interface.md, Covariance).",
         minimum=0.0, maximum=100.0, minimum_exclusive=True, group="output",
     )
     yaw_covariance_rad2: float = param(
-        0.003, "rad^2", "Variance reported for yaw while the heading is referenced by the "
-        "magnetometer; about (3 deg)^2.",
+        0.003, "rad^2", "Floor of the variance reported for yaw while the heading is "
+        "referenced by the magnetometer, about (3 deg)^2; the last measured heading error and "
+        "the gyro drift since the last used sample add to it.",
         minimum=0.0, maximum=100.0, minimum_exclusive=True, group="output",
     )
     unreferenced_yaw_covariance_rad2: float = param(

@@ -43,6 +43,7 @@ from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import MAG_DISABLED, MAG_REJECTED, MAG_USED
 from cf_estimator.core.velocity import VelocityAiding, filter_bias
 from cf_estimator.pipeline import checks
+from cf_estimator.pipeline.covariance import OrientationCovariance
 from cf_estimator.pipeline.diagnostics import (
     DiagnosticsReport,
     WindowStats,
@@ -86,15 +87,12 @@ class PipelineOutput:
     warnings: list[str] = field(default_factory=list)
 
 
-def _covariance(var_tilt: float, var_yaw: float) -> tuple[float, ...]:
-    return (var_tilt, 0.0, 0.0, 0.0, var_tilt, 0.0, 0.0, 0.0, var_yaw)
-
-
 class ImuPipeline:
     """Validated IMU (+ magnetometer) messages → complementary filter → output contents.
 
     ``filter_params``/``pipeline_params`` default to the schema defaults. ``diagnostics_name``
-    is the ``name`` of the diagnostic status (the node passes its fully qualified name).
+    is the ``name`` of the diagnostic status (the node passes its fully qualified name),
+    ``imu_topic`` the IMU input topic named in "no IMU messages" reports.
     """
 
     def __init__(
@@ -103,11 +101,13 @@ class ImuPipeline:
         pipeline_params: PipelineParams | None = None,
         *,
         diagnostics_name: str = "cf_estimator",
+        imu_topic: str = "",
     ) -> None:
         self._fp = filter_params if filter_params is not None else FilterParams()
         self._pp = pipeline_params if pipeline_params is not None else PipelineParams()
         self._filter = ComplementaryFilter(self._fp)
         self.diagnostics_name = diagnostics_name
+        self.imu_topic = imu_topic  #: named in the "no IMU messages" diagnostics (the node's)
         # cumulative counters (plain ints: the hot path increments attributes)
         self._received_imu = 0
         self._processed = 0
@@ -128,7 +128,7 @@ class ImuPipeline:
         self._imu_frame: str | None = None
         self._mag_frame: str | None = None
         self._acc_n = 0
-        self._acc_sum = 0.0
+        self._acc_sx = self._acc_sy = self._acc_sz = 0.0
         self._mag_n = 0
         self._mag_sum = 0.0
         # diagnostics window
@@ -141,6 +141,9 @@ class ImuPipeline:
         self._aiding: VelocityAiding | None = None  # created by the first velocity message
         self._av_cov = _CovarianceCache()
         self._la_cov = _CovarianceCache()
+        self._cov_model = OrientationCovariance(
+            self._pp.orientation_covariance_rad2, self._pp.yaw_covariance_rad2,
+            self._pp.unreferenced_yaw_covariance_rad2, self._fp.bias_prior_sigma_rad_s)
         self._apply_derived()
         self._clear_time_state()
 
@@ -204,10 +207,11 @@ class ImuPipeline:
 
     def _apply_derived(self) -> None:
         pp = self._pp
-        self._cov_referenced = _covariance(pp.orientation_covariance_rad2, pp.yaw_covariance_rad2)
-        self._cov_unreferenced = _covariance(
-            pp.orientation_covariance_rad2, pp.unreferenced_yaw_covariance_rad2
-        )
+        cov = self._cov_model
+        cov.tilt0 = pp.orientation_covariance_rad2
+        cov.yaw0 = pp.yaw_covariance_rad2
+        cov.yaw_unref = pp.unreferenced_yaw_covariance_rad2
+        cov.bias_prior = self._fp.bias_prior_sigma_rad_s
         self._max_dt_ns = int(round(pp.max_dt_s * 1e9))
         # 0 = never; a positive value below 0.5 ns must not round to "never"
         self._reset_gap_on = pp.reset_after_gap_s > 0.0
@@ -216,6 +220,12 @@ class ImuPipeline:
         self._mag_timeout_ns = int(round(pp.mag_timeout_s * 1e9))
         self._use_mag = self._fp.use_mag
         self._ned = self._fp.world_frame == "ned"
+        # FLU <-> FRD: (x, y, z) -> (x, -y, -z), a half turn about x. Applied to the input
+        # vectors when their convention is not the one paired with the world frame (FLU-ENU,
+        # FRD-NED), so the core estimates q_world_from_body in that paired convention.
+        bf = pp.body_frame
+        self._flip = bf != "sensor" and (bf == "frd") != self._ned
+        self._av_cov.flip = self._la_cov.flip = self._flip
 
     # -- state ------------------------------------------------------------------------------------
     def _clear_time_state(self) -> None:
@@ -232,11 +242,19 @@ class ImuPipeline:
         self._filter.reset()
         if self._aiding is not None:
             self._aiding.reset()
+        self._cov_model.reset()
         self._clear_time_state()
         self._resets[reason] = self._resets.get(reason, 0) + 1
         if self._pending_mag is not None:
             self._pending_mag = None
             self._mag_dropped += 1
+
+    @property
+    def converts_axes(self) -> bool:
+        """True when ``body_frame`` turns the input vectors half a turn about x (FLU <-> FRD):
+        the output's angular velocity, acceleration and their covariances differ from the
+        input's."""
+        return self._flip
 
     @property
     def initialized(self) -> bool:
@@ -289,6 +307,8 @@ class ImuPipeline:
             m = msg.magnetic_field
             mx, my, mz = float(m.x), float(m.y), float(m.z)
             frame = msg.header.frame_id
+            if self._flip:
+                my, mz = -my, -mz
         except Exception:  # noqa: BLE001 - malformed: counted, never raised
             self._mag_invalid += 1
             return
@@ -360,6 +380,8 @@ class ImuPipeline:
         except Exception:  # noqa: BLE001
             self._reject(checks.MALFORMED)
             return None
+        if self._flip:  # into the body convention paired with world_frame (see body_frame)
+            gy, gz, ay, az = -gy, -gz, -ay, -az
         if sec == 0 and nsec == 0:
             self._reject(checks.ZERO_STAMP)
             return None
@@ -424,16 +446,22 @@ class ImuPipeline:
             self._imu_frame = frame
             self._warn(checks.frame_id_warning(str(frame), "IMU"))
         if self._acc_n < checks.ACCEL_CHECK_SAMPLES:
+            # |mean a|, not mean |a|: vibration adds to every |a| (13 m/s^2 on a quadrotor)
+            # but averages out of the vector, which is gravity (plus a mean acceleration)
             self._acc_n += 1
-            self._acc_sum += math.sqrt(a2)
+            self._acc_sx += ax
+            self._acc_sy += ay
+            self._acc_sz += az
             if self._acc_n == checks.ACCEL_CHECK_SAMPLES:
-                self._warn(checks.accel_units_warning(self._acc_sum / self._acc_n,
-                                                      self._fp.gravity_m_s2))
+                n = self._acc_n
+                mean_norm = math.sqrt(self._acc_sx**2 + self._acc_sy**2 + self._acc_sz**2) / n
+                self._warn(checks.accel_units_warning(mean_norm, self._fp.gravity_m_s2))
         if g2 > checks.GYRO_IMPLAUSIBLE_RAD_S**2:
             self._warn(checks.gyro_units_warning(math.sqrt(g2)))
 
         # -- magnetometer sample, used once -------------------------------------------------------
         mag = None
+        mag_used = False
         pending = self._pending_mag
         if pending is not None:
             self._pending_mag = None
@@ -457,6 +485,7 @@ class ImuPipeline:
                 ms = s.mag_status
                 if ms == MAG_USED:
                     self._mag_used += 1
+                    mag_used = True
                     self._last_mag_used_ns = pending[0]  # type: ignore[index]
                 elif ms == MAG_REJECTED:
                     self._mag_rejected += 1
@@ -474,10 +503,10 @@ class ImuPipeline:
             if mag is not None:
                 if f._state.heading_initialized:  # noqa: SLF001
                     self._mag_used += 1
+                    mag_used = True
                     self._last_mag_used_ns = pending[0]  # type: ignore[index]
                 else:  # horizontal component too small to give a heading
                     self._mag_rejected += 1
-        heading = f._state.heading_initialized  # noqa: SLF001
         self._last_ns = t_ns
         self._processed += 1
 
@@ -490,7 +519,10 @@ class ImuPipeline:
         else:
             qw, qx, qy, qz = q
             xyzw = (qx, qy, qz, qw)
-            cov = self._cov_referenced if heading else self._cov_unreferenced
+            last_mag = self._last_mag_used_ns
+            cov = self._cov_model.update(
+                dt, f._state, mag_used,  # noqa: SLF001 - flags without building FilterStatus
+                None if last_mag is None else (t_ns - last_mag) * 1e-9)
             roll = math.atan2(2.0 * (qw * qx + qy * qz), 1.0 - 2.0 * (qx * qx + qy * qy))
             sp = 2.0 * (qw * qy - qz * qx)
             pitch = math.asin(1.0 if sp > 1.0 else (-1.0 if sp < -1.0 else sp))
@@ -560,6 +592,7 @@ class ImuPipeline:
             mag_age_s=mag_age,
             mag_timeout_s=self._pp.mag_timeout_s,
             filter_backend=self._filter.backend,
+            imu_topic=self.imu_topic,
         )
         if self._aiding is not None:
             report = dataclasses.replace(
@@ -574,18 +607,25 @@ class ImuPipeline:
 class _CovarianceCache:
     """Input covariances rarely change: reuse the last tuple when the bytes are equal."""
 
-    __slots__ = ("raw", "value")
+    __slots__ = ("flip", "raw", "value")
 
     def __init__(self) -> None:
         self.raw: bytes | None = None
         self.value: tuple[float, ...] = ()
+        self.flip = False  #: FLU <-> FRD: D C D with D = diag(1, -1, -1)
+
+    def _convert(self, cov: Any) -> tuple[float, ...]:
+        c = covariance9(cov)
+        if not self.flip or c[0] == -1.0:  # -1: "not provided", kept as is
+            return c
+        return (c[0], -c[1], -c[2], -c[3], c[4], c[5], -c[6], c[7], c[8])
 
     def get(self, cov: Any) -> tuple[float, ...]:
         tobytes = getattr(cov, "tobytes", None)  # array.array (rclpy) and NumPy (rosbags)
         if tobytes is None:
-            return covariance9(cov)
+            return self._convert(cov)
         raw = tobytes()
         if raw != self.raw:
-            self.value = covariance9(cov)
+            self.value = self._convert(cov)
             self.raw = raw
         return self.value
