@@ -19,7 +19,7 @@ PACKAGE = "cf_estimator"
 #: is not importable). rcl_interfaces, rosgraph_msgs, builtin_interfaces... come along.
 ROS_WHEELS = (
     "ros-jazzy-rclpy", "ros-jazzy-sensor-msgs", "ros-jazzy-geometry-msgs",
-    "ros-jazzy-diagnostic-msgs", "ros-jazzy-rmw-fastrtps-cpp",
+    "ros-jazzy-diagnostic-msgs", "ros-jazzy-rmw-fastrtps-cpp", "ros-jazzy-nav-msgs",
 )
 ROS_WHEEL_MARKER = (
     'sys_platform == "linux" and platform_machine == "x86_64" and '

@@ -16,6 +16,12 @@ fraction >= echo's - 1 point, p99 <= 1.5 x echo's, processing median <= 50 us.
 
     python3 scripts/bench_node_load.py                       # 2 rounds of 20 s per target
     python3 scripts/bench_node_load.py --depth 5 --rounds 1  # the sensor-data default depth
+    python3 scripts/bench_node_load.py --velocity-rate 10    # the velocity-aided node
+
+``--velocity-rate HZ`` adds a geometry_msgs/TwistStamped on /gnss/vel (a steady 5 m/s cruise,
+stamped 100 ms before it is sent, as GNSS arrives late) and runs the node with
+``velocity_topic: /gnss/vel``, ``velocity_heading: filter`` (aided from the first window: the
+aided per-sample path is what is measured); the echo node does not subscribe to it.
 The machine's other load counts: run it on an idle machine for figures that mean something.
 """
 
@@ -39,6 +45,8 @@ IMU_RATE_HZ = 1000.0
 MAG_RATE_HZ = 100.0
 WARMUP_S = 1.0
 IN_TOPIC, MAG_TOPIC, OUT_TOPIC = "/imu/data_raw", "/imu/mag", "/imu/data"
+VEL_TOPIC = "/gnss/vel"
+VEL_LATENCY_NS = 100_000_000
 DISCOVERY_TIMEOUT_S = 60.0
 
 
@@ -50,7 +58,8 @@ def _env(domain: int) -> dict[str, str]:
 
 
 # -- roles (each in its own process) -------------------------------------------------------------
-def role_publisher(duration_s: float, out: Path) -> int:
+def role_publisher(duration_s: float, out: Path, velocity_rate_hz: float = 0.0,
+                   node_target: bool = False) -> int:
     """Wait until the target and the subscriber are matched, publish for WARMUP_S + duration_s;
     write the measured stamps [ns] (after the warm-up) to ``out``."""
     import rclpy
@@ -61,10 +70,19 @@ def role_publisher(duration_s: float, out: Path) -> int:
     node = rclpy.create_node("load_publisher")
     imu_pub = node.create_publisher(Imu, IN_TOPIC, qos_profile_sensor_data)
     mag_pub = node.create_publisher(MagneticField, MAG_TOPIC, qos_profile_sensor_data)
+    vel_pub = vel = None
+    if velocity_rate_hz > 0:
+        from geometry_msgs.msg import TwistStamped
+
+        vel_pub = node.create_publisher(TwistStamped, VEL_TOPIC, qos_profile_sensor_data)
+        vel = TwistStamped()
+        vel.header.frame_id = "map"
+        vel.twist.linear.x = 5.0
     end = time.monotonic() + DISCOVERY_TIMEOUT_S
     while not (imu_pub.get_subscription_count() >= 1 and mag_pub.get_subscription_count() >= 1
                and node.count_publishers(OUT_TOPIC) >= 1
-               and node.count_subscribers(OUT_TOPIC) >= 1):
+               and node.count_subscribers(OUT_TOPIC) >= 1
+               and (vel_pub is None or not node_target or vel_pub.get_subscription_count() >= 1)):
         if time.monotonic() > end:
             print("publisher: the target or the subscriber never appeared", file=sys.stderr)
             return 2
@@ -77,6 +95,7 @@ def role_publisher(duration_s: float, out: Path) -> int:
     n_imu = int((WARMUP_S + duration_s) * IMU_RATE_HZ)
     n_warm = int(WARMUP_S * IMU_RATE_HZ)
     every_mag = int(IMU_RATE_HZ / MAG_RATE_HZ)
+    every_vel = int(IMU_RATE_HZ / velocity_rate_hz) if velocity_rate_hz > 0 else 0
     period = 1.0 / IMU_RATE_HZ
     stamps: list[int] = []
     t0 = time.perf_counter()
@@ -90,6 +109,9 @@ def role_publisher(duration_s: float, out: Path) -> int:
         if i % every_mag == 0:
             mag.header.stamp = imu.header.stamp
             mag_pub.publish(mag)
+        if vel_pub is not None and i % every_vel == 0:
+            vel.header.stamp.sec, vel.header.stamp.nanosec = divmod(now - VEL_LATENCY_NS, 10**9)
+            vel_pub.publish(vel)
         if i >= n_warm:
             stamps.append(now)
     out.write_text(json.dumps({"stamps": stamps,
@@ -111,6 +133,7 @@ def role_subscriber(out: Path) -> int:
     node = rclpy.create_node("load_subscriber")
     arrivals: list[tuple[int, int]] = []
     proc_us: list[float] = []
+    aided: list[int] = []
 
     def on_imu(msg: Imu) -> None:
         arrivals.append((msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec, time.time_ns()))
@@ -120,12 +143,15 @@ def role_subscriber(out: Path) -> int:
             for kv in status.values:
                 if kv.key == "processing_time_mean_us":
                     proc_us.append(float(kv.value))
+                elif kv.key == "velocity_aided_samples":
+                    aided.append(int(kv.value))
 
     node.create_subscription(Imu, OUT_TOPIC, on_imu, QoSProfile(depth=1000))
     node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, QoSProfile(depth=100))
     with contextlib.suppress(KeyboardInterrupt, ExternalShutdownException):
         rclpy.spin(node)
-    out.write_text(json.dumps({"arrivals": arrivals, "proc_us": proc_us}), encoding="utf-8")
+    out.write_text(json.dumps({"arrivals": arrivals, "proc_us": proc_us, "aided": aided}),
+                   encoding="utf-8")
     rclpy.try_shutdown()
     return 0
 
@@ -165,7 +191,8 @@ def _stop(proc: subprocess.Popen) -> None:
         proc.wait()
 
 
-def trial(target: str, depth: int, duration_s: float, domain: int, tmp: Path) -> dict[str, Any]:
+def trial(target: str, depth: int, duration_s: float, domain: int, tmp: Path,
+          velocity_rate_hz: float = 0.0) -> dict[str, Any]:
     """One run of publisher → target → subscriber; the figures of :func:`summarize`."""
     env = _env(domain)
     pub_file, sub_file = tmp / f"{target}_{domain}_pub.json", tmp / f"{target}_{domain}_sub.json"
@@ -174,11 +201,14 @@ def trial(target: str, depth: int, duration_s: float, domain: int, tmp: Path) ->
     if target == "node":
         cmd = [sys.executable, "-m", "cf_estimator.node.cf_estimator_node", "--ros-args",
                "-p", f"qos_overrides.{IN_TOPIC}.subscription.depth:={depth}"]
+        if velocity_rate_hz > 0:
+            cmd += ["-p", f"velocity_topic:={VEL_TOPIC}", "-p", "velocity_heading:=filter"]
     else:
         cmd = _python_role("echo", "--depth", str(depth))
     tgt = subprocess.Popen(cmd, env=env, **quiet)
     pub = subprocess.Popen(
-        _python_role("publisher", "--duration", str(duration_s), "--out", str(pub_file)), env=env)
+        _python_role("publisher", "--duration", str(duration_s), "--out", str(pub_file),
+                     "--velocity-rate", str(velocity_rate_hz), "--target", target), env=env)
     try:
         code = pub.wait(timeout=DISCOVERY_TIMEOUT_S + duration_s + 60)
         time.sleep(1.0)  # the last messages in flight
@@ -212,6 +242,7 @@ def summarize(pub: dict[str, Any], sub: dict[str, Any]) -> dict[str, Any]:
         "max_ms": latency_ms[-1] if latency_ms else float("nan"),
         "proc_median_us": statistics.median(proc) if proc else float("nan"),
         "publish_rate_hz": len(sent) / max(pub["elapsed_s"] - WARMUP_S, 1e-9),
+        "aided_samples": max(sub.get("aided") or [0]),
     }
 
 
@@ -222,6 +253,7 @@ def _pooled(rows: list[dict[str, Any]]) -> dict[str, Any]:
     out["fraction"] = out["delivered"] / out["published"]
     for key in ("p50_ms", "p90_ms", "p99_ms", "max_ms", "proc_median_us", "publish_rate_hz"):
         out[key] = statistics.median(r[key] for r in rows)
+    out["aided_samples"] = sum(r.get("aided_samples", 0) for r in rows)
     return out
 
 
@@ -231,7 +263,8 @@ def _row(name: str, r: dict[str, Any]) -> str:
             f"{r['proc_median_us']:>9.1f}")
 
 
-def orchestrate(rounds: int, duration_s: float, depth: int) -> int:
+def orchestrate(rounds: int, duration_s: float, depth: int, velocity_rate_hz: float = 0.0
+                ) -> int:
     from cf_estimator.core.kernel import resolve_backend
 
     domains = random.Random(os.getpid()).sample(range(1, 102), 2 * rounds)
@@ -239,14 +272,17 @@ def orchestrate(rounds: int, duration_s: float, depth: int) -> int:
     print(f"load: {IMU_RATE_HZ:.0f} Hz Imu + {MAG_RATE_HZ:.0f} Hz MagneticField for "
           f"{duration_s:g} s (+{WARMUP_S:g} s warm-up) per trial, {rounds} round(s), input queue "
           f"depth {depth} for both, {os.cpu_count()} CPUs, load average "
-          f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}, filter step {resolve_backend()}")
+          f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}, filter step {resolve_backend()}"
+          + (f"; + {velocity_rate_hz:g} Hz TwistStamped on {VEL_TOPIC} (node velocity-aided)"
+             if velocity_rate_hz > 0 else ""))
     header = (f"{'trial':<22} {'published':>9} {'delivered':>9} {'fraction':>9} {'p50 ms':>7} "
               f"{'p90 ms':>7} {'p99 ms':>7} {'max ms':>8} {'proc µs':>9}")
     print(header)
     with tempfile.TemporaryDirectory(prefix="cf_node_load_") as tmp:
         for r in range(rounds):
             for target in ("echo", "node"):
-                row = trial(target, depth, duration_s, domains.pop(), Path(tmp))
+                row = trial(target, depth, duration_s, domains.pop(), Path(tmp),
+                            velocity_rate_hz)
                 results[target].append(row)
                 print(_row(f"{target} round {r + 1}", row), flush=True)
     echo, node = _pooled(results["echo"]), _pooled(results["node"])
@@ -259,6 +295,9 @@ def orchestrate(rounds: int, duration_s: float, depth: int) -> int:
     print(f"node vs echo: delivered {d_points:+.2f} points, p50 x{p50_ratio:.2f}, "
           f"p99 x{p99_ratio:.2f}; node processing median {node['proc_median_us']:.1f} µs/message; "
           f"publisher kept {echo['publish_rate_hz']:.0f} / {node['publish_rate_hz']:.0f} Hz")
+    if velocity_rate_hz > 0:
+        print(f"node velocity-aided IMU samples (all rounds, from /diagnostics): "
+              f"{node['aided_samples']}")
     checks = [(d_points >= -1.0, "delivered >= echo - 1 point"),
               (p99_ratio <= 1.5, "p99 <= 1.5 x echo"),
               (node["proc_median_us"] <= 50.0, "processing median <= 50 µs")]
@@ -274,19 +313,26 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--duration", type=float, default=20.0, help="seconds per trial (20)")
     parser.add_argument("--depth", type=int, default=IMU_QUEUE_DEPTH,
                         help=f"input queue depth of both targets ({IMU_QUEUE_DEPTH})")
+    parser.add_argument("--velocity-rate", type=float, default=0.0, metavar="HZ",
+                        help="also publish a TwistStamped velocity at this rate; the node is "
+                        "velocity-aided (default 0: none)")
     parser.add_argument("--role", choices=("publisher", "subscriber", "echo"),
                         help=argparse.SUPPRESS)
+    parser.add_argument("--target", default="node", help=argparse.SUPPRESS)
     parser.add_argument("--out", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.role == "publisher":
-        return role_publisher(args.duration, args.out)
+        return role_publisher(args.duration, args.out, args.velocity_rate,
+                              args.target == "node")
     if args.role == "subscriber":
         return role_subscriber(args.out)
     if args.role == "echo":
         return role_echo(args.depth)
     if args.rounds < 1 or args.duration <= 0 or args.depth < 1:
         parser.error("--rounds, --duration and --depth must be positive")
-    return orchestrate(args.rounds, args.duration, args.depth)
+    if args.velocity_rate < 0:
+        parser.error("--velocity-rate must be >= 0")
+    return orchestrate(args.rounds, args.duration, args.depth, args.velocity_rate)
 
 
 if __name__ == "__main__":

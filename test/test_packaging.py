@@ -36,6 +36,7 @@ ROSDEP_KEY = {
     "std_msgs": "std_msgs",
     "diagnostic_msgs": "diagnostic_msgs",
     "tf2_msgs": "tf2_msgs",
+    "nav_msgs": "nav_msgs",
     "numpy": "python3-numpy",
     "scipy": "python3-scipy",
     "yaml": "python3-yaml",

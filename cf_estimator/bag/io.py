@@ -39,6 +39,8 @@ VECTOR3_STAMPED_TYPE = "geometry_msgs/msg/Vector3Stamped"
 QUATERNION_STAMPED_TYPE = "geometry_msgs/msg/QuaternionStamped"
 POSE_STAMPED_TYPE = "geometry_msgs/msg/PoseStamped"
 ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
+TWIST_STAMPED_TYPE = "geometry_msgs/msg/TwistStamped"
+VELOCITY_TYPES = (TWIST_STAMPED_TYPE, ODOMETRY_TYPE)
 DIAGNOSTIC_ARRAY_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
 #: Message types accepted as an orientation reference (ground truth, motion capture, odometry).
 REFERENCE_TYPES = (QUATERNION_STAMPED_TYPE, POSE_STAMPED_TYPE, ODOMETRY_TYPE)
@@ -465,6 +467,32 @@ def imu_message(
         linear_acceleration=vector3(linear_acceleration),
         linear_acceleration_covariance=covariance9(linear_acceleration_covariance),
     )
+
+
+def twist_stamped_message(sec: int, nanosec: int, frame_id: str, linear: Sequence[float],
+                          angular: Sequence[float] = (0.0, 0.0, 0.0)) -> Any:
+    """geometry_msgs/TwistStamped (Jazzy): a velocity [m/s] (and rate [rad/s]) in frame_id."""
+    t = _types()
+    return t[TWIST_STAMPED_TYPE](
+        header=header(sec, nanosec, frame_id),
+        twist=t["geometry_msgs/msg/Twist"](linear=vector3(linear), angular=vector3(angular)))
+
+
+def odometry_message(sec: int, nanosec: int, frame_id: str, child_frame_id: str,
+                     orientation_xyzw: Sequence[float], position: Sequence[float],
+                     linear_body: Sequence[float]) -> Any:
+    """nav_msgs/Odometry (Jazzy): pose of child_frame_id in frame_id, twist in child_frame_id."""
+    t = _types()
+    pose = t["geometry_msgs/msg/Pose"](
+        position=t["geometry_msgs/msg/Point"](x=float(position[0]), y=float(position[1]),
+                                              z=float(position[2])),
+        orientation=quaternion_xyzw(orientation_xyzw))
+    twist = t["geometry_msgs/msg/Twist"](linear=vector3(linear_body),
+                                         angular=vector3((0.0, 0.0, 0.0)))
+    return t[ODOMETRY_TYPE](
+        header=header(sec, nanosec, frame_id), child_frame_id=str(child_frame_id),
+        pose=t["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36)),
+        twist=t["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=np.zeros(36)))
 
 
 def imu_from_output(out: Any) -> Any:

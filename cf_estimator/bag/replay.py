@@ -55,6 +55,8 @@ class ReplayOptions:
 
     imu_topic: str | None = None
     mag_topic: str | None = None  #: "none" = replay without magnetometer
+    #: velocity aiding input (TwistStamped or Odometry); None = none (never auto-detected)
+    velocity_topic: str | None = None
     reference_topic: str | None = None
     storage: str = "mcap"
     copy_inputs: bool = False
@@ -624,8 +626,13 @@ def replay_variants(
                                          (*io.REFERENCE_TYPES, io.IMU_TYPE), required=True,
                                          option="--reference-topic")
         ref_type = bag.msgtype_of(ref_topic) if ref_topic else None
+        vel_topic = None
+        if opts.velocity_topic is not None:
+            vel_topic = bag.select_topic("velocity", opts.velocity_topic, io.VELOCITY_TYPES,
+                                         required=True, option="--velocity-topic")
         # the reference may be the input IMU topic itself (its orientation, e.g. the driver's)
-        topics = list(dict.fromkeys(t for t in (imu_topic, mag_topic, ref_topic) if t))
+        topics = list(dict.fromkeys(t for t in (imu_topic, mag_topic, ref_topic, vel_topic)
+                                    if t))
         types = {t: bag.msgtype_of(t) for t in topics}
         total = bag.count(topics)
         in_format = bag.format
@@ -634,7 +641,7 @@ def replay_variants(
         progress: _Progress | None = None
         ref_t: list[float] = []
         ref_q: list[tuple[float, float, float, float]] = []
-        n_imu = n_mag = n_ref = 0
+        n_imu = n_mag = n_ref = n_vel = 0
         first_log = last_log = None
         try:
             for v in variants:
@@ -686,6 +693,10 @@ def replay_variants(
                     n_mag += 1
                     for r in runs:
                         r.pipe.on_mag(m.msg)
+                elif m.topic == vel_topic:
+                    n_vel += 1
+                    for r in runs:
+                        r.pipe.on_velocity(m.msg)
                 if m.topic == ref_topic:
                     if m.topic != imu_topic:
                         n_ref += 1
@@ -693,11 +704,11 @@ def replay_variants(
                 progress.tick()
             if n_imu == 0:
                 raise io.BagError(f"{in_path}: topic {imu_topic!r} yielded no messages")
-            if n_imu + n_mag + n_ref < total:
+            if n_imu + n_mag + n_ref + n_vel < total:
                 # e.g. garbage inside an mcap chunk written without CRC: the reader skips
                 # records silently; an output would look complete with data missing
                 raise io.BagError(
-                    f"{in_path}: read {n_imu + n_mag + n_ref} of the {total} messages its "
+                    f"{in_path}: read {n_imu + n_mag + n_ref + n_vel} of the {total} messages its "
                     "index lists on the replayed topics: the bag is corrupt"
                 )
         except BaseException:
@@ -741,7 +752,8 @@ def replay_variants(
             "input_format": in_format,
             "output": str(r.out_path) if r.out_path is not None else None,
             "storage": opts.storage if r.out_path is not None else None,
-            "topics": {"imu": imu_topic, "mag": mag_topic, "reference": ref_topic},
+            "topics": {"imu": imu_topic, "mag": mag_topic, "reference": ref_topic,
+                       **({"velocity": vel_topic} if vel_topic else {})},
             "messages_in": n_imu,
             "mag_messages_in": n_mag,
             "reference_messages_in": n_ref,
@@ -762,6 +774,7 @@ def replay_variants(
                 float(r.bias_t[int(np.argmax(converged))] - r.bias_t[0])
                 if converged.any() else None),
             "still_fraction": float(np.mean(series.at_rest[init])) if init.any() else None,
+            **({"velocity": _velocity_summary(r.pipe, n_vel)} if vel_topic else {}),
             "counters": counters,
             "warnings": r.warnings,
             **({"offline": {"segments": r.offline_segments,
@@ -786,6 +799,24 @@ def replay_variants(
             summary["rmse_deg"] = stats.get("rmse_deg")
         results.append(ReplayResult(_jsonable(summary), series, r.out_path, scored))
     return results
+
+
+def _velocity_summary(pipe: Any, n_vel: int) -> dict[str, Any]:
+    """The velocity aiding's counters and heading offset for the replay JSON."""
+    aiding = pipe.velocity_aiding
+    if aiding is None:
+        return {"messages_in": n_vel, "aiding": "off"}
+    st = aiding.status()
+    return {
+        "messages_in": n_vel, "aiding_at_end": st.mode, "used": st.used,
+        "stale": st.rejected.get("too_old", 0),
+        "rejected": {k: v for k, v in st.rejected.items() if v and k != "too_old"},
+        "reanchors": st.reanchors, "aided_samples": st.aided_samples,
+        "unaided_stale_samples": st.stale_samples, "heading_known": st.heading_known,
+        "heading_offset_rad": st.heading_offset_rad,
+        "heading_sigma_rad": st.heading_sigma_rad if math.isfinite(st.heading_sigma_rad)
+        else None,
+    }
 
 
 def _series(r: _Run, ref_t: Sequence[float], ref_q: Sequence[Any]) -> ReplaySeries:

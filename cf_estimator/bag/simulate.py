@@ -28,10 +28,13 @@ import numpy as np
 
 from cf_estimator.bag import io
 from cf_estimator.scenarios import Scenario
+from cf_estimator.scenarios.velocity_sensor import VelocityData
 
 IMU_TOPIC = "/imu/data_raw"
 MAG_TOPIC = "/imu/mag"
 TRUTH_TOPIC = "/ground_truth/orientation"
+#: Simulated GNSS velocity (geometry_msgs/TwistStamped, ENU world frame), when asked for.
+VELOCITY_TOPIC = "/gnss/vel"
 IMU_FRAME = "imu_link"
 WORLD_FRAME = "world"
 #: Default first header stamp: 2024-01-01T00:00:00Z (a real-looking, non-zero time).
@@ -73,11 +76,14 @@ def write_scenario_bag(
     mag_rate_hz: float | None = 100.0, truth_rate_hz: float | None = 100.0,
     start_time_ns: int = DEFAULT_START_TIME_NS,
     progress: Callable[[int], None] | None = None,
+    velocity: VelocityData | None = None,
 ) -> SimulatedBag:
     """Write ``scenario`` as a ROS 2 bag at ``path`` (atomic: nothing is left on failure).
 
     ``mag_rate_hz``/``truth_rate_hz``: None or 0 = every IMU sample. ``progress`` is called with
-    the number of IMU samples written since the last call.
+    the number of IMU samples written since the last call. ``velocity``: simulated velocity
+    samples (:mod:`cf_estimator.scenarios.velocity_sensor`) written on :data:`VELOCITY_TOPIC`
+    stamped at their measurement time and logged at their arrival (stamp + latency).
     """
     imu = scenario.imu
     t = np.asarray(imu.t_s, dtype=float)
@@ -107,6 +113,17 @@ def write_scenario_bag(
         out.add_topic(IMU_TOPIC, io.IMU_TYPE)
         out.add_topic(MAG_TOPIC, io.MAG_TYPE)
         out.add_topic(TRUTH_TOPIC, io.QUATERNION_STAMPED_TYPE)
+        vel_rows: list[tuple[int, int, list[float]]] = []
+        if velocity is not None:
+            out.add_topic(VELOCITY_TOPIC, io.TWIST_STAMPED_TYPE)
+            t_rel = np.asarray(velocity.t_s, dtype=float) - t[0]
+            v_st = start_time_ns + np.round(t_rel * 1e9).astype(np.int64)
+            v_log = start_time_ns + np.round((velocity.arrival_s - t[0]) * 1e9).astype(np.int64)
+            vel_rows = [(int(a), int(b), v) for a, b, v in
+                        zip(v_log.tolist(), v_st.tolist(), velocity.v_world_m_s.tolist(),
+                            strict=True) if a > 0 and b > 0]
+            vel_rows.sort()
+        jv = 0
         out._writer.set_custom_data(  # metadata.yaml custom_data: how the bag was made
             "cf_estimator.scenario",
             json.dumps({
@@ -119,6 +136,12 @@ def write_scenario_bag(
         step = max(1, n // 200)
         for k in range(n):
             ns = int(stamps[k])
+            while jv < len(vel_rows) and vel_rows[jv][0] <= ns + _IMU_DELAY_NS:
+                log_ns, st_ns, v = vel_rows[jv]
+                vs, vn = divmod(st_ns, 1_000_000_000)
+                out.write(VELOCITY_TOPIC, io.TWIST_STAMPED_TYPE, log_ns,
+                          io.twist_stamped_message(vs, vn, WORLD_FRAME, v))
+                jv += 1
             sec, nsec = divmod(ns, 1_000_000_000)
             if truth_mask[k]:
                 out.write(TRUTH_TOPIC, io.QUATERNION_STAMPED_TYPE, ns + _TRUTH_DELAY_NS,

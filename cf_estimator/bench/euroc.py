@@ -70,6 +70,11 @@ class Flight:
     path: Path
     groundtruth_path: Path | None = None
     notes: tuple[str, ...] = ()
+    #: ground-truth velocity stamps (M,) [s] on ``t_s``'s time base (None: no ground truth)
+    velocity_t_s: np.ndarray | None = None
+    #: ground-truth velocity (M, 3) [m/s] in the ground truth's world frame (z up): the ASL
+    #: v_RS_R columns, or differentiated positions (TUM files, ASL files without v)
+    velocity_m_s: np.ndarray | None = None
 
     @property
     def n_samples(self) -> int:
@@ -95,9 +100,13 @@ class Flight:
             raise ValueError(f"{self.name}: nothing left after {start_s:g} s "
                              f"(the flight lasts {float(self.t_s[-1]):.1f} s)")
         t0 = float(self.t_s[i])
+        vt = vel = None
+        if self.velocity_t_s is not None and self.velocity_m_s is not None:
+            keep = self.velocity_t_s >= t0  # the velocity from the new start on, re-based too
+            vt, vel = self.velocity_t_s[keep] - t0, self.velocity_m_s[keep]
         return Flight(f"{self.name}@{start_s:g}s", self.t_s[i:] - t0, self.gyro_rad_s[i:],
                       self.accel_m_s2[i:], self.q_ref[i:], self.t0_ns + int(round(t0 * 1e9)),
-                      self.path, self.groundtruth_path, self.notes)
+                      self.path, self.groundtruth_path, self.notes, vt, vel)
 
 
 # -- text tables -------------------------------------------------------------------------------
@@ -243,6 +252,30 @@ def read_groundtruth(path: str | os.PathLike, fmt: str | None = None
     return t, q * sign[:, None], notes
 
 
+def read_groundtruth_velocity(path: str | os.PathLike, fmt: str | None = None
+                              ) -> tuple[np.ndarray, np.ndarray, str]:
+    """World-frame velocity of a ground-truth file: (stamps [ns] (M,), v [m/s] (M, 3), source).
+
+    ASL files with finite ``v_RS_R`` columns (8–10): those (source ``"v_RS_R"``); otherwise
+    (TUM, or no velocity columns) the positions differentiated, central differences at the
+    stamps (source ``"positions"``).
+    """
+    p = Path(path)
+    if fmt is None:
+        fmt = _detect_format(p)
+    if fmt == "asl":
+        try:
+            t, v, _ = read_table(p, 11, time_in_s=False, what="ASL ground truth")
+            return t, v[:, 7:10], "v_RS_R"
+        except EurocDataError:
+            pass  # no (finite) velocity columns: differentiate the positions
+    t, v, _ = read_table(p, 4, time_in_s=(fmt == "tum"), what=f"{fmt.upper()} ground truth")
+    if t.size < 2:
+        raise EurocDataError(f"ground truth {p}: too few rows to differentiate positions")
+    ts = (t - t[0]) * 1e-9
+    return t, np.gradient(v[:, 0:3], ts, axis=0), "positions"
+
+
 def interpolate_groundtruth(t_gt_ns: np.ndarray, q_gt: np.ndarray, t_ns: np.ndarray,
                             max_gap_s: float = MAX_GAP_S) -> np.ndarray:
     """Slerp ground truth (stamps [ns] (M,), w x y z (M, 4)) onto stamps ``t_ns`` (N,) [ns].
@@ -337,6 +370,7 @@ def load_flight(path: str | os.PathLike, groundtruth: str | os.PathLike | None =
     gt = (Path(groundtruth), gt_format) if groundtruth is not None else find_groundtruth(folder)
     q_ref = np.full((t_ns.shape[0], 4), np.nan)
     gt_path = None
+    vel_t = vel = None
     if gt is None:
         if require_groundtruth:
             raise EurocDataError(
@@ -347,12 +381,14 @@ def load_flight(path: str | os.PathLike, groundtruth: str | os.PathLike | None =
         t_gt, q_gt, gt_notes = read_groundtruth(gt_path, gt[1])
         notes += gt_notes
         q_ref = interpolate_groundtruth(t_gt, q_gt, t_ns, max_gap_s)
+        t_vel, vel, _source = read_groundtruth_velocity(gt_path, gt[1] or _detect_format(gt_path))
+        vel_t = (t_vel - t_ns[0]) * 1e-9
         if require_groundtruth and not np.any(np.isfinite(q_ref[:, 0])):
             raise EurocDataError(f"ground truth {gt_path} covers none of the IMU samples "
                                  "(different clocks or units?)")
     t_s = (t_ns - t_ns[0]) * 1e-9
     return Flight(name or flight_name(folder), t_s, gyro, acc, q_ref, int(t_ns[0]), folder,
-                  gt_path, tuple(notes))
+                  gt_path, tuple(notes), vel_t, vel)
 
 
 def load_flights(data: str | os.PathLike, **kwargs) -> list[Flight]:

@@ -160,18 +160,22 @@ def score_windows(flight: Flight, q_est: np.ndarray,
 
 
 def _midair_worker(task: tuple) -> dict[str, dict[str, float]]:
-    flight, params, peers = task
-    names = [a.name for a in ALGORITHMS.values() if a.ours] + list(peers)
-    return {n: score_windows(flight, ALGORITHMS[n].run(flight, params)) for n in names}
+    flight, params, peers, velocity = task
+    algos = [a for a in ALGORITHMS.values() if a.ours]
+    if velocity is not None:
+        algos += aided_algorithms(velocity)
+    algos += [ALGORITHMS[n] for n in peers]
+    return {a.name: score_windows(flight, a.run(flight, params)) for a in algos}
 
 
 def run_midair(flights: Sequence[Flight], params: FilterParams, start_s: float,
-               peers: Sequence[str] = (), jobs: int = 1) -> EurocResult:
+               peers: Sequence[str] = (), jobs: int = 1, velocity: VelocityInput | None = None
+               ) -> EurocResult:
     """Every flight cropped to start ``start_s`` after its first sample (:meth:`Flight.cropped`)
     and scored in :data:`MIDAIR_WINDOWS` (keys :data:`MIDAIR_SCORES`); flights too short for
-    the later window are left out."""
+    the later window are left out. ``velocity``: ours aided too (as in :func:`run_euroc`)."""
     crops = [f.cropped(start_s) for f in flights if f.t_s[-1] - start_s > MIDAIR_WINDOWS[1][0]]
-    tasks = [(f, params, tuple(peers)) for f in crops]
+    tasks = [(f, params, tuple(peers), velocity) for f in crops]
     result = EurocResult(settle_s=MIDAIR_WINDOWS[0][0])
     for flight, scores in zip(crops, run_tasks(_midair_worker, tasks, jobs), strict=True):
         result.flights[flight.name] = scores
@@ -179,11 +183,65 @@ def run_midair(flights: Sequence[Flight], params: FilterParams, start_s: float,
     return result
 
 
+# -- velocity aiding (issue 17) ------------------------------------------------------------
+@dataclass(frozen=True)
+class VelocityInput:
+    """How the ground-truth velocity is given to the aided filter: resampled to ``rate_hz``
+    (None: as given), white noise ``noise_m_s`` [m/s] per axis (seeded per flight name),
+    delivered ``latency_s`` [s] after its stamp."""
+
+    rate_hz: float | None = None
+    noise_m_s: float = 0.0
+    latency_s: float = 0.0
+
+
+def degraded_velocity(flight: Flight, vin: VelocityInput) -> tuple[np.ndarray, np.ndarray]:
+    """(stamps [s] (M,), velocity [m/s] (M, 3)) of a flight's ground truth, degraded by ``vin``
+    (ValueError if the flight has no ground-truth velocity)."""
+    import zlib
+
+    if flight.velocity_t_s is None or flight.velocity_m_s is None:
+        raise ValueError(f"{flight.name}: no ground-truth velocity")
+    t, v = flight.velocity_t_s, flight.velocity_m_s
+    if vin.rate_hz is not None:
+        grid = np.arange(t[0], t[-1], 1.0 / vin.rate_hz)
+        v = np.stack([np.interp(grid, t, v[:, i]) for i in range(3)], axis=1)
+        t = grid
+    if vin.noise_m_s > 0.0:
+        rng = np.random.default_rng(zlib.crc32(flight.name.encode()))
+        v = v + rng.normal(0.0, vin.noise_m_s, v.shape)
+    return t, v
+
+
+def aided_algorithms(vin: VelocityInput) -> list[Algorithm]:
+    """Our filter online and offline with the (degraded) ground-truth velocity as aiding."""
+
+    def online(flight: Flight, params: FilterParams) -> np.ndarray:
+        p = dataclasses.replace(params, use_mag=False)
+        return estimate(flight.gyro_rad_s, flight.accel_m_s2, None, timestamps_s=flight.t_s,
+                        params=p, velocity=degraded_velocity(flight, vin),
+                        velocity_latency_s=vin.latency_s).quaternion
+
+    def offline(flight: Flight, params: FilterParams) -> np.ndarray:
+        p = dataclasses.replace(params, use_mag=False)
+        return estimate(flight.gyro_rad_s, flight.accel_m_s2, None, timestamps_s=flight.t_s,
+                        params=p, velocity=degraded_velocity(flight, vin),
+                        velocity_latency_s=vin.latency_s, offline=True).quaternion
+
+    return [Algorithm("cf_estimator_aided", online, ours=True),
+            Algorithm("cf_estimator_aided_offline", offline, ours=True)]
+
+
 def evaluate_flight(flight: Flight, params: FilterParams, peers: Sequence[str] = (),
-                    settle_s: float = SETTLE_S) -> dict[str, dict[str, float]]:
-    """``{algorithm: score}`` for ours and ``peers`` on one flight."""
-    names = [a.name for a in ALGORITHMS.values() if a.ours] + list(peers)
-    return {n: score_flight(flight, ALGORITHMS[n].run(flight, params), settle_s) for n in names}
+                    settle_s: float = SETTLE_S, velocity: VelocityInput | None = None
+                    ) -> dict[str, dict[str, float]]:
+    """``{algorithm: score}`` for ours (and, with ``velocity``, ours aided) and ``peers`` on one
+    flight."""
+    algos = [a for a in ALGORITHMS.values() if a.ours]
+    if velocity is not None:
+        algos += aided_algorithms(velocity)
+    algos += [ALGORITHMS[n] for n in peers]
+    return {a.name: score_flight(flight, a.run(flight, params), settle_s) for a in algos}
 
 
 @dataclass
@@ -231,14 +289,16 @@ def flight_info(flight: Flight) -> dict:
 def _worker(task: tuple) -> dict[str, dict[str, float]]:
     from cf_estimator.bench.parallel import aligned
 
-    flight, params, peers, settle_s = task
-    return evaluate_flight(aligned(flight), params, peers, settle_s)  # aligned: a cluster's copy
+    flight, params, peers, settle_s, velocity = task
+    # aligned: a cluster's copy of the arrays
+    return evaluate_flight(aligned(flight), params, peers, settle_s, velocity)
 
 
 def run_euroc(flights: Sequence[Flight], params: FilterParams, peers: Sequence[str] = (),
-              settle_s: float = SETTLE_S, jobs: int = 1) -> EurocResult:
+              settle_s: float = SETTLE_S, jobs: int = 1, velocity: VelocityInput | None = None
+              ) -> EurocResult:
     """Evaluate every flight (one process per flight when ``jobs`` > 1), order kept."""
-    tasks = [(f, params, tuple(peers), settle_s) for f in flights]
+    tasks = [(f, params, tuple(peers), settle_s, velocity) for f in flights]
     result = EurocResult(settle_s=settle_s)
     for flight, scores in zip(flights, run_tasks(_worker, tasks, jobs), strict=True):
         result.flights[flight.name] = scores

@@ -98,11 +98,22 @@ def register(subparsers: Any) -> None:
                    "(default: the shipped defaults, FilterParams())")
     e.add_argument("--start-at", metavar="LIST",
                    help="comma-separated seconds, e.g. 20,40,60: also crop every flight to start "
-                   "there (a mid-air start: node restarted in flight) and score 2-12 s and 12 s-end "
-                   "after that start, beside the full (ground) start")
+                   "there (a mid-air start: node restarted in flight) and score 2-12 s and "
+                   "12 s-end after that start, beside the full (ground) start")
     e.add_argument("--json", metavar="OUT", help="write per-flight scores and means as JSON")
     e.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
                    help="worker processes, one flight each (default %(default)s)")
+    e.add_argument("--velocity", action="store_true",
+                   help="also run our filter aided by the ground truth's velocity (ASL v_RS_R "
+                   "columns, else differentiated positions), degraded by the flags below: "
+                   "columns cf_estimator_aided and cf_estimator_aided_offline")
+    e.add_argument("--velocity-rate", type=finite_float, metavar="HZ",
+                   help="resample the velocity to this rate (default: as given)")
+    e.add_argument("--velocity-noise", type=finite_float, default=0.0, metavar="M_S",
+                   help="white noise added per axis [m/s] (seeded per flight; default 0)")
+    e.add_argument("--velocity-latency", type=finite_float, default=0.0, metavar="S",
+                   help="each velocity sample reaches the filter this long after its stamp "
+                   "(default 0)")
     add_cluster_option(e)
     e.set_defaults(run=run_euroc)
 
@@ -122,6 +133,10 @@ def register(subparsers: Any) -> None:
                    help="simulation seed of the sensor noise and disturbances (default 0)")
     s.add_argument("--duration", type=float, metavar="S",
                    help="scenario duration [s] (default: each scenario's own)")
+    s.add_argument("--velocity", action="store_true",
+                   help="also ours aided by a simulated GNSS velocity (10 Hz, 0.1 m/s, 100 ms "
+                   "late): heading offset estimated (cf_estimator_aided) and known from the "
+                   "start (cf_estimator_aided_heading)")
     s.add_argument("--json", metavar="OUT", help="write the table's rows as JSON")
     s.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
     s.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
@@ -318,6 +333,7 @@ def run_euroc(args: Any) -> int:
             raise CliError(f"--start-at takes seconds > 0, got {token!r}", 2)
         starts.append(value)
     params = _load_params(args.params)
+    velocity = _velocity_input(args)
     try:
         if args.groundtruth:
             folders = euroc.find_flights(args.data)
@@ -329,16 +345,25 @@ def run_euroc(args: Any) -> int:
             flights = euroc.load_flights(args.data)
     except euroc.EurocDataError as exc:
         raise CliError(str(exc), 2) from None
+    if velocity is not None:
+        missing = [f.name for f in flights if f.velocity_t_s is None]
+        if missing:
+            raise CliError(f"--velocity: no ground-truth velocity for {missing[0]}", 2)
     from cf_estimator.cluster import ClusterError, make_engine
 
     try:  # on a cluster the flights (read here from their CSV files) travel once each
         with make_engine(args.cluster, args.jobs) as engine:
-            result = ev.run_euroc(flights, params, peers, args.settle, jobs=engine)
+            result = ev.run_euroc(flights, params, peers, args.settle, jobs=engine,
+                                  velocity=velocity)
     except ClusterError as exc:
         raise CliError(str(exc), 2) from None
     print(f"EuRoC: {len(result.flights)} flight(s) from {args.data}; 6-D inclination error "
           f"[deg] vs ground truth after the first {args.settle:g} s: RMS / max")
     print(f"cf_estimator parameters: {args.params or 'shipped defaults'}")
+    if velocity is not None:
+        rate = f"{velocity.rate_hz:g} Hz" if velocity.rate_hz else "rate as given"
+        print(f"velocity aiding: ground-truth velocity, {rate}, noise {velocity.noise_m_s:g} "
+              f"m/s, latency {velocity.latency_s:g} s")
     for name, info in result.info.items():
         for line in info["notes"]:
             print(f"  note: {name}: {line}")
@@ -346,7 +371,7 @@ def run_euroc(args: Any) -> int:
     print(ev.format_table(result), end="")
     midair = {}
     for start in starts:
-        mid = ev.run_midair(flights, params, start, peers, jobs=args.jobs)
+        mid = ev.run_midair(flights, params, start, peers, jobs=args.jobs, velocity=velocity)
         midair[f"{start:g}"] = mid
         print()
         w0, w1 = ev.MIDAIR_WINDOWS
@@ -360,11 +385,30 @@ def run_euroc(args: Any) -> int:
         doc["meta"] = {
             "data": str(args.data), "peers": peers, "peers_skipped": skipped,
             "params_file": args.params, "cf_estimator_params": as_dict(params),
+            "velocity": None if velocity is None else dataclasses.asdict(velocity),
             "metrics": "inclination error: angle between estimated and true up in the sensor "
                        "frame [deg]; RMS and max over samples with ground truth, t >= settle_s",
         }
         _write_json(args.json, doc)
     return 0
+
+
+def _velocity_input(args: Any) -> Any:
+    """``bench euroc``'s velocity flags as a VelocityInput (None without --velocity)."""
+    from cf_estimator.bench.euroc_eval import VelocityInput
+
+    given = (args.velocity_rate is not None or args.velocity_noise != 0.0
+             or args.velocity_latency != 0.0)
+    if not args.velocity:
+        if given:
+            raise CliError("--velocity-rate/--velocity-noise/--velocity-latency need --velocity",
+                           2)
+        return None
+    if args.velocity_rate is not None and not args.velocity_rate > 0.0:
+        raise CliError(f"--velocity-rate must be > 0 (got {args.velocity_rate:g})", 2)
+    if args.velocity_noise < 0.0 or args.velocity_latency < 0.0:
+        raise CliError("--velocity-noise and --velocity-latency must be >= 0", 2)
+    return VelocityInput(args.velocity_rate, args.velocity_noise, args.velocity_latency)
 
 
 def run_scenarios(args: Any) -> int:
@@ -376,7 +420,7 @@ def run_scenarios(args: Any) -> int:
     names = _csv(args.scenarios)
     try:
         rows = sc.run_scenarios(names, params, peers, seed=args.seed, duration_s=args.duration,
-                                jobs=args.jobs)
+                                jobs=args.jobs, velocity=args.velocity)
     except ValueError as exc:
         raise CliError(str(exc), 2) from None
     print(sc.format_table(rows), end="")

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 from typing import Any
@@ -53,6 +54,10 @@ def register(subparsers: Any) -> None:
     p.add_argument("--imu-topic", metavar="TOPIC", help="sensor_msgs/Imu input (default: detect)")
     p.add_argument("--mag-topic", metavar="TOPIC",
                    help="sensor_msgs/MagneticField input (default: detect; 'none' = without)")
+    p.add_argument("--velocity-topic", metavar="TOPIC",
+                   help="velocity aiding input: geometry_msgs/TwistStamped (world-frame "
+                        "velocity, axes by the velocity_frame parameter) or nav_msgs/Odometry "
+                        "(default: none, IMU-only)")
     p.add_argument("--reference-topic", metavar="TOPIC",
                    help="orientation reference (geometry_msgs/PoseStamped, QuaternionStamped, "
                         "nav_msgs/Odometry, or a sensor_msgs/Imu's orientation): adds error "
@@ -112,6 +117,21 @@ def mag_line(s: dict[str, Any]) -> str:
             f"{c.get('mag_dropped', 0)}")
 
 
+def velocity_line(s: dict[str, Any]) -> str:
+    """``velocity N on TOPIC: used U, stale S, rejected ...; aided A IMU samples; heading ...``."""
+    v = s["velocity"]
+    topic = s["topics"].get("velocity")
+    if "used" not in v:
+        return f"velocity {v['messages_in']} on {topic}: none usable (aiding off)"
+    heading = (f"heading offset {math.degrees(v['heading_offset_rad']):+.1f} deg ± "
+               f"{math.degrees(v['heading_sigma_rad']):.1f}" if v.get("heading_sigma_rad")
+               is not None else "heading offset not observed")
+    return (f"velocity {v['messages_in']} on {topic}: used {v['used']}, stale {v['stale']}, "
+            f"rejected {sum(v['rejected'].values())} ({_format_counts(v['rejected'])}); aided "
+            f"{v['aided_samples']} IMU samples; {heading}"
+            f"{'' if v['heading_known'] else ' (not known: no aiding)'}")
+
+
 #: Below this share of magnetometer samples used, the replay warns that heading was mostly
 #: unreferenced (it followed the gyro).
 MAG_USED_WARN_FRACTION = 0.5
@@ -149,6 +169,8 @@ def print_summary(s: dict[str, Any], out: Any = None) -> None:
           f"{_format_counts(s.get('resets') or {})}, clipped "
           f"{100.0 * (s['clipped_fraction'] or 0.0):.1f}% of samples", file=out)
     print(mag_line(s), file=out)
+    if s.get("velocity") is not None:
+        print(velocity_line(s), file=out)
     bias = s.get("final_gyro_bias_rad_s")
     if bias:
         after = s.get("gyro_bias_converged_after_s")
@@ -193,7 +215,7 @@ def _options(args: argparse.Namespace) -> ReplayOptions:
         imu_topic=args.imu_topic, mag_topic=args.mag_topic, reference_topic=args.reference_topic,
         storage=args.storage, copy_inputs=args.copy_inputs, overwrite=args.overwrite,
         heading_alignment=args.heading_alignment, progress=args.progress,
-        offline=args.offline,
+        offline=args.offline, velocity_topic=args.velocity_topic,
     )
 
 

@@ -39,6 +39,13 @@ def register(subparsers: Any) -> None:
                    help="magnetometer rate (default 100; 0 = IMU rate)")
     p.add_argument("--truth-rate", type=finite_float, default=100.0, metavar="HZ",
                    help="ground-truth rate (default 100; 0 = IMU rate)")
+    p.add_argument("--velocity-rate", type=finite_float, default=0.0, metavar="HZ",
+                   help="also write a simulated GNSS velocity (geometry_msgs/TwistStamped, ENU) "
+                   "on /gnss/vel at this rate (default 0 = none)")
+    p.add_argument("--velocity-noise", type=finite_float, default=0.1, metavar="M_S",
+                   help="its white noise per axis [m/s] (default %(default)s)")
+    p.add_argument("--velocity-latency", type=finite_float, default=0.1, metavar="S",
+                   help="its delay from stamp to recording [s] (default %(default)s)")
     p.add_argument("--storage", choices=sorted(io.STORAGES), default="mcap",
                    help="storage plugin (default mcap)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output bag")
@@ -68,7 +75,10 @@ def run(args: argparse.Namespace) -> int:
     for opt, value in (("--rate", args.rate), ("--duration", args.duration)):
         if value is not None and value <= 0:
             raise CliError(f"{opt} must be > 0 (got {value:g})", 2)
-    for opt, value in (("--mag-rate", args.mag_rate), ("--truth-rate", args.truth_rate)):
+    for opt, value in (("--mag-rate", args.mag_rate), ("--truth-rate", args.truth_rate),
+                       ("--velocity-rate", args.velocity_rate),
+                       ("--velocity-noise", args.velocity_noise),
+                       ("--velocity-latency", args.velocity_latency)):
         if value < 0:
             raise CliError(f"{opt} must be >= 0 (got {value:g})", 2)
     out = Path(args.output)
@@ -80,6 +90,15 @@ def run(args: argparse.Namespace) -> int:
         scenario = make_scenario(name, rate_hz=args.rate, duration_s=args.duration, seed=args.seed)
     except ValueError as exc:
         raise CliError(str(exc), 2) from None
+    velocity = None
+    if args.velocity_rate > 0:
+        import numpy as np
+
+        from cf_estimator.scenarios.velocity_sensor import VelocityModel, measure_velocity
+
+        model = VelocityModel(args.velocity_rate, args.velocity_noise, args.velocity_latency)
+        velocity = measure_velocity(scenario.truth, model,
+                                    np.random.default_rng([args.seed, 17]))
     progress = None
     bar = None
     if sys.stderr.isatty():
@@ -92,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
         result = write_scenario_bag(
             scenario, out, storage=args.storage, overwrite=args.overwrite,
             mag_rate_hz=args.mag_rate or None, truth_rate_hz=args.truth_rate or None,
-            progress=progress,
+            progress=progress, velocity=velocity,
         )
     except io.BagError as exc:
         raise CliError(str(exc), exc.code) from None

@@ -22,6 +22,7 @@ from cf_estimator.core.input_checks import warn_units
 from cf_estimator.core.kernel import resolve_backend
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import BIAS_CONVERGED_SIGMA_RAD_S
+from cf_estimator.core.velocity import VelocityAiding, VelocityStatus, filter_bias
 
 
 @dataclass
@@ -37,6 +38,10 @@ class EstimateResult:
     at_rest: np.ndarray  #: (N,) bool: still (block statistics); the bias is learned from the gyro
     mag_status: np.ndarray  #: (N,) int: 0 none, 1 used, 2 rejected, 3 disabled
     gyro_bias_sigma_rad_s: np.ndarray  #: (N,) standard deviation of the bias estimate [rad/s]
+    #: (N,) bool: the sample was velocity-aided (None: no velocity given)
+    velocity_aided: np.ndarray | None = None
+    #: the velocity aiding's counters and heading offset at the end (None: no velocity given)
+    velocity_status: VelocityStatus | None = None
 
     @property
     def gyro_bias_converged(self) -> np.ndarray:
@@ -123,6 +128,64 @@ def _run_filter(f: ComplementaryFilter, gyro: np.ndarray, acc: np.ndarray, mg: n
         f.run_rows(gyro, acc, mg, np.diff(t, prepend=t[0]), start, q_out, extra_out)
 
 
+def velocity_arrays(velocity: tuple[ArrayLike, ArrayLike]) -> tuple[np.ndarray, np.ndarray]:
+    """(t_v [s] (M,), v [m/s] (M, 3)) float arrays from ``estimate``'s ``velocity`` argument
+    (ValueError on wrong shapes; bad values are left to the aiding, which rejects and counts
+    them)."""
+    try:
+        t_v, v = velocity
+    except (TypeError, ValueError):
+        raise ValueError("velocity must be a pair (t_v_s of shape (M,), v_world_m_s of shape "
+                         "(M, 3))") from None
+    t_arr = np.asarray(t_v, dtype=float).reshape(-1)
+    v_arr = np.asarray(v, dtype=float)
+    if v_arr.ndim != 2 or v_arr.shape[1] != 3 or v_arr.shape[0] != t_arr.shape[0]:
+        raise ValueError(f"velocity: t_v_s has shape {np.shape(t_v)} and v_world_m_s "
+                         f"{v_arr.shape}; expected (M,) and (M, 3)")
+    return t_arr, v_arr
+
+
+def run_aided(f: ComplementaryFilter, aiding: VelocityAiding, gyro: np.ndarray, acc: np.ndarray,
+              mg: np.ndarray | None, t: np.ndarray, t_v: np.ndarray, v: np.ndarray,
+              latency_s: float, q_out: np.ndarray, extra_out: np.ndarray | None,
+              aided_out: np.ndarray, accel_out: np.ndarray | None = None) -> None:
+    """:func:`_run_filter` with velocity aiding, one sample at a time: velocity sample j is
+    offered once the IMU stamp reaches t_v[j] + latency_s (its arrival); each IMU sample's
+    accelerometer goes through :meth:`VelocityAiding.aided_accel` (writes aided_out (N,) bool
+    and, if given, accel_out (N, 3): the accelerometer rows the filter was given)."""
+    order = np.argsort(t_v + latency_s, kind="stable")
+    arrival = (t_v + latency_s)[order].tolist()
+    tv_rows, v_rows = t_v[order].tolist(), v[order].tolist()
+    nv, jv = len(arrival), 0
+    g_rows, a_rows = gyro.tolist(), acc.tolist()
+    m_rows = mg.tolist() if mg is not None else None
+    ts = t.tolist()
+    dts = np.diff(t, prepend=t[0]).tolist()
+    for i in range(len(ts)):
+        while jv < nv and arrival[jv] <= ts[i]:
+            aiding.add_velocity(tv_rows[jv], v_rows[jv])
+            jv += 1
+        m = m_rows[i] if m_rows is not None else None
+        if i == 0 or not f.initialized:  # initialisation (or a given initial orientation)
+            if not f.initialized:
+                f.update(g_rows[i], a_rows[i], 1.0, m)
+            if not f.initialized:
+                continue
+            a_in = a_rows[i]
+            aiding.aided_accel(ts[i], g_rows[i], a_in, 1e-9, f.orientation_tuple(),
+                               filter_bias(f))
+        else:
+            a_in = aiding.aided_accel(ts[i], g_rows[i], a_rows[i], dts[i],
+                                      f.orientation_tuple(), filter_bias(f))
+            f.update(g_rows[i], a_in, dts[i], m)
+        q_out[i] = f.orientation_tuple()
+        aided_out[i] = aiding.active
+        if accel_out is not None:
+            accel_out[i] = a_in
+        if extra_out is not None:
+            extra_out[i] = state_extras(f._state)  # noqa: SLF001 - read-only
+
+
 def estimate(
     gyro_rad_s: ArrayLike,
     accel_m_s2: ArrayLike,
@@ -134,6 +197,8 @@ def estimate(
     initial_orientation: Sequence[float] | None = None,
     backend: str | None = None,
     offline: bool = False,
+    velocity: tuple[ArrayLike, ArrayLike] | None = None,
+    velocity_latency_s: float = 0.0,
 ) -> EstimateResult:
     """Run the filter over a recording.
 
@@ -143,24 +208,45 @@ def estimate(
     :mod:`cf_estimator.core.kernel`. ``offline``: the acausal estimate of
     :mod:`cf_estimator.core.offline` (every sample uses the whole recording; intervals over
     ``OFFLINE_MAX_GAP_S`` and non-finite gyro rows split it into segments).
+
+    ``velocity``: optional aiding, ``(t_v_s (M,), v_world_m_s (M, 3))``: stamps [s] on the IMU's
+    time base and velocities [m/s] in the filter's world frame (ENU or NED by
+    ``params.world_frame``; heading tied by ``params.velocity_heading``), see
+    :mod:`cf_estimator.core.velocity`. ``velocity_latency_s``: each velocity sample becomes
+    available that long after its stamp (transport delay, as GNSS; alignment is by stamps).
+    Offline, the aided specific force of a causal pass is fed to the acausal estimate.
     """
     gyro, acc, mg = _rows(gyro_rad_s, accel_m_s2, mag)
     n = gyro.shape[0]
     t = sample_times(n, rate_hz, timestamps_s)
     f = ComplementaryFilter(params, initial_orientation=initial_orientation, backend=backend)
     warn_units(gyro, acc, f.params.gravity_m_s2)  # deg/s or g: warned once per call site
+    aided = status = None
+    if velocity is not None:
+        t_v, v = velocity_arrays(velocity)
+        if not (np.isfinite(velocity_latency_s) and velocity_latency_s >= 0.0):
+            raise ValueError(f"velocity_latency_s must be >= 0, got {velocity_latency_s!r}")
+        aiding = VelocityAiding(f.params)
+        out_q = np.full((n, 4), np.nan)
+        extra = np.zeros((n, EXTRA_COLUMNS))
+        aided = np.zeros(n, dtype=bool)
+        acc_used = acc.copy()
+        run_aided(f, aiding, gyro, acc, mg, t, t_v, v, velocity_latency_s, out_q, extra, aided,
+                  acc_used)
+        status = aiding.status()
+        acc = acc_used
     if offline:
         from cf_estimator.core.offline import estimate_offline
 
         out_q, extra = estimate_offline(gyro, acc, mg, t, f.params, initial_orientation, backend)
-    else:
+    elif velocity is None:
         out_q = np.full((n, 4), np.nan)
         extra = np.zeros((n, EXTRA_COLUMNS))
         _run_filter(f, gyro, acc, mg, t, out_q, extra)
     return EstimateResult(
         t, out_q, extra[:, 0:3], extra[:, 6] != 0.0, extra[:, 3:6],
         extra[:, 7].astype(np.int8), extra[:, 8] != 0.0, extra[:, 9].astype(np.int8),
-        extra[:, 10],
+        extra[:, 10], aided, status,
     )
 
 

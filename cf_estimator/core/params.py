@@ -16,6 +16,7 @@ from cf_estimator.schema import ParameterError, param, validate_fields
 
 WORLD_FRAMES = ("enu", "ned")
 MAG_MODES = ("yaw", "full")
+VELOCITY_HEADINGS = ("auto", "filter")
 
 
 @dataclass(frozen=True)
@@ -314,6 +315,82 @@ class FilterParams:
         minimum=1.0,
         maximum=30.0,
         group="frames",
+    )
+
+    velocity_window_s: float = param(
+        1.0,
+        "s",
+        "Velocity aiding: the world-frame acceleration is the velocity difference over the "
+        "newest accepted velocity samples spanning at least this long (noise: about "
+        "sqrt(2)*velocity_noise/window), matched by the mean specific force over the same "
+        "stamps.",
+        minimum=0.0,
+        maximum=30.0,
+        minimum_exclusive=True,
+        group="velocity aiding",
+    )
+    velocity_timeout_s: float = param(
+        1.5,
+        "s",
+        "Velocity aiding: a velocity sample older than this (by header stamp, against the IMU "
+        "stamp) is stale; without a fresh one the filter runs IMU-only, exactly as unaided.",
+        minimum=0.0,
+        maximum=30.0,
+        minimum_exclusive=True,
+        group="velocity aiding",
+    )
+    velocity_jump_threshold_m_s: float = param(
+        1.0,
+        "m/s",
+        "Velocity aiding: a velocity sample whose change from the last accepted one departs "
+        "from the IMU's own prediction by more than this (plus 2 m/s^2 times the interval) is "
+        "a jump (GNSS glitch) and rejected.",
+        minimum=0.0,
+        maximum=100.0,
+        minimum_exclusive=True,
+        group="velocity aiding",
+    )
+    velocity_noise_m_s: float = param(
+        0.1,
+        "m/s",
+        "Velocity aiding: noise (standard deviation per axis) of the velocity input. A "
+        "horizontal acceleration within its differentiation noise is taken out only in part "
+        "(none below it), so a noisy velocity adds no tilt noise in steady flight "
+        "(0 = always take it out in full).",
+        minimum=0.0,
+        maximum=10.0,
+        group="velocity aiding",
+    )
+    velocity_heading: str = param(
+        "auto",
+        "",
+        "Velocity aiding: how the filter's heading is tied to the velocity's world frame. "
+        "'auto': estimate the heading offset from the accelerations (observable while the "
+        "vehicle accelerates horizontally) and aid once it is known to "
+        "velocity_heading_sigma_rad; 'filter': the filter's heading already is the velocity's "
+        "frame (magnetometer heading with negligible declination, or a simulator).",
+        choices=VELOCITY_HEADINGS,
+        group="velocity aiding",
+    )
+    velocity_heading_sigma_rad: float = param(
+        0.1,
+        "rad",
+        "Velocity aiding ('auto'): aid only while the heading offset's standard deviation is "
+        "below this (0.1 rad = 5.7 deg: the tilt error left by it is about sigma*|a_h|/g).",
+        minimum=0.0,
+        maximum=3.2,
+        minimum_exclusive=True,
+        group="velocity aiding",
+    )
+    velocity_heading_memory_s: float = param(
+        60.0,
+        "s",
+        "Velocity aiding ('auto'): memory (forgetting time constant) of the heading-offset "
+        "estimator; the 6-D filter's heading drifts, so old accelerations count less.",
+        minimum=0.0,
+        maximum=3600.0,
+        minimum_exclusive=True,
+        group="velocity aiding",
     )
 
     def __post_init__(self) -> None:

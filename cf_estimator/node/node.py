@@ -183,6 +183,13 @@ class CfEstimatorNode(Node):
         self._sub_mag = self.create_subscription(
             MagneticField, MAG_IN, self._on_mag, _sensor_qos(), qos_overriding_options=overrides
         )
+        self._sub_vel = None
+        if pipeline_params.velocity_topic:
+            vel_type = self._velocity_type(pipeline_params)
+            self._sub_vel = self.create_subscription(
+                vel_type, pipeline_params.velocity_topic, self._on_velocity, _sensor_qos(),
+                qos_overriding_options=overrides,
+            )
         # Diagnostics on the steady clock: they keep coming when sim time stalls.
         self._timer = self.create_timer(
             pipeline_params.diagnostics_period_s, self._on_diagnostics,
@@ -200,7 +207,9 @@ class CfEstimatorNode(Node):
             self.add_post_set_parameters_callback(self._apply_parameters)
 
         topics = {
-            "in": [self.resolve_topic_name(IMU_IN), self.resolve_topic_name(MAG_IN)],
+            "in": [self.resolve_topic_name(IMU_IN), self.resolve_topic_name(MAG_IN)]
+            + ([f"{self.resolve_topic_name(pipeline_params.velocity_topic)} (velocity aiding, "
+                f"{self._sub_vel.msg_type.__name__})"] if self._sub_vel else []),
             "out": [self.resolve_topic_name(IMU_OUT)]
             + ([self.resolve_topic_name(RPY_OUT)] if self._pub_rpy else [])
             + [DIAGNOSTICS_OUT]
@@ -290,6 +299,35 @@ class CfEstimatorNode(Node):
 
     def _on_mag(self, msg: MagneticField) -> None:
         self._pipe.on_mag(msg)
+
+    def _velocity_type(self, pp: Any) -> Any:
+        """TwistStamped or Odometry for velocity_topic: by velocity_topic_type, or ('auto') by
+        the type advertised on the graph now (TwistStamped when nobody advertises it yet)."""
+        kind = pp.velocity_topic_type
+        if kind == "auto":
+            name = self.resolve_topic_name(pp.velocity_topic)
+            types = dict(self.get_topic_names_and_types()).get(name, [])
+            kind = "odometry" if "nav_msgs/msg/Odometry" in types else "twist"
+        if kind == "odometry":
+            try:
+                from nav_msgs.msg import Odometry
+            except ImportError:
+                raise StartError(
+                    "velocity_topic_type odometry needs the nav_msgs package (ROS: apt install "
+                    "ros-jazzy-nav-msgs; PyPI wheels: pip install ros-jazzy-nav-msgs)"
+                ) from None
+            return Odometry
+        from geometry_msgs.msg import TwistStamped
+
+        return TwistStamped
+
+    def _on_velocity(self, msg: Any) -> None:
+        reason = self._pipe.on_velocity(msg)
+        if reason is not None and reason != "too_old":
+            self.get_logger().warning(
+                f"velocity message rejected: {reason} (counted in /diagnostics)",
+                throttle_duration_sec=LOG_THROTTLE_S,
+            )
 
     def _on_diagnostics(self) -> None:
         try:

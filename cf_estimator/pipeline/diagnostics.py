@@ -239,3 +239,31 @@ def compose_report(
 
 def _reasons(counts: Mapping[str, int]) -> str:
     return ", ".join(f"{k}: {v}" for k, v in sorted(counts.items()))
+
+
+def velocity_values(status: Any) -> list[tuple[str, str]]:
+    """Key-values of the velocity aiding (a :class:`cf_estimator.core.velocity.VelocityStatus`):
+    whether the last IMU sample was aided, velocity messages received / used / stale /
+    rejected by reason, IMU samples aided and left unaided by a stale velocity, the heading
+    offset between the filter's world frame and the velocity's and its standard deviation."""
+    rejected = dict(status.rejected)
+    stale = rejected.pop("too_old", 0)
+    values = [
+        ("velocity_aiding", status.mode),
+        ("velocity_received", str(status.received)),
+        ("velocity_used", str(status.used)),
+        ("velocity_stale", str(stale)),
+        ("velocity_rejected", str(sum(rejected.values()))),
+    ]
+    values += [(f"velocity_rejected.{k}", str(v)) for k, v in sorted(rejected.items()) if v]
+    values += [
+        ("velocity_reanchors", str(status.reanchors)),
+        ("velocity_aided_samples", str(status.aided_samples)),
+        ("velocity_stale_samples", str(status.stale_samples)),
+        ("velocity_age_s", _f(status.age_s if math.isfinite(status.age_s) else None)),
+        ("velocity_heading_known", str(bool(status.heading_known)).lower()),
+        ("velocity_heading_offset_rad", _f(status.heading_offset_rad)),
+        ("velocity_heading_sigma_rad", _f(status.heading_sigma_rad
+                                          if math.isfinite(status.heading_sigma_rad) else None)),
+    ]
+    return values

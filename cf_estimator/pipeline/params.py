@@ -99,6 +99,28 @@ class PipelineParams:
         "tree whose root is the robot, e.g. base_link -> imu_link already published).",
         group="tf",
     )
+    velocity_topic: str = param(
+        "", "", "Velocity aiding input (node): a geometry_msgs/TwistStamped (linear velocity "
+        "in the world frame, axes by velocity_frame: mavros global_position/raw/gps_vel, "
+        "nmea_navsat_driver vel) or nav_msgs/Odometry topic (twist in child_frame_id, rotated "
+        "to the world by its own pose); empty = no velocity aiding (IMU-only).",
+        read_only=True, group="velocity",
+    )
+    velocity_topic_type: str = param(
+        "auto", "", "Message type of velocity_topic: 'auto' (from the ROS graph when the node "
+        "starts, TwistStamped if not advertised yet), 'twist' or 'odometry'.",
+        choices=("auto", "twist", "odometry"), read_only=True, group="velocity",
+    )
+    velocity_frame: str = param(
+        "enu", "", "Axes of the velocity's world frame: 'enu' (REP-103, ROS drivers) or 'ned'; "
+        "converted to world_frame.",
+        choices=("enu", "ned"), group="velocity",
+    )
+    velocity_frame_id: str = param(
+        "", "", "If not empty, velocity messages whose header.frame_id differs are rejected "
+        "(counted velocity_rejected.frame): a velocity in some other frame.",
+        group="velocity",
+    )
     diagnostics_period_s: float = param(
         1.0, "s", "Period of the /diagnostics report (the node's timer; steady clock).",
         minimum=0.05, maximum=60.0, read_only=True, group="diagnostics",

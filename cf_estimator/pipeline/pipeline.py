@@ -19,6 +19,11 @@ test the node's behaviour. Rules, in the order :meth:`ImuPipeline.on_imu` applie
    (else it is counted stale). NaN components are legal ("not reported"): such samples are
    counted invalid and ignored. A magnetometer dropout never stops the output.
 5. Unit and frame sanity checks warn once each (see :mod:`cf_estimator.pipeline.checks`).
+6. Velocity messages (optional aiding, :meth:`ImuPipeline.on_velocity`; TwistStamped or
+   Odometry) go to :class:`cf_estimator.core.velocity.VelocityAiding`, created at the first
+   one: until then, and whenever it is not aided, the filter gets the raw accelerometer sample
+   exactly as without velocity. Every velocity message is counted used, stale or rejected by
+   reason (diagnostics ``velocity_*``); a reset of the filter resets the aiding.
 
 Per-message cost is kept small: plain floats, no NumPy, no per-message dicts; statistics are
 accumulated incrementally and turned into a report only by :meth:`ImuPipeline.diagnostics`.
@@ -26,6 +31,7 @@ accumulated incrementally and turned into a report only by :meth:`ImuPipeline.di
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -35,11 +41,18 @@ from typing import Any
 from cf_estimator.core.filter import ComplementaryFilter
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import MAG_DISABLED, MAG_REJECTED, MAG_USED
+from cf_estimator.core.velocity import VelocityAiding, filter_bias
 from cf_estimator.pipeline import checks
 from cf_estimator.pipeline.covariance import OrientationCovariance
-from cf_estimator.pipeline.diagnostics import DiagnosticsReport, WindowStats, compose_report
+from cf_estimator.pipeline.diagnostics import (
+    DiagnosticsReport,
+    WindowStats,
+    compose_report,
+    velocity_values,
+)
 from cf_estimator.pipeline.messages import UNKNOWN_COVARIANCE, covariance9
 from cf_estimator.pipeline.params import PipelineParams
+from cf_estimator.pipeline.velocity_input import velocity_from_message
 from cf_estimator.schema import ParameterError, as_dict, specs_of, split_by_owner
 
 Vec3 = tuple[float, float, float]
@@ -125,6 +138,7 @@ class ImuPipeline:
         self._last_rpy: Vec3 | None = None
         self._last_mag_used_ns: int | None = None
         self._pending_mag: tuple[int, float, float, float] | None = None  # (t_ns, x, y, z)
+        self._aiding: VelocityAiding | None = None  # created by the first velocity message
         self._av_cov = _CovarianceCache()
         self._la_cov = _CovarianceCache()
         self._cov_model = OrientationCovariance(
@@ -151,17 +165,17 @@ class ImuPipeline:
 
     def _prepare(self, changes: Mapping[str, Any]) -> tuple[FilterParams, PipelineParams]:
         fchanges, pchanges = split_by_owner(changes, (FilterParams, PipelineParams))
-        pairs = ((FilterParams, self._fp, fchanges), (PipelineParams, self._pp, pchanges))
-        for cls, current, ch in pairs:
-            for spec in specs_of(cls):
-                if spec.read_only and spec.name in ch:
-                    value = spec.check(ch[spec.name])
-                    if value != getattr(current, spec.name):
-                        raise ParameterError(
-                            f"{spec.name} is read-only at run time (restart the node to change it)"
-                        )
+        # the schema first (the same one-line reason as at start-up, read-only values included)
         fp = FilterParams(**{**as_dict(self._fp), **fchanges}) if fchanges else self._fp
         pp = PipelineParams(**{**as_dict(self._pp), **pchanges}) if pchanges else self._pp
+        pairs = ((FilterParams, self._fp, fp, fchanges), (PipelineParams, self._pp, pp, pchanges))
+        for cls, current, new, ch in pairs:
+            for spec in specs_of(cls):
+                if spec.read_only and spec.name in ch and \
+                        getattr(new, spec.name) != getattr(current, spec.name):
+                    raise ParameterError(
+                        f"{spec.name} is read-only at run time (restart the node to change it)"
+                    )
         return fp, pp
 
     def validate_changes(self, changes: Mapping[str, Any]) -> tuple[bool, str]:
@@ -185,6 +199,8 @@ class ImuPipeline:
         if fp is not self._fp:
             self._filter.set_params(fp)
             self._fp = fp
+            if self._aiding is not None:
+                self._aiding.set_params(fp)
         self._pp = pp
         self._apply_derived()
         return True, ""
@@ -224,6 +240,8 @@ class ImuPipeline:
         the old time base).
         """
         self._filter.reset()
+        if self._aiding is not None:
+            self._aiding.reset()
         self._cov_model.reset()
         self._clear_time_state()
         self._resets[reason] = self._resets.get(reason, 0) + 1
@@ -314,6 +332,27 @@ class ImuPipeline:
         if self._pending_mag is not None:
             self._mag_dropped += 1
         self._pending_mag = (t_ns, mx, my, mz)
+
+    # -- velocity ---------------------------------------------------------------------------------
+    def on_velocity(self, msg: Any) -> str | None:
+        """Queue one TwistStamped/Odometry-like velocity message for the aiding (see
+        :mod:`cf_estimator.pipeline.velocity_input`); returns None, or the rejection reason
+        (counted)."""
+        if self._aiding is None:
+            self._aiding = VelocityAiding(self._fp)
+        pp = self._pp
+        got = velocity_from_message(msg, pp.velocity_frame, self._fp.world_frame,
+                                    pp.velocity_frame_id)
+        if isinstance(got, str):
+            self._aiding.reject(got)
+            return got
+        t_ns, v = got
+        return self._aiding.add_velocity(t_ns * 1e-9, v)
+
+    @property
+    def velocity_aiding(self) -> VelocityAiding | None:
+        """The velocity aiding (None until the first velocity message)."""
+        return self._aiding
 
     # -- IMU --------------------------------------------------------------------------------------
     def on_imu(self, msg: Any) -> PipelineOutput | None:
@@ -436,7 +475,11 @@ class ImuPipeline:
         # -- filter -------------------------------------------------------------------------------
         f = self._filter
         if f.initialized:
-            q = f.update((gx, gy, gz), (ax, ay, az), dt, mag)
+            acc = (ax, ay, az)
+            if self._aiding is not None:
+                acc = self._aiding.aided_accel(t_ns * 1e-9, (gx, gy, gz), acc, dt,
+                                               f.orientation_tuple(), filter_bias(f))
+            q = f.update((gx, gy, gz), acc, dt, mag)
             s = f._state  # noqa: SLF001 - per-sample flags without building FilterStatus (20 us)
             if mag is not None:
                 ms = s.mag_status
@@ -551,6 +594,10 @@ class ImuPipeline:
             filter_backend=self._filter.backend,
             imu_topic=self.imu_topic,
         )
+        if self._aiding is not None:
+            report = dataclasses.replace(
+                report, values=list(report.values) + velocity_values(
+                    self._aiding.status(self._last_ns * 1e-9 if self._last_ns else None)))
         self._previous_counters = counters
         self._previous_now_s = now_s
         self._window = WindowStats()

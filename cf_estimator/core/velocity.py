@@ -1,0 +1,388 @@
+"""Velocity aiding: take the vehicle's own acceleration out of the specific force (GNSS, odometry).
+
+The accelerometer measures f = Rᵀ·(a − g_w). An IMU-only filter takes f for gravity; in a
+sustained manoeuvre it tilts towards the thrust. With a world-frame velocity v(t) the kinematic
+acceleration a is known (late, noisy, at a low rate), and f − Rᵀ·a is gravity alone. This
+module builds that aided specific force for the unchanged filter step, outside it
+(``accel_aided = accel − R̂ᵀ·a_world``), aligned on stamps:
+
+- **Differentiation matched to the input.** For the newest accepted velocity sample k and the
+  latest earlier one j with t_k − t_j ≥ ``velocity_window_s``: a_v = (v_k − v_j)/(t_k − t_j),
+  the exact mean acceleration over [t_j, t_k]. The IMU's specific force is averaged over the
+  very same interval (by stamps, from a cumulative sum), so both sides see the same motion
+  whatever the velocity's rate, latency (50–200 ms for GNSS) or jitter.
+- **Delay without loop delay.** The mean specific force is accumulated in a frame P carried by
+  the gyro alone (P ← P ⊗ Exp((ω − b̂)·dt), b̂ the filter's bias estimate): m_P = F̄_P − a_v(in
+  P) is then a gravity measurement that stays valid in P while time passes (only gyro
+  integration over the delay, not the filter's own corrections, lies between it and now), and
+  the step gets ``Pᵀ·(m_P + f_P − lowpass(f_P))``: gravity from the velocity window, plus
+  the specific force's content faster than :data:`HIGHPASS_TIME_CONSTANT_S` (vibration,
+  impacts: what the step's detectors and saturation expect to see).
+- **Horizontal only.** Only a_v's horizontal part is taken out: a vertical acceleration is
+  along gravity and tilts nothing, and left in, it keeps the step's stillness and
+  linear-acceleration detectors seeing the vehicle's vertical motion (taken out, steady flight
+  passed for rest on phantom4 and a wrong bias was learned: measured, then dropped).
+- **Noise.** A horizontal acceleration within the differentiation noise (from
+  ``velocity_noise_m_s``) is shrunk towards 0 (factor 1 − noise²/|a_h|², never below 0): in
+  steady flight a noisy velocity adds no tilt noise, in a manoeuvre it is taken out in full.
+- **Heading.** a_v is in the velocity's frame; the filter's world frame may be turned about the
+  vertical by δ (6-D: arbitrary heading). ``velocity_heading='auto'`` estimates δ from the two
+  accelerations (:mod:`cf_estimator.core.heading_offset`) and aids only once it is known;
+  ``'filter'`` takes δ = 0.
+- **Fallback.** Without a fresh window (no velocity, a stamp older than ``velocity_timeout_s``,
+  a dropout, heading unknown) the raw accelerometer sample is returned untouched: the filter's
+  outputs are then bit-identical to the unaided filter's.
+
+Velocity samples are queued by stamp and used once the IMU stamps pass them. Rejected (and
+counted): non-finite values, zero/negative stamps, stamps not after the previous one, samples
+older than the IMU buffer, and jumps (the change from the last accepted sample departs from
+the IMU's own prediction by more than ``velocity_jump_threshold_m_s`` +
+:data:`IMU_PREDICTION_M_S2`·interval). :data:`REANCHOR_REJECTIONS` jumps in a row: the stream
+moved for good (re-anchored, the window starts again).
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from cf_estimator.core.heading_offset import HeadingOffset, HeadingOffsetEstimator
+from cf_estimator.core.params import FilterParams
+
+#: Time constant [s] of the low-pass whose complement (the specific force's fast content:
+#: vibration, impacts) is passed through while aided: slower content is replaced by the
+#: velocity-aided gravity measurement.
+HIGHPASS_TIME_CONSTANT_S = 0.05
+#: Allowed IMU prediction error of the velocity change [m/s per s of interval] in the jump gate
+#: (a tilt error of about 0.2 rad times g).
+IMU_PREDICTION_M_S2 = 2.0
+#: Consecutive jumps after which the stream is re-anchored on the newest sample.
+REANCHOR_REJECTIONS = 5
+#: IMU history kept beyond velocity_timeout_s + velocity_window_s [s].
+BUFFER_MARGIN_S = 0.5
+#: Velocity samples awaiting the IMU stamps to pass them (older ones are dropped, counted).
+MAX_PENDING = 1000
+
+REJECT_REASONS = ("nonfinite", "stamp", "backwards", "too_old", "jump", "frame", "malformed")
+
+
+@dataclass(frozen=True)
+class VelocityStatus:
+    """What the aiding did (diagnostics; counts since construction or the last reset)."""
+
+    active: bool  #: the last IMU sample was aided
+    mode: str  #: 'off' | 'aided'
+    received: int  #: velocity samples offered
+    used: int  #: accepted into the velocity window
+    stale_samples: int  #: IMU samples that found the velocity older than velocity_timeout_s
+    aided_samples: int  #: IMU samples aided
+    rejected: dict[str, int]  #: velocity samples rejected, by reason (REJECT_REASONS)
+    reanchors: int  #: times the stream was re-anchored after repeated jumps
+    heading_offset_rad: float  #: δ: filter world = Rz(δ)·velocity world
+    heading_sigma_rad: float  #: standard deviation of δ (inf: not observed yet)
+    heading_known: bool
+    age_s: float  #: IMU stamp − stamp of the newest velocity window end (inf: none)
+
+
+def _rot(qw: float, qx: float, qy: float, qz: float, x: float, y: float, z: float
+         ) -> tuple[float, float, float]:
+    """q ⊗ v ⊗ q* for a unit quaternion (w, x, y, z)."""
+    tx = 2.0 * (qy * z - qz * y)
+    ty = 2.0 * (qz * x - qx * z)
+    tz = 2.0 * (qx * y - qy * x)
+    return (x + qw * tx + qy * tz - qz * ty, y + qw * ty + qz * tx - qx * tz,
+            z + qw * tz + qx * ty - qy * tx)
+
+
+def _mul(aw: float, ax: float, ay: float, az: float, bw: float, bx: float, by: float,
+         bz: float) -> tuple[float, float, float, float]:
+    return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
+
+
+class VelocityAiding:
+    """Turns IMU samples into aided specific force given world-frame velocity samples.
+
+    Per IMU sample, before the filter's update::
+
+        accel_in = aiding.aided_accel(t_s, gyro, accel, dt_s, q_filter, bias)
+        filter.update(gyro, accel_in, dt_s, mag)
+
+    ``q_filter``: the filter's q_world_from_sensor before the update (its world frame, ENU or
+    NED); ``bias``: its gyro-bias estimate [rad/s] (sensor frame). Velocity samples [m/s] in the
+    velocity's world frame (same axes convention as the filter's world: ENU or NED) arrive
+    through :meth:`add_velocity` with their header stamps [s].
+    """
+
+    def __init__(self, params: FilterParams | None = None) -> None:
+        self.set_params(params if params is not None else FilterParams())
+        self.reset()
+
+    def set_params(self, params: FilterParams) -> None:
+        """Apply new parameters (the window and counters are kept)."""
+        self._params = params
+        self._window = params.velocity_window_s
+        self._timeout = params.velocity_timeout_s
+        self._jump = params.velocity_jump_threshold_m_s
+        self._auto = params.velocity_heading == "auto"
+        self._span = params.velocity_timeout_s + params.velocity_window_s + BUFFER_MARGIN_S
+        if hasattr(self, "_heading"):
+            self._heading.required_sigma_rad = params.velocity_heading_sigma_rad
+            self._heading.memory_s = params.velocity_heading_memory_s
+        else:
+            self._heading = HeadingOffsetEstimator(params.velocity_heading_sigma_rad,
+                                                   params.velocity_heading_memory_s)
+
+    def reset(self) -> None:
+        """Forget the IMU history, the velocity window and the heading offset (counters kept
+        unless :meth:`reset_counters`)."""
+        self._p: tuple[float, float, float, float] | None = None
+        self._bt: list[float] = []  # IMU stamps [s]
+        self._bs: list[tuple[float, float, float]] = []  # Σ f_P·dt up to that stamp [m/s]
+        self._b0 = 0  # first live index of the buffer lists
+        self._sum = (0.0, 0.0, 0.0)
+        self._lp = (0.0, 0.0, 0.0)  # low-pass of f_P (HIGHPASS_TIME_CONSTANT_S)
+        self._pending: list[tuple[float, tuple[float, float, float]]] = []
+        self._hist: list[tuple[float, tuple[float, float, float], tuple[float, float, float]]
+                         ] = []  # accepted (t, v, Σ f_P at t)
+        self._last_stamp = -math.inf
+        self._jumps = 0
+        self._m: tuple[float, float, float] | None = None  # gravity measurement in P [m/s²]
+        self._m_t = -math.inf
+        self._heading.reset()
+        self._hd = HeadingOffset(0.0, math.inf, False)
+        self._active = False
+        if not hasattr(self, "_received"):
+            self.reset_counters()
+
+    def reset_counters(self) -> None:
+        """Zero every counter."""
+        self._received = 0
+        self._used = 0
+        self._stale = 0
+        self._aided = 0
+        self._reanchors = 0
+        self.rejected = dict.fromkeys(REJECT_REASONS, 0)
+
+    # -- velocity input ------------------------------------------------------------------------
+    def reject(self, reason: str) -> None:
+        """Count a velocity sample rejected before it got here (e.g. 'frame' by the pipeline)."""
+        self._received += 1
+        self.rejected[reason] += 1
+
+    def add_velocity(self, t_s: float, v_m_s: Sequence[float]) -> str | None:
+        """Queue one velocity sample (stamp [s], world-frame velocity [m/s]); returns None when
+        queued, else the rejection reason (counted)."""
+        self._received += 1
+        try:
+            vx, vy, vz = (float(c) for c in v_m_s)
+            t = float(t_s)
+        except (TypeError, ValueError):
+            self.rejected["nonfinite"] += 1
+            return "nonfinite"
+        if not math.isfinite(vx + vy + vz + t):
+            reason = "nonfinite"
+        elif t <= self._last_stamp:
+            reason = "backwards"
+        elif self._bt and t < self._bt[self._b0]:
+            reason = "too_old"
+        else:
+            self._last_stamp = t
+            self._pending.append((t, (vx, vy, vz)))
+            if len(self._pending) > MAX_PENDING:
+                self._pending.pop(0)
+                self.rejected["too_old"] += 1
+            return None
+        self.rejected[reason] += 1
+        return reason
+
+    # -- per IMU sample ------------------------------------------------------------------------
+    def aided_accel(self, t_s: float, gyro_rad_s: Sequence[float], accel_m_s2: Sequence[float],
+                    dt_s: float, q_filter: Sequence[float], bias_rad_s: Sequence[float]
+                    ) -> Sequence[float]:
+        """The accelerometer sample to give the filter at IMU stamp t_s [s]: aided when a fresh
+        velocity window and the heading are known, else ``accel_m_s2`` itself (same object)."""
+        # queued samples the buffer covers, with P and q_filter both at the last IMU stamp
+        bt = self._bt
+        if self._pending and bt and self._pending[0][0] <= bt[-1]:
+            self._take_pending(bt[-1], q_filter)
+        ax, ay, az = float(accel_m_s2[0]), float(accel_m_s2[1]), float(accel_m_s2[2])
+        if self._p is None:
+            pw, px, py, pz = (float(c) for c in q_filter)
+        else:
+            aw, bx, by, bz = self._p
+            hx = 0.5 * (gyro_rad_s[0] - bias_rad_s[0]) * dt_s
+            hy = 0.5 * (gyro_rad_s[1] - bias_rad_s[1]) * dt_s
+            hz = 0.5 * (gyro_rad_s[2] - bias_rad_s[2]) * dt_s
+            n = math.sqrt(hx * hx + hy * hy + hz * hz)
+            c = math.cos(n)
+            sn = math.sin(n) / n if n > 1e-12 else 1.0
+            hx, hy, hz = hx * sn, hy * sn, hz * sn
+            pw = aw * c - bx * hx - by * hy - bz * hz
+            px = aw * hx + bx * c + by * hz - bz * hy
+            py = aw * hy - bx * hz + by * c + bz * hx
+            pz = aw * hz + bx * hy - by * hx + bz * c
+            inv = 1.0 / math.sqrt(pw * pw + px * px + py * py + pz * pz)
+            pw, px, py, pz = pw * inv, px * inv, py * inv, pz * inv
+        self._p = (pw, px, py, pz)
+        # f_P = P ⊗ f ⊗ P*
+        tx, ty, tz = 2.0 * (py * az - pz * ay), 2.0 * (pz * ax - px * az), 2.0 * (px * ay - py * ax)
+        fx = ax + pw * tx + py * tz - pz * ty
+        fy = ay + pw * ty + pz * tx - px * tz
+        fz = az + pw * tz + px * ty - py * tx
+        if bt:
+            d = t_s - bt[-1]
+            if d <= 0.0:  # not after the last stamp: nothing to add
+                self._active = False
+                return accel_m_s2
+            sx, sy, sz = self._sum
+            self._sum = (sx + fx * d, sy + fy * d, sz + fz * d)
+            k = d / (HIGHPASS_TIME_CONSTANT_S + d)
+            lx, ly, lz = self._lp
+            self._lp = lp = (lx + k * (fx - lx), ly + k * (fy - ly), lz + k * (fz - lz))
+        else:
+            self._lp = lp = (fx, fy, fz)
+        bt.append(t_s)
+        self._bs.append(self._sum)
+        if not len(bt) & 127:  # drop history older than the span now and then
+            start = t_s - self._span
+            if bt[self._b0] < start:
+                self._b0 = bisect.bisect_left(bt, start, self._b0)
+                if self._b0 > 4096:
+                    del bt[:self._b0]
+                    del self._bs[:self._b0]
+                    self._b0 = 0
+        m = self._m
+        if m is None or t_s - self._m_t > self._timeout:
+            self._active = False
+            if m is not None:
+                self._stale += 1
+            return accel_m_s2
+        self._active = True
+        self._aided += 1
+        # Pᵀ·(m_P + f_P − lowpass(f_P)): gravity from the velocity window, fast content kept
+        gx, gy, gz = m[0] + fx - lp[0], m[1] + fy - lp[1], m[2] + fz - lp[2]
+        tx, ty, tz = 2.0 * (pz * gy - py * gz), 2.0 * (px * gz - pz * gx), 2.0 * (py * gx - px * gy)
+        return (gx + pw * tx - py * tz + pz * ty, gy + pw * ty - pz * tx + px * tz,
+                gz + pw * tz - px * ty + py * tx)
+
+    def _at(self, t: float) -> tuple[float, float, float]:
+        """Σ f_P·dt at stamp t (linear between IMU stamps; clamped to the buffer)."""
+        bt, bs = self._bt, self._bs
+        if t <= bt[self._b0]:
+            return bs[self._b0]
+        k = bisect.bisect_left(bt, t, self._b0)
+        if k >= len(bt):
+            return bs[-1]
+        if bt[k] == t:
+            return bs[k]
+        a = (t - bt[k - 1]) / (bt[k] - bt[k - 1])
+        s0, s1 = bs[k - 1], bs[k]
+        return (s0[0] + a * (s1[0] - s0[0]), s0[1] + a * (s1[1] - s0[1]),
+                s0[2] + a * (s1[2] - s0[2]))
+
+    def _take_pending(self, t_s: float, q_filter: Sequence[float]) -> None:
+        """Accept the queued velocity samples whose stamps the IMU has passed."""
+        qw, qx, qy, qz = q_filter
+        pw, px, py, pz = self._p  # type: ignore[misc]
+        # W = q_filter ⊗ P*: from the gyro frame P to the filter's world frame
+        ww, wx, wy, wz = _mul(qw, qx, qy, qz, pw, -px, -py, -pz)
+        while self._pending and self._pending[0][0] <= t_s:
+            t, v = self._pending.pop(0)
+            if t < self._bt[self._b0]:
+                self.rejected["too_old"] += 1
+                continue
+            s = self._at(t)
+            hist = self._hist
+            if hist and t - hist[-1][0] > self._timeout:
+                hist.clear()  # a dropout: the window starts again
+            if hist:
+                t1, v1, s1 = hist[-1]
+                dt = t - t1
+                # the IMU's prediction of the velocity change, in the velocity's frame
+                dwx, dwy, dwz = _rot(ww, wx, wy, wz, s[0] - s1[0], s[1] - s1[1], s[2] - s1[2])
+                g = self._params.gravity_m_s2 * dt
+                dwz -= g if self._params.world_frame == "enu" else -g
+                dvx, dvy, dvz = v[0] - v1[0], v[1] - v1[1], v[2] - v1[2]
+                if self._hd.known or not self._auto:
+                    c, sn = math.cos(self._hd.offset_rad), math.sin(self._hd.offset_rad)
+                    ex, ey = c * dvx - sn * dvy - dwx, sn * dvx + c * dvy - dwy
+                    err = math.sqrt(ex * ex + ey * ey + (dvz - dwz) ** 2)
+                else:
+                    err = math.hypot(math.hypot(dvx, dvy) - math.hypot(dwx, dwy), dvz - dwz)
+                if err > self._jump + IMU_PREDICTION_M_S2 * dt:
+                    self._jumps += 1
+                    self.rejected["jump"] += 1
+                    if self._jumps < REANCHOR_REJECTIONS:
+                        continue
+                    self._reanchors += 1
+                    hist.clear()
+            self._jumps = 0
+            self._used += 1
+            hist.append((t, v, s))
+            # the window: the latest earlier sample at least velocity_window_s before t
+            k = len(hist) - 1
+            j = k - 1
+            while j > 0 and t - hist[j][0] < self._window:
+                j -= 1
+            if j < 0 or t - hist[j][0] < self._window * 0.999:
+                continue
+            del hist[:j]  # older samples are no longer needed
+            t0, v0, s0 = hist[0]
+            span = t - t0
+            mx, my, mz = ((s[0] - s0[0]) / span, (s[1] - s0[1]) / span, (s[2] - s0[2]) / span)
+            ax, ay = (v[0] - v0[0]) / span, (v[1] - v0[1]) / span
+            # mean specific force in the filter's world frame: its horizontal part is the
+            # acceleration as the filter sees it (heading offset δ from the velocity's)
+            fwx, fwy, fwz = _rot(ww, wx, wy, wz, mx, my, mz)
+            if self._auto:
+                new = (t - hist[-2][0]) / span if len(hist) > 1 else 1.0
+                self._hd = self._heading.update(t, (fwx, fwy), (ax, ay), new)
+            else:
+                self._hd = HeadingOffset(0.0, 0.0, True)
+            if not self._hd.known:
+                continue  # heading unknown: no aiding (see VelocityAiding.mode)
+            c, sn = math.cos(self._hd.offset_rad), math.sin(self._hd.offset_rad)
+            # shrinkage: an acceleration within the differentiation noise (2 axes of variance
+            # 2·σ_v²/span²) is mostly noise and taken out only in part (none when below it)
+            h2 = ax * ax + ay * ay
+            noise2 = 4.0 * (self._params.velocity_noise_m_s / span) ** 2
+            keep = max(0.0, 1.0 - noise2 / h2) if h2 > 0.0 else 0.0
+            awx, awy = keep * (c * ax - sn * ay), keep * (sn * ax + c * ay)
+            # gravity measurement (specific force minus acceleration), world → P
+            self._m = _rot(ww, -wx, -wy, -wz, fwx - awx, fwy - awy, fwz)
+            self._m_t = t
+
+    # -- status --------------------------------------------------------------------------------
+    @property
+    def active(self) -> bool:
+        """True when the last IMU sample was aided (vertically or fully)."""
+        return self._active
+
+    @property
+    def mode(self) -> str:
+        """Aiding of the last IMU sample: 'off', or 'aided'. (A vertical-only mode before the
+        heading is known — the vertical acceleration needs no heading — was measured and
+        dropped: the step's stillness detector, fed the aided specific force, then takes steady
+        flight for rest and learns a wrong bias; see docs and the report of issue 17.)"""
+        return "aided" if self._active else "off"
+
+    def status(self, t_s: float | None = None) -> VelocityStatus:
+        """Counters and state (``t_s``: IMU stamp for the age; default the last one)."""
+        now = t_s if t_s is not None else (self._bt[-1] if self._bt else math.nan)
+        return VelocityStatus(
+            active=self._active, mode=self.mode, received=self._received, used=self._used,
+            stale_samples=self._stale, aided_samples=self._aided, rejected=dict(self.rejected),
+            reanchors=self._reanchors, heading_offset_rad=self._hd.offset_rad,
+            heading_sigma_rad=self._hd.sigma_rad,
+            heading_known=self._hd.known or not self._auto,
+            age_s=now - self._m_t if self._m is not None else math.inf)
+
+
+def filter_bias(f: Any) -> tuple[float, float, float]:
+    """The regulator's integral (bias) state b of a ComplementaryFilter [rad/s], cheaply."""
+    s = f._state  # noqa: SLF001 - read-only access to the state fields
+    return (s.bx, s.by, s.bz)

@@ -1,0 +1,319 @@
+"""Velocity aiding (issue 17): the core module, the heading offset and estimate(velocity=...)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cf_estimator.bench import euroc
+from cf_estimator.bench.scenarios import peak_rms_arcmin, scenario_masks
+from cf_estimator.cli.main import main
+from cf_estimator.core.batch import estimate
+from cf_estimator.core.heading_offset import HeadingOffsetEstimator
+from cf_estimator.core.params import FilterParams
+from cf_estimator.core.velocity import VelocityAiding
+from cf_estimator.metrics import tilt_error_rad
+from cf_estimator.scenarios import make_scenario
+from cf_estimator.scenarios.velocity_sensor import (
+    VelocityModel,
+    measure_velocity,
+    true_velocity,
+    with_faults,
+)
+
+P6 = FilterParams(use_mag=False)
+ARCMIN = 180.0 * 60.0 / math.pi
+
+
+@pytest.fixture(scope="module")
+def uav():
+    """The multirotor flight (cruise, coordinated turns, climbs, large gyro bias), 60 s."""
+    return make_scenario("uav", duration_s=60.0, seed=3)
+
+
+@pytest.fixture(scope="module")
+def uav_unaided(uav):
+    imu = uav.imu
+    return estimate(imu.gyro_rad_s, imu.accel_m_s2, timestamps_s=imu.t_s, params=P6)
+
+
+def _run(sc, vd, params=P6, latency=None, **kw):
+    imu = sc.imu
+    return estimate(imu.gyro_rad_s, imu.accel_m_s2, timestamps_s=imu.t_s, params=params,
+                    velocity=(vd.t_s, vd.v_world_m_s),
+                    velocity_latency_s=(vd.arrival_s[0] - vd.t_s[0]) if latency is None
+                    else latency, **kw)
+
+
+def _tilt_arcmin(sc, result, t_from=10.0):
+    e = tilt_error_rad(result.quaternion, sc.truth.q_world_from_body) * ARCMIN
+    return e[sc.truth.t_s >= t_from]
+
+
+def _rms(e):
+    return float(np.sqrt(np.mean(e * e)))
+
+
+# -- heading offset --------------------------------------------------------------------------
+def test_heading_offset_recovers_a_rotation_between_the_frames():
+    rng = np.random.default_rng(0)
+    est = HeadingOffsetEstimator(required_sigma_rad=0.05, memory_s=60.0)
+    delta = 0.7
+    for k in range(50):
+        av = rng.normal(0.0, 1.0, 2)
+        c, s = math.cos(delta), math.sin(delta)
+        af = (c * av[0] - s * av[1] + rng.normal(0, 0.05), s * av[0] + c * av[1]
+              + rng.normal(0, 0.05))
+        h = est.update(0.1 * k, af, tuple(av), 0.1)
+    assert h.known
+    assert abs(h.offset_rad - delta) < 0.03
+    assert h.sigma_rad < 0.05
+
+
+def test_heading_offset_unknown_without_horizontal_acceleration():
+    est = HeadingOffsetEstimator(required_sigma_rad=0.1, memory_s=60.0)
+    rng = np.random.default_rng(1)
+    for k in range(100):  # hover: only noise on both sides
+        h = est.update(0.1 * k, tuple(rng.normal(0, 0.2, 2)), tuple(rng.normal(0, 0.02, 2)), 0.1)
+    assert not h.known
+
+
+# -- bit-equality when the velocity is absent or never usable --------------------------------
+def test_no_velocity_samples_give_the_unaided_outputs_bit_equal(uav, uav_unaided):
+    imu = uav.imu
+    r = estimate(imu.gyro_rad_s, imu.accel_m_s2, timestamps_s=imu.t_s, params=P6,
+                 velocity=(np.zeros(0), np.zeros((0, 3))))
+    assert np.array_equal(r.quaternion, uav_unaided.quaternion)
+    assert np.array_equal(r.gyro_bias_rad_s, uav_unaided.gyro_bias_rad_s)
+    assert not r.velocity_aided.any()
+
+
+def test_stale_velocity_gives_the_unaided_outputs_bit_equal(uav, uav_unaided):
+    """Every sample arrives 5 s late (velocity_timeout_s 1.5 s): stale on arrival, never used."""
+    vd = measure_velocity(uav.truth, VelocityModel(10.0, 0.1, 0.0), np.random.default_rng(0))
+    r = _run(uav, vd, latency=5.0)
+    assert np.array_equal(r.quaternion, uav_unaided.quaternion)
+    assert not r.velocity_aided.any()
+    assert r.velocity_status.rejected["too_old"] + r.velocity_status.used > 0
+
+
+def test_velocity_without_a_known_heading_leaves_the_filter_unaided():
+    """Hover (no horizontal acceleration): the heading offset stays unknown, outputs identical."""
+    sc = make_scenario("static", duration_s=30.0, seed=0)
+    vd = measure_velocity(sc.truth, VelocityModel(10.0, 0.1, 0.1), np.random.default_rng(0))
+    imu = sc.imu
+    r0 = estimate(imu.gyro_rad_s, imu.accel_m_s2, timestamps_s=imu.t_s, params=P6)
+    r1 = _run(sc, vd)
+    assert not r1.velocity_status.heading_known
+    assert np.array_equal(r0.quaternion, r1.quaternion)
+
+
+# -- the correction ----------------------------------------------------------------------------
+def test_aiding_removes_most_of_the_manoeuvre_error_in_a_multirotor_flight(uav, uav_unaided):
+    vd = measure_velocity(uav.truth, VelocityModel(10.0, 0.1, 0.1), np.random.default_rng(0))
+    r = _run(uav, vd)
+    e0, e1 = _tilt_arcmin(uav, uav_unaided), _tilt_arcmin(uav, r)
+    assert r.velocity_status.heading_known
+    assert r.velocity_aided.mean() > 0.7
+    assert _rms(e1) < 0.5 * _rms(e0)
+    # the heading offset found is the filter's real heading error against ENU
+    yaw_err = _yaw_offset(r.quaternion[-1], uav.truth.q_world_from_body[-1])
+    d = math.remainder(r.velocity_status.heading_offset_rad - yaw_err, 2 * math.pi)
+    assert abs(d) < 0.1
+
+
+def _yaw_offset(q_est, q_true):
+    from cf_estimator.core import quaternion as quat
+
+    dq = quat.multiply(q_est, quat.conjugate(q_true))  # world-frame error rotation
+    return 2.0 * math.atan2(dq[3], dq[0])
+
+
+def test_thesis_acceleration_manoeuvre_aided_peak_below_unaided():
+    """25 m/s in 5 s, 10 Hz / 0.1 m/s / 100 ms velocity; heading known from the start."""
+    sc = make_scenario("acceleration", seed=0)
+    vd = measure_velocity(sc.truth, VelocityModel(10.0, 0.1, 0.1), np.random.default_rng(1))
+    p = FilterParams(use_mag=False, velocity_heading="filter")
+    q0 = sc.truth.q_world_from_body[0]
+    imu = sc.imu
+    r0 = estimate(imu.gyro_rad_s, imu.accel_m_s2, timestamps_s=imu.t_s, params=p,
+                  initial_orientation=q0)
+    r1 = _run(sc, vd, params=p, initial_orientation=q0)
+    mask = scenario_masks(sc)
+    peak0, _ = peak_rms_arcmin(r0.quaternion, sc.truth.q_world_from_body, mask)
+    peak1, _ = peak_rms_arcmin(r1.quaternion, sc.truth.q_world_from_body, mask)
+    assert peak1 < peak0 - 10.0
+
+
+def test_offline_estimate_takes_the_velocity_too(uav):
+    vd = measure_velocity(uav.truth, VelocityModel(10.0, 0.1, 0.1), np.random.default_rng(0))
+    imu = uav.imu
+    r0 = estimate(imu.gyro_rad_s, imu.accel_m_s2, timestamps_s=imu.t_s, params=P6, offline=True)
+    r1 = _run(uav, vd, offline=True)
+    assert _rms(_tilt_arcmin(uav, r1)) < 0.7 * _rms(_tilt_arcmin(uav, r0))
+
+
+# -- bad input: counted, never a crash, never much worse than IMU-only -----------------------
+#: Bound [arcmin] by which a faulty stream may exceed the unaided filter's tilt error, at most.
+WORSE_BOUND_ARCMIN = 30.0
+
+
+def _not_worse(uav, uav_unaided, r):
+    e0, e1 = _tilt_arcmin(uav, uav_unaided), _tilt_arcmin(uav, r)
+    assert np.all(np.isfinite(e1))
+    assert np.max(e1) < np.max(e0) + WORSE_BOUND_ARCMIN
+    assert _rms(e1) <= _rms(e0)
+
+
+def test_nan_and_inf_velocity_samples_are_counted_and_skipped(uav, uav_unaided):
+    vd = measure_velocity(uav.truth, VelocityModel(10.0, 0.1, 0.1), np.random.default_rng(0))
+    v = vd.v_world_m_s.copy()
+    v[100:110, 0] = np.nan
+    v[200, 2] = np.inf
+    r = estimate(uav.imu.gyro_rad_s, uav.imu.accel_m_s2, timestamps_s=uav.imu.t_s, params=P6,
+                 velocity=(vd.t_s, v), velocity_latency_s=0.1)
+    assert r.velocity_status.rejected["nonfinite"] == 11
+    _not_worse(uav, uav_unaided, r)
+
+
+def test_repeated_and_backward_stamps_are_counted(uav, uav_unaided):
+    vd = measure_velocity(uav.truth, VelocityModel(10.0, 0.1, 0.1), np.random.default_rng(0))
+    t = vd.t_s.copy()
+    t[300] = t[299]  # repeated
+    t[400] = t[398]  # backwards
+    r = estimate(uav.imu.gyro_rad_s, uav.imu.accel_m_s2, timestamps_s=uav.imu.t_s, params=P6,
+                 velocity=(t, vd.v_world_m_s))
+    assert r.velocity_status.rejected["backwards"] == 2
+    _not_worse(uav, uav_unaided, r)
+
+
+def test_gnss_glitch_of_5_m_s_is_rejected_as_a_jump(uav, uav_unaided):
+    model = with_faults(VelocityModel(10.0, 0.1, 0.1), glitches=[(30.0, 30.35, (5.0, 0.0, 0.0))])
+    vd = measure_velocity(uav.truth, model, np.random.default_rng(0))
+    r = _run(uav, vd)
+    assert r.velocity_status.rejected["jump"] >= 3
+    _not_worse(uav, uav_unaided, r)
+
+
+def test_dropout_of_seconds_falls_back_to_imu_only_and_recovers(uav, uav_unaided):
+    model = with_faults(VelocityModel(10.0, 0.1, 0.1), dropouts=[(25.0, 33.0)])
+    vd = measure_velocity(uav.truth, model, np.random.default_rng(0))
+    r = _run(uav, vd)
+    t = uav.imu.t_s
+    assert not r.velocity_aided[(t > 25.0 + 1.7) & (t < 33.0)].any()  # timeout 1.5 s + latency
+    assert r.velocity_aided[(t > 36.0) & (t < 40.0)].all()  # back after one window
+    assert r.velocity_status.stale_samples > 0
+    _not_worse(uav, uav_unaided, r)
+
+
+@pytest.mark.parametrize("rate_hz", [1.0, 50.0])
+def test_slow_and_fast_velocity_streams(uav, uav_unaided, rate_hz):
+    vd = measure_velocity(uav.truth, VelocityModel(rate_hz, 0.1, 0.1), np.random.default_rng(0))
+    r = _run(uav, vd)
+    assert r.velocity_status.used > 0.9 * len(vd.t_s)
+    _not_worse(uav, uav_unaided, r)
+
+
+def test_wrong_velocity_shapes_are_one_line_errors(uav):
+    imu = uav.imu
+    with pytest.raises(ValueError, match=r"\(M,\) and \(M, 3\)"):
+        estimate(imu.gyro_rad_s, imu.accel_m_s2, timestamps_s=imu.t_s, params=P6,
+                 velocity=(np.zeros(3), np.zeros((4, 3))))
+    with pytest.raises(ValueError, match="pair"):
+        estimate(imu.gyro_rad_s, imu.accel_m_s2, timestamps_s=imu.t_s, params=P6,
+                 velocity=np.zeros((4, 3)))
+
+
+def test_velocity_sensor_model_matches_the_truth():
+    sc = make_scenario("acceleration", seed=0)
+    vd = measure_velocity(sc.truth, VelocityModel(10.0, 0.0, 0.2), np.random.default_rng(0))
+    v_true = true_velocity(sc.truth)
+    assert np.allclose(vd.arrival_s - vd.t_s, 0.2)
+    k = np.searchsorted(sc.truth.t_s, vd.t_s[-1])
+    assert np.allclose(vd.v_world_m_s[-1], v_true[k], atol=0.05)
+    assert abs(np.linalg.norm(v_true[-1] - v_true[0]) - 25.0) < 0.5  # 25 m/s gained
+
+
+def test_aiding_counts_every_sample_it_is_offered():
+    a = VelocityAiding(P6)
+    assert a.add_velocity(1.0, (0.0, 0.0, 0.0)) is None
+    assert a.add_velocity(1.0, (0.0, 0.0, 0.0)) == "backwards"
+    assert a.add_velocity(2.0, (math.nan, 0.0, 0.0)) == "nonfinite"
+    assert a.add_velocity(3.0, ("x", 0.0, 0.0)) == "nonfinite"
+    a.reject("frame")
+    st = a.status()
+    assert st.received == 5
+    assert st.rejected["backwards"] == 1 and st.rejected["nonfinite"] == 2
+    assert st.rejected["frame"] == 1
+    assert not st.active and st.mode == "off"
+
+
+# -- bench euroc with the ground truth's velocity (real flights) -----------------------------
+EUROC = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "euroc"
+PHANTOM4 = EUROC.parent / "phantom4"
+
+
+@pytest.mark.skipif(not EUROC.is_dir(), reason=f"EuRoC flights not present in {EUROC}")
+def test_euroc_ground_truth_velocity_asl_columns_and_differentiated_tum_positions():
+    f4 = euroc.load_flight(EUROC / "MH_04_difficult")
+    f3 = euroc.load_flight(EUROC / "MH_03_medium")  # TUM: positions only
+    for f in (f4, f3):
+        assert f.velocity_m_s is not None and f.velocity_m_s.shape == (f.velocity_t_s.size, 3)
+        assert np.all(np.isfinite(f.velocity_m_s))
+        assert 0.3 < np.percentile(np.linalg.norm(f.velocity_m_s, axis=1), 90) < 5.0
+
+
+@pytest.mark.skipif(not EUROC.is_dir(), reason=f"EuRoC flights not present in {EUROC}")
+def test_cli_bench_euroc_aided_gnss_quality_velocity_beats_unaided(tmp_path, capsys):
+    out = tmp_path / "e.json"
+    assert main(["bench", "euroc", "--data", str(EUROC / "MH_05_difficult"), "--peers", "none",
+                 "--velocity", "--velocity-rate", "10", "--velocity-noise", "0.1",
+                 "--velocity-latency", "0.1", "--json", str(out), "--jobs", "1"]) == 0
+    text = capsys.readouterr().out
+    assert "velocity aiding: ground-truth velocity, 10 Hz, noise 0.1 m/s, latency 0.1 s" in text
+    doc = json.loads(out.read_text())
+    mean = doc["mean"]
+    assert mean["cf_estimator_aided"]["inclination_rms_deg"] < 1.2
+    assert (mean["cf_estimator_aided"]["inclination_rms_deg"]
+            < 0.8 * mean["cf_estimator"]["inclination_rms_deg"])
+    assert doc["meta"]["velocity"] == {"rate_hz": 10.0, "noise_m_s": 0.1, "latency_s": 0.1}
+
+
+@pytest.mark.skipif(not EUROC.is_dir(), reason=f"EuRoC flights not present in {EUROC}")
+def test_cli_bench_euroc_velocity_flag_errors(capsys):
+    base = ["bench", "euroc", "--data", str(EUROC / "MH_05_difficult"), "--peers", "none"]
+    assert main(base + ["--velocity-rate", "10"]) == 2
+    assert "need --velocity" in capsys.readouterr().err
+    assert main(base + ["--velocity", "--velocity-rate", "0"]) == 2
+    assert "--velocity-rate must be > 0" in capsys.readouterr().err
+
+
+@pytest.mark.skipif(not EUROC.is_dir(), reason=f"EuRoC flights not present in {EUROC}")
+def test_mid_air_start_crops_and_rebases_the_velocity_too():
+    f = euroc.load_flight(EUROC / "MH_05_difficult")
+    c = f.cropped(30.0)
+    assert c.t_s[0] == 0.0 and c.n_samples == int((f.t_s >= 30.0).sum())
+    assert c.velocity_t_s[0] >= 0.0
+    k = int(np.searchsorted(f.velocity_t_s, f.t_s[np.searchsorted(f.t_s, 30.0)]))
+    assert np.array_equal(c.velocity_m_s[0], f.velocity_m_s[k])
+
+
+def test_ned_world_frame_with_ned_velocity_matches_enu(uav):
+    """The aiding works in the filter's world frame: NED params + NED velocity = ENU run."""
+    from cf_estimator.core import quaternion as quat
+
+    vd = measure_velocity(uav.truth, VelocityModel(10.0, 0.1, 0.1), np.random.default_rng(0))
+    v_ned = vd.v_world_m_s[:, [1, 0, 2]] * np.array([1.0, 1.0, -1.0])
+    imu = uav.imu
+    r_enu = estimate(imu.gyro_rad_s, imu.accel_m_s2, timestamps_s=imu.t_s, params=P6,
+                     velocity=(vd.t_s, vd.v_world_m_s), velocity_latency_s=0.1)
+    p_ned = FilterParams(use_mag=False, world_frame="ned")
+    r_ned = estimate(imu.gyro_rad_s, imu.accel_m_s2, timestamps_s=imu.t_s, params=p_ned,
+                     velocity=(vd.t_s, v_ned), velocity_latency_s=0.1)
+    assert r_ned.velocity_aided.mean() > 0.7
+    d = quat.angle_between(quat.ned_to_enu(r_ned.quaternion), r_enu.quaternion)
+    assert np.nanmax(d) < 1e-3

@@ -1,0 +1,152 @@
+"""Velocity aiding through the pipeline and the bag replay: real rosbags messages (issue 17)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from cf_estimator.bag import io
+from cf_estimator.bag.replay import ReplayOptions, ReplayVariant, replay_bag, replay_variants
+from cf_estimator.bag.simulate import VELOCITY_TOPIC, write_scenario_bag
+from cf_estimator.cli.main import main
+from cf_estimator.core import quaternion as quat
+from cf_estimator.core.params import FilterParams
+from cf_estimator.pipeline import ImuPipeline, PipelineParams
+from cf_estimator.pipeline.velocity_input import velocity_from_message
+from cf_estimator.scenarios import make_scenario
+from cf_estimator.scenarios.velocity_sensor import VelocityModel, measure_velocity, with_faults
+
+P6 = FilterParams(use_mag=False)
+T0_NS = 1_704_067_200 * 10**9
+
+
+@pytest.fixture(scope="module")
+def uav():
+    return make_scenario("uav", duration_s=60.0, seed=3)
+
+
+@pytest.fixture(scope="module")
+def faulty_bag(uav, tmp_path_factory):
+    """The flight with a 10 Hz GNSS velocity that glitches by 5 m/s and drops out for 6 s."""
+    model = with_faults(VelocityModel(10.0, 0.1, 0.1), dropouts=[(30.0, 36.0)],
+                        glitches=[(20.0, 20.35, (5.0, 0.0, 0.0))])
+    vd = measure_velocity(uav.truth, model, np.random.default_rng(0))
+    path = tmp_path_factory.mktemp("vel") / "flight"
+    write_scenario_bag(uav, path, velocity=vd)
+    return path
+
+
+def test_replay_aided_and_unaided_side_by_side(faulty_bag):
+    opts = ReplayOptions(mag_topic="none", reference_topic="/ground_truth/orientation",
+                         velocity_topic=VELOCITY_TOPIC, progress=False)
+    aided, = replay_variants(faulty_bag, [ReplayVariant("aided", P6)], opts)
+    opts.velocity_topic = None
+    unaided, = replay_variants(faulty_bag, [ReplayVariant("unaided", P6)], opts)
+    va = aided.summary["velocity"]
+    assert aided.summary["topics"]["velocity"] == VELOCITY_TOPIC
+    assert "velocity" not in unaided.summary
+    assert va["rejected"].get("jump", 0) >= 3  # the 5 m/s glitch
+    assert va["used"] > 400 and va["heading_known"]
+    assert va["unaided_stale_samples"] > 0  # the dropout
+    inc_a = aided.summary["reference"]["rmse_deg"]["inclination"]
+    inc_u = unaided.summary["reference"]["rmse_deg"]["inclination"]
+    assert inc_a < 0.5 * inc_u
+
+
+def test_replay_cli_velocity_topic_json_and_errors(faulty_bag, tmp_path, capsys):
+    params = tmp_path / "p.yaml"
+    params.write_text("/**:\n  ros__parameters:\n    use_mag: false\n")
+    out = tmp_path / "s.json"
+    assert main(["replay", str(faulty_bag), "--mag-topic", "none", "--velocity-topic",
+                 VELOCITY_TOPIC, "--params", str(params), "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    line = next(ln for ln in text.splitlines() if ln.startswith("velocity "))
+    assert f"on {VELOCITY_TOPIC}: used" in line and "jump" in line and "heading offset" in line
+    doc = json.loads(out.read_text())
+    assert doc["velocity"]["aided_samples"] > 0
+    # a topic of the wrong type: one-line error, exit 2
+    assert main(["replay", str(faulty_bag), "--velocity-topic", "/imu/mag", "--json",
+                 str(tmp_path / "t.json")]) == 2
+    err = capsys.readouterr().err
+    assert "--velocity-topic needs geometry_msgs/msg/TwistStamped or nav_msgs/msg/Odometry" in err
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_offline_replay_uses_the_aided_specific_force(faulty_bag):
+    opts = ReplayOptions(mag_topic="none", reference_topic="/ground_truth/orientation",
+                         velocity_topic=VELOCITY_TOPIC, progress=False, offline=True)
+    r = replay_bag(faulty_bag, None, P6, None, opts)
+    opts.velocity_topic = None
+    r0 = replay_bag(faulty_bag, None, P6, None, opts)
+    assert (r.summary["reference"]["rmse_deg"]["inclination"]
+            < 0.7 * r0.summary["reference"]["rmse_deg"]["inclination"])
+
+
+# -- messages --------------------------------------------------------------------------------
+def test_twist_and_odometry_messages_give_the_same_world_velocity():
+    q = quat.from_euler(0.1, -0.2, 1.0)
+    v_world = np.array([1.0, -2.0, 0.5])
+    vb = quat.rotate(quat.conjugate(q), v_world)
+    tw = io.twist_stamped_message(5, 0, "map", v_world)
+    od = io.odometry_message(5, 0, "odom", "base_link", (q[1], q[2], q[3], q[0]), (0, 0, 0), vb)
+    t1, v1 = velocity_from_message(tw, "enu", "enu")
+    t2, v2 = velocity_from_message(od, "enu", "enu")
+    assert t1 == t2 == 5 * 10**9
+    assert np.allclose(v1, v_world) and np.allclose(v2, v_world)
+    _, vn = velocity_from_message(tw, "enu", "ned")  # ENU -> NED
+    assert np.allclose(vn, (-2.0, 1.0, -0.5))
+
+
+def test_bad_velocity_messages_are_reasons_not_exceptions():
+    assert velocity_from_message(io.twist_stamped_message(0, 0, "map", (1, 0, 0)), "enu",
+                                 "enu") == "stamp"
+    assert velocity_from_message(io.twist_stamped_message(1, 0, "map", (math.nan, 0, 0)), "enu",
+                                 "enu") == "nonfinite"
+    assert velocity_from_message(io.twist_stamped_message(1, 0, "gps", (1, 0, 0)), "enu", "enu",
+                                 "map") == "frame"
+    zero_q = io.odometry_message(1, 0, "odom", "base", (0, 0, 0, 0), (0, 0, 0), (1, 0, 0))
+    assert velocity_from_message(zero_q, "enu", "enu") == "frame"
+    assert velocity_from_message(io.magnetic_field_message(1, 0, "imu", (1e-5, 0, 0)), "enu",
+                                 "enu") == "malformed"
+    assert velocity_from_message(object(), "enu", "enu") == "malformed"
+
+
+def test_pipeline_counts_velocity_and_reports_it_in_diagnostics(uav):
+    vd = measure_velocity(uav.truth, VelocityModel(10.0, 0.1, 0.1), np.random.default_rng(0))
+    pipe = ImuPipeline(P6, PipelineParams(velocity_frame_id="map"))
+    imu = uav.imu
+    jv = 0
+    for k in range(imu.n_samples):
+        t = float(imu.t_s[k])
+        while jv < len(vd.t_s) and vd.arrival_s[jv] <= t:
+            st = divmod(T0_NS + round(float(vd.t_s[jv]) * 1e9), 10**9)
+            frame = "gps" if jv == 7 else "map"
+            pipe.on_velocity(io.twist_stamped_message(*st, frame, vd.v_world_m_s[jv]))
+            jv += 1
+        st = divmod(T0_NS + round(t * 1e9), 10**9)
+        pipe.on_imu(io.imu_message(*st, "imu", (0, 0, 0, 1), None, imu.gyro_rad_s[k], None,
+                                   imu.accel_m_s2[k], None))
+    values = dict(pipe.diagnostics().values)
+    assert values["velocity_rejected.frame"] == "1"
+    assert values["velocity_aiding"] == "aided"
+    assert values["velocity_heading_known"] == "true"
+    assert int(values["velocity_received"]) == jv
+    # a reset (time jump back) resets the aiding as well
+    pipe.on_imu(io.imu_message(1, 0, "imu", (0, 0, 0, 1), None, (0, 0, 0), None, (0, 0, 9.8),
+                               None))
+    assert pipe.velocity_aiding.status().age_s == math.inf
+
+
+def test_pipeline_without_velocity_messages_matches_the_filter_bit_for_bit(uav):
+    """No velocity topic: the pipeline never creates the aiding (bit-equal by construction)."""
+    pipe = ImuPipeline(P6)
+    imu = uav.imu
+    for k in range(500):
+        st = divmod(T0_NS + round(float(imu.t_s[k]) * 1e9), 10**9)
+        pipe.on_imu(io.imu_message(*st, "imu", (0, 0, 0, 1), None, imu.gyro_rad_s[k], None,
+                                   imu.accel_m_s2[k], None))
+    assert pipe.velocity_aiding is None
+    assert not any(k.startswith("velocity") for k, _ in pipe.diagnostics().values)
