@@ -68,7 +68,7 @@ class ReplayOptions:
     bulk_decode: bool = True
     #: with bulk_decode, one online variant: ordinary runs through the pipeline at once
     #: (pipeline/bulk.py; same outputs, bit for bit; False: message by message)
-    bulk_pipeline: bool = True
+    bulk_pipeline: bool = False
     #: called with the number of messages read since the last call (a fleet's progress bar)
     on_messages: Callable[[int], None] | None = None
 
