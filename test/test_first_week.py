@@ -250,7 +250,8 @@ def test_search_boxes_keep_the_safety_nets() -> None:
         tuning.with_bounds(tuning.DEFAULT_SPACE, {"recovery_trigger_s": (10.0, 400.0)})
 
 
-@pytest.mark.xfail(reason="with the issue-16 core this search no longer finds a losing set; needs a case that loses again", strict=False)
+@pytest.mark.xfail(reason="with the issue-16 core this search no longer finds a losing "
+                   "set; needs a case that loses again", strict=False)
 def test_tune_refuses_to_write_a_set_that_loses_on_validation(flight60, tmp_path, capsys):
     out = tmp_path / "tuned.yaml"
     argv = ["tune", "--bag", str(flight60), "--candidates", "24", "--passes", "2",
