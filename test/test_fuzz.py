@@ -595,7 +595,9 @@ def change_sets(draw, valid: bool) -> dict[str, Any]:
         elif how == "read_only":
             spec = draw(st.sampled_from(READ_ONLY))
             other = {"bool": lambda d: not d,
-                     "str": lambda d, c=spec.choices: next(x for x in c if x != d),
+                     # a choice other than the default; a free string (velocity_topic): another
+                     "str": lambda d, c=spec.choices: (next(x for x in c if x != d) if c
+                                                       else d + "_other" if d else "other"),
                      "float": lambda d: 2.0 * d}[spec.kind](spec.default)
             changes[spec.name] = other
         else:
