@@ -150,3 +150,27 @@ def test_pipeline_without_velocity_messages_matches_the_filter_bit_for_bit(uav):
                                    imu.accel_m_s2[k], None))
     assert pipe.velocity_aiding is None
     assert not any(k.startswith("velocity") for k, _ in pipe.diagnostics().values)
+
+
+def test_pipeline_with_stale_velocity_messages_is_bit_equal_to_no_velocity(uav):
+    """Velocity messages that arrive 5 s after their stamps (velocity_timeout_s 1.5 s): each is
+    counted stale and the outputs are those of a pipeline that never saw a velocity."""
+    vd = measure_velocity(uav.truth, VelocityModel(10.0, 0.1, 5.0), np.random.default_rng(0))
+    aided, plain = ImuPipeline(P6), ImuPipeline(P6)
+    imu = uav.imu
+    jv = 0
+    for k in range(imu.n_samples):
+        t = float(imu.t_s[k])
+        while jv < len(vd.t_s) and vd.arrival_s[jv] <= t:
+            st = divmod(T0_NS + round(float(vd.t_s[jv]) * 1e9), 10**9)
+            aided.on_velocity(io.twist_stamped_message(*st, "map", vd.v_world_m_s[jv]))
+            jv += 1
+        st = divmod(T0_NS + round(t * 1e9), 10**9)
+        msg = io.imu_message(*st, "imu", (0, 0, 0, 1), None, imu.gyro_rad_s[k], None,
+                             imu.accel_m_s2[k], None)
+        a, b = aided.on_imu(msg), plain.on_imu(msg)
+        assert a.orientation_xyzw == b.orientation_xyzw
+        assert a.orientation_covariance == b.orientation_covariance
+    status = aided.velocity_aiding.status()
+    assert jv > 400 and status.rejected["too_old"] == jv and status.aided_samples == 0
+    assert dict(aided.diagnostics().values)["velocity_stale"] == str(jv)
