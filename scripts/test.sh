@@ -24,8 +24,16 @@ fi
 # without one, the Jazzy wheels from PyPI (extra "ros") provide it where they exist. Never both:
 # an installed but unsourced ROS gets a hint, not the wheels beside it.
 ros_state=$("$PYTHON" - <<'PY'
-import glob, importlib.util, platform, sys
-if importlib.util.find_spec("rclpy") is not None:
+import glob, importlib.metadata, importlib.util, platform, sys
+def from_wheels():  # rclpy installed by pip from the PyPI Jazzy wheels (an earlier run of this)
+    try:
+        importlib.metadata.distribution("ros-jazzy-rclpy")
+    except importlib.metadata.PackageNotFoundError:
+        return False
+    return True
+if importlib.util.find_spec("rclpy") is not None and from_wheels():
+    print("wheels")  # keep the wheel set complete (e.g. a message package added since)
+elif importlib.util.find_spec("rclpy") is not None:
     print("present")
 elif glob.glob("/opt/ros/*/setup.bash"):
     print("unsourced " + " ".join(sorted(glob.glob("/opt/ros/*/setup.bash"))))
