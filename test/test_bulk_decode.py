@@ -285,10 +285,9 @@ def clean_flight(tmp_path_factory) -> Path:
     {"pipeline": {"publish_rpy": False, "rpy_unwrap": False}},
     {"pipeline": {"max_dt_s": 0.0021, "reset_after_gap_s": 0.0}},  # every interval a "gap"
     {"mag_topic": "none"},
+    {"pipeline": {"body_frame": "frd"}},  # ENU world, FRD input: the half turn about x
+    {"filter": {"world_frame": "ned"}, "pipeline": {"body_frame": "flu"}},
 ])
-@pytest.mark.xfail(reason="the bulk pipeline has no per-row state for the state-based orientation "
-                   "covariance (issue 19 item 5) yet: replay runs the pipeline per message "
-                   "(ReplayOptions.bulk_pipeline False) until it does", strict=False)
 @pytest.mark.parametrize("bag", ["clean", "hostile"])
 def test_bulk_pipeline_equals_message_by_message_for_other_parameters(
         variant, bag, clean_flight, hostile, tmp_path):
@@ -314,9 +313,6 @@ def test_bulk_pipeline_equals_message_by_message_for_other_parameters(
     assert ca == cb
 
 
-@pytest.mark.xfail(reason="the bulk pipeline has no per-row state for the state-based orientation "
-                   "covariance (issue 19 item 5) yet: replay runs the pipeline per message "
-                   "(ReplayOptions.bulk_pipeline False) until it does", strict=False)
 def test_the_bulk_pipeline_takes_almost_every_message_of_a_clean_flight(clean_flight, tmp_path,
                                                                         monkeypatch):
     from cf_estimator.pipeline import bulk

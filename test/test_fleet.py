@@ -186,7 +186,7 @@ def test_tune_over_many_bags_on_a_local_cluster_matches_the_local_run(good_dir, 
                                                                        engine, capsys):
     flights = [str(good_dir / "a_flight"), str(good_dir / "sub" / "b_flight")]
     common = ["tune", "--bag", *flights, "--candidates", "6", "--passes", "2", "--decimate",
-              "4", "--scenario-limit", "none", "--seed", "3"]
+              "4", "--scenario-limit", "none", "--seed", "3", "--force"]  # a tiny search
     assert main([*common, "--jobs", "1", "--out", str(tmp_path / "local.yaml")]) == 0
     local = capsys.readouterr().out
     assert main([*common, "--cluster", "local:2", "--out", str(tmp_path / "dask.yaml")]) == 0

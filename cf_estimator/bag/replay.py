@@ -68,7 +68,7 @@ class ReplayOptions:
     bulk_decode: bool = True
     #: with bulk_decode, one online variant: ordinary runs through the pipeline at once
     #: (pipeline/bulk.py; same outputs, bit for bit; False: message by message)
-    bulk_pipeline: bool = False
+    bulk_pipeline: bool = True
     #: called with the number of messages read since the last call (a fleet's progress bar)
     on_messages: Callable[[int], None] | None = None
 
@@ -652,8 +652,10 @@ def replay_variants(
             # copied: those need rosbags' message objects; runs of ordinary messages through
             # the pipeline at once (pipeline/bulk.py) for one online variant
             decode_bulk = not copy and opts.bulk_decode
+            # (velocity aiding: message by message, the aided accelerometer is per sample)
             bulk_run = runs[0] if (decode_bulk and opts.bulk_pipeline and len(runs) == 1
-                                   and not runs[0].offline and pipeline_factory is None) else None
+                                   and not runs[0].offline and pipeline_factory is None
+                                   and vel_topic is None) else None
             if bulk_run is not None:
                 for chunk in bag.chunks(topics):
                     if first_log is None:

@@ -12,10 +12,13 @@ not ordinary is left to ``on_imu`` / ``on_mag``: rejections, resets, gaps beyond
 threshold, first samples, warnings.
 
 Equality with the per-message path (same outputs, counters, diagnostics, bit for bit) is tested
-on real and hostile bags (test/test_bulk_pipeline.py). It relies on: ``run_rows`` = repeated
+on real and hostile bags (test/test_bulk_decode.py). It relies on: ``run_rows`` = repeated
 ``update`` (a magnetometer row of NaN = no sample), the extra columns of
-:func:`cf_estimator.core.filter.state_extras`, and the error norm being
-``sqrt(ex² + ey² + ez²)`` of the error vector (core/step.py).
+:func:`cf_estimator.core.filter.state_extras` (clipped, phase, bias sigma, magnetometer status
+per row: what the orientation covariance model needs, with the heading error read after each
+magnetometer row), and the error norm being ``sqrt(ex² + ey² + ez²)`` of the error vector
+(core/step.py). body_frame's half turn is applied as ``on_imu``/``on_mag`` apply it; with
+velocity aiding the pipeline runs per message.
 """
 
 from __future__ import annotations
@@ -64,7 +67,8 @@ class Scan:
 def _ordinary_start(pipe: ImuPipeline) -> bool:
     f = pipe._filter  # noqa: SLF001 - this module is the pipeline's own bulk path
     return (f.initialized and pipe._last_ns is not None and not pipe._pending_warnings
-            and pipe._acc_n >= checks.ACCEL_CHECK_SAMPLES)
+            and pipe._acc_n >= checks.ACCEL_CHECK_SAMPLES
+            and getattr(pipe, "_aiding", None) is None)  # velocity aiding: per message
 
 
 def _imu_ok(v: np.ndarray, sec: np.ndarray, nsec: np.ndarray) -> np.ndarray:
@@ -105,13 +109,17 @@ class Events:
         self._frames: dict[tuple[int, str | None], np.ndarray] = {}
 
     def column(self, name: str) -> list[float]:
-        """``gx gy gz ax ay az`` (IMU) or ``mx my mz`` (magnetometer) as a list of floats."""
+        """``gx gy gz ax ay az`` (IMU) or ``mx my mz`` (magnetometer) as a list of floats;
+        a leading ``-``: negated (body_frame's half turn about x)."""
         col = self._cols.get(name)
         if col is None:
+            neg = name.startswith("-")
+            base = name.lstrip("-")
             j = {"gx": 13, "gy": 14, "gz": 15, "ax": 25, "ay": 26, "az": 27,
-                 "mx": 0, "my": 1, "mz": 2}[name]
-            block = self.mag if name[0] == "m" else self.imu
-            col = self._cols[name] = block.values[:, j].tolist()
+                 "mx": 0, "my": 1, "mz": 2}[base]
+            block = self.mag if base[0] == "m" else self.imu
+            values = block.values[:, j]
+            col = self._cols[name] = (-values if neg else values).tolist()
         return col
 
     def static(self) -> dict[str, np.ndarray]:
@@ -236,6 +244,8 @@ def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = N
     mag_block = ev.mag
     if mag_block is not None:
         mxs, mys, mzs = ev.column("mx"), ev.column("my"), ev.column("mz")
+        if p._flip:  # body_frame FLU <-> FRD, as on_mag turns the field
+            mys, mzs = ev.column("-my"), ev.column("-mz")
     t_list = t_all[start:end].tolist()
     logs = ev.log_ns
     imu_sec = ev.imu.sec if ev.imu is not None else []
@@ -309,7 +319,7 @@ class Committed:
     rpy: list[tuple[float, float, float]]
     extra: np.ndarray  #: (n, EXTRA_COLUMNS): state_extras after each sample
     error_norm: list[float]
-    covariance: tuple[float, ...]  #: orientation covariance of every row
+    covariance: np.ndarray  #: (n, 9) orientation covariance of each row (pipeline/covariance.py)
     av_cov: tuple[float, ...]
     la_cov: tuple[float, ...]
     gyro: np.ndarray  #: (n, 3) the rows the filter got [rad/s] (= the output's input copy)
@@ -330,40 +340,65 @@ def commit(pipe: ImuPipeline, run: Scan, marks: Sequence[int] = (),
     sel = run.values[np.asarray(run.rows, dtype=np.intp)]
     gyro = np.ascontiguousarray(sel[:, 13:16])
     acc = np.ascontiguousarray(sel[:, 25:28])
-    has_mag = any(m is not None for m in run.mag)
+    if p._flip:  # body_frame FLU <-> FRD, as on_imu turns the vectors
+        gyro[:, 1:] = -gyro[:, 1:]
+        acc[:, 1:] = -acc[:, 1:]
+    mag_rows = [k for k, m in enumerate(run.mag) if m is not None]
     mag = None
-    if has_mag:
+    if mag_rows:
         mag = np.full((n, 3), np.nan)
-        for k, m in enumerate(run.mag):
-            if m is not None:
-                mag[k] = m
+        for k in mag_rows:
+            mag[k] = run.mag[k]
     dt = np.array(run.dt, dtype=np.float64)
     q = np.empty((n, 4))
     extra = np.empty((n, EXTRA_COLUMNS))
+    # the filter in pieces ending at each magnetometer row (its heading error is read there,
+    # for the covariance) and at each of the caller's marks
+    marked, mag_set = set(marks), set(mag_rows)
+    yaw_err: dict[int, float] = {}
     a = 0
-    marked = set(marks)
-    for b in [*(m + 1 for m in marks), n]:
+    state = f._state  # noqa: SLF001 - read-only
+    for b in sorted({*(m + 1 for m in marks), *(k + 1 for k in mag_rows), n}):
         if b <= a:
             continue
         f.run_rows(gyro[a:b], acc[a:b], None if mag is None else mag[a:b], dt[a:b], 0,
                    q[a:b], extra[a:b])
+        state = f._state  # noqa: SLF001
+        if b - 1 in mag_set:
+            yaw_err[b - 1] = float(state.yaw_error_rad)
         if on_mark is not None and b - 1 in marked:
             on_mark(b - 1)
         a = b
-    # -- counters and statistics ------------------------------------------------------------
+    # -- counters, statistics and the covariance model, row by row ------------------------------
     st = run.state
     status = extra[:, 9].tolist()
-    for k, m in enumerate(run.mag):
-        if m is None:
-            continue
-        ms = status[k]
-        if ms == MAG_USED:
-            p._mag_used += 1
-            p._last_mag_used_ns = run.mag_t_ns[k]
-        elif ms == MAG_REJECTED:
-            p._mag_rejected += 1
-        elif ms == MAG_DISABLED:
-            p._mag_disabled += 1
+    ex, ey, ez = extra[:, 0], extra[:, 1], extra[:, 2]
+    en = np.sqrt(ex * ex + ey * ey + ez * ez).tolist()
+    clipped = (extra[:, 6] != 0.0).tolist()
+    phase = extra[:, 7].tolist()
+    sigma = extra[:, 10].tolist()
+    heading = bool(state.heading_initialized)  # constant over the run
+    model = p._cov_model
+    last_mag = p._last_mag_used_ns
+    covs: list[tuple[float, ...]] = []
+    t_ns = run.t_ns
+    for k in range(n):
+        used = False
+        if run.mag[k] is not None:
+            ms = status[k]
+            if ms == MAG_USED:
+                p._mag_used += 1
+                used = True
+                last_mag = run.mag_t_ns[k]
+            elif ms == MAG_REJECTED:
+                p._mag_rejected += 1
+            elif ms == MAG_DISABLED:
+                p._mag_disabled += 1
+        sb = sigma[k]
+        covs.append(model.step(run.dt[k], clipped[k], None if sb != sb else sb, phase[k], en[k],
+                               heading, yaw_err.get(k, 0.0) if used else 0.0, used,
+                               None if last_mag is None else (t_ns[k] - last_mag) * 1e-9))
+    p._last_mag_used_ns = last_mag
     p._mag_dropped += st["dropped"]
     p._mag_stale += st["stale"]
     p._received_mag += st["n_mag"]
@@ -373,8 +408,6 @@ def commit(pipe: ImuPipeline, run: Scan, marks: Sequence[int] = (),
     p._processed += n
     w = p._window
     w.dt_min, w.dt_max, w.dt_sum, w.n_dt = st["window"]
-    ex, ey, ez = extra[:, 0], extra[:, 1], extra[:, 2]
-    en = np.sqrt(ex * ex + ey * ey + ez * ez).tolist()
     err_sum, err_max = w.err_sum, w.err_max
     for e in en:
         err_sum += e
@@ -388,8 +421,6 @@ def commit(pipe: ImuPipeline, run: Scan, marks: Sequence[int] = (),
     w.n += n
     w.last_ns = run.t_ns[-1]
     # -- outputs ------------------------------------------------------------------------------
-    heading = bool(f._state.heading_initialized)  # noqa: SLF001 - constant over the run
-    cov = p._cov_referenced if heading else p._cov_unreferenced
     atan2, asin = math.atan2, math.asin
     unwrap = p._pp.rpy_unwrap
     prev = p._unwrap_prev
@@ -412,4 +443,5 @@ def commit(pipe: ImuPipeline, run: Scan, marks: Sequence[int] = (),
     w.proc_sum += elapsed
     if elapsed / n > w.proc_max:
         w.proc_max = elapsed / n
-    return Committed(q, rpy, extra, en, cov, p._av_cov.value, p._la_cov.value, gyro, acc)
+    return Committed(q, rpy, extra, en, np.array(covs, dtype=np.float64).reshape(n, 9),
+                     p._av_cov.value, p._la_cov.value, gyro, acc)

@@ -56,17 +56,28 @@ class OrientationCovariance:
         step used a magnetometer sample; ``mag_age_s``: time since the last used one (None:
         never)."""
         s = state
-        self._clip_s = self._clip_s + dt_s if s.clipped else 0.0  # type: ignore[attr-defined]
         bv = s.bias_var  # type: ignore[attr-defined]
-        sigma_b = math.sqrt(bv) if bv >= 0.0 else self.bias_prior
-        phase = s.phase  # type: ignore[attr-defined]
+        return self.step(dt_s, bool(s.clipped),  # type: ignore[attr-defined]
+                         math.sqrt(bv) if bv >= 0.0 else None, s.phase,  # type: ignore[attr-defined]
+                         s.error_norm, bool(s.heading_initialized),  # type: ignore[attr-defined]
+                         s.yaw_error_rad if mag_used else 0.0,  # type: ignore[attr-defined]
+                         mag_used, mag_age_s)
+
+    def step(self, dt_s: float, clipped: bool, bias_sigma_rad_s: float | None, phase: float,
+             error_norm_rad: float, heading_initialized: bool, yaw_error_rad: float,
+             mag_used: bool, mag_age_s: float | None) -> tuple[float, ...]:
+        """:meth:`update` from the state's figures (the bulk pipeline has them per row):
+        ``bias_sigma_rad_s`` = √bias_var (None: no estimate yet, the prior is used),
+        ``yaw_error_rad`` read only when ``mag_used``."""
+        self._clip_s = self._clip_s + dt_s if clipped else 0.0
+        sigma_b = bias_sigma_rad_s if bias_sigma_rad_s is not None else self.bias_prior
         settling = phase in (PHASE_STARTUP, PHASE_RECOVERING)
-        e_t = s.error_norm if settling else 0.0  # type: ignore[attr-defined]
+        e_t = error_norm_rad if settling else 0.0
         drift = sigma_b * self._clip_s
         tilt = min(self.tilt0 + e_t * e_t + drift * drift, max(_PI2, self.tilt0))
-        if s.heading_initialized:  # type: ignore[attr-defined]
+        if heading_initialized:
             if mag_used:
-                self._yaw_err = abs(s.yaw_error_rad)  # type: ignore[attr-defined]
+                self._yaw_err = abs(yaw_error_rad)
             yd = sigma_b * (mag_age_s or 0.0)
             yaw = min(self.yaw0 + self._yaw_err**2 + yd * yd,
                       max(_PI2, self.yaw_unref, self.yaw0))
