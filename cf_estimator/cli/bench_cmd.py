@@ -172,6 +172,29 @@ def register(subparsers: Any) -> None:
     sp.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
     sp.set_defaults(run=run_speed)
 
+    cr = sub.add_parser(
+        "cross", help="one table over every data family (EuRoC ground and mid-air starts, "
+        "phantom4, BROAD groups, thesis scenarios), ours beside VQF online and offline",
+        description=(
+            "The cross-dataset table of BENCHMARKS.md: for each family below --data (euroc/, "
+            "phantom4/, broad/; missing ones are left out with a note) and the simulated thesis "
+            "scenarios, our filter online and offline beside VQF online and offline. Inclination "
+            "[deg]; scenarios: peak tilt error [arcmin]. A default changes only when no row "
+            "gets worse."
+        ),
+    )
+    cr.add_argument("--data", default="../shared/data", metavar="DIR",
+                    help="directory holding euroc/, phantom4/ and broad/ (default %(default)s)")
+    cr.add_argument("--families", default=",".join(_cross_families()), metavar="LIST",
+                    help="comma-separated subset of %(default)s")
+    cr.add_argument("--params", metavar="YAML", help="ROS 2 parameter file for our filter "
+                    "(default: the shipped defaults)")
+    cr.add_argument("--json", metavar="OUT", help="write the rows as JSON")
+    cr.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
+    cr.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
+                    help="worker processes (default %(default)s)")
+    cr.set_defaults(run=run_cross)
+
     fl = sub.add_parser(
         "fleet", help="replay and tuning throughput of many bags: here, and on a Dask "
         "LocalCluster of 1 and 2 workers",
@@ -465,6 +488,40 @@ def run_speed(args: Any) -> int:
                                 "per_sample_hz": rates, "pipeline": pipe,
                                 "batched_param_samples_per_s": batched_json,
                                 "bag_throughput": dataclasses.asdict(bag)})
+    return 0
+
+
+def _cross_families() -> tuple[str, ...]:
+    from cf_estimator.bench.cross import FAMILIES
+
+    return FAMILIES
+
+
+def run_cross(args: Any) -> int:
+    """``bench cross``."""
+    from cf_estimator.bench import cross
+
+    _check_outputs(args, "json")
+    families = _csv(args.families)
+    bad = [f for f in families if f not in cross.FAMILIES]
+    if bad or not families:
+        raise CliError(f"--families: unknown {bad[0]!r}; valid: {', '.join(cross.FAMILIES)}"
+                       if bad else "--families is empty", 2)
+    if args.jobs < 1:
+        raise CliError("--jobs must be >= 1", 2)
+    if not Path(args.data).is_dir() and families != ["scenarios"]:
+        raise CliError(f"--data: {args.data} is not a directory", 2)
+    params = _load_params(args.params)
+    result = cross.run_cross(args.data, params, families, jobs=args.jobs,
+                             progress=lambda f: note(f"bench cross: {f} ..."))
+    print(f"Cross-dataset table ({args.data}); cf_estimator parameters: "
+          f"{args.params or 'shipped defaults'}")
+    for line in result.notes:
+        print(f"  note: {line}")
+    print()
+    print(cross.format_table(result), end="")
+    if args.json:
+        _write_json(args.json, result.to_json())
     return 0
 
 

@@ -109,7 +109,7 @@ class FilterParams:
         group="error path",
     )
     aperiodic_time_constant_s: float = param(
-        3.0,
+        2.0,
         "s",
         "Time constant T of the aperiodic unit 1/(T*s+1) on the clipped error, applied "
         "in the world frame (0 = off). Must satisfy T < k1/k2 for stability.",

@@ -1,0 +1,159 @@
+"""Cross-dataset table: every family of the dev data in one table, ours beside VQF.
+
+One row per family and window, four columns: our filter online and offline, VQF online and
+offline (its own offline mode). Rows (inclination [deg] unless marked):
+
+- EuRoC MH, ground start: RMS after the first 10 s, mean over flights;
+- EuRoC MH, mid-air starts (each flight cropped to start 20, 40, 60 s in): RMS 2-12 s and
+  12 s-end after that start;
+- phantom4: RMS after the first 10 s, mean and worst recording;
+- BROAD: 6-D inclination RMSE per trial group, 9-D total RMSE of all trials;
+- thesis scenarios (simulated, 6-D): peak tilt error [arcmin] in the disturbance windows.
+
+Families whose data directory is missing are left out (a note says so). The defaults are chosen
+so that no row gets worse (BENCHMARKS.md "How the shipped defaults were chosen").
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from cf_estimator.core.params import FilterParams
+
+COLUMNS = ("cf_estimator", "cf_estimator_offline", "vqf", "vqf_offline")
+FAMILIES = ("euroc", "phantom4", "broad", "scenarios")
+MIDAIR_STARTS_S = (20.0, 40.0, 60.0)
+SCENARIOS = ("impacts", "vibration", "acceleration")
+
+
+@dataclass
+class Row:
+    """One row: ``values[column]`` in ``unit`` (NaN: not run / not applicable)."""
+
+    family: str
+    label: str
+    unit: str
+    values: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class CrossResult:
+    """The rows in table order, and notes (families left out, peers missing)."""
+
+    rows: list[Row] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    def to_json(self) -> dict:
+        """``{"columns", "rows": [{family, label, unit, values}], "notes"}`` (NaN → null)."""
+        def clean(v: float) -> float | None:
+            return None if not math.isfinite(v) else round(float(v), 4)
+
+        return {"columns": list(COLUMNS), "notes": list(self.notes),
+                "rows": [{"family": r.family, "label": r.label, "unit": r.unit,
+                          "values": {c: clean(r.values.get(c, math.nan)) for c in COLUMNS}}
+                         for r in self.rows]}
+
+
+def _euroc_rows(root: Path, params: FilterParams, peers: Sequence[str], jobs: int,
+                family: str, label: str, midair: bool) -> list[Row]:
+    from cf_estimator.bench import euroc
+    from cf_estimator.bench import euroc_eval as ev
+
+    flights = euroc.load_flights(root)
+    res = ev.run_euroc(flights, params, peers, ev.SETTLE_S, jobs=jobs)
+    start = ", ground start" if midair else ""
+    mean = Row(family, f"{label}{start}, after 10 s: mean", "deg",
+               {c: res.mean(c, "inclination_rms_deg") for c in COLUMNS})
+    rows = [mean]
+    if not midair:
+        rows.append(Row(family, f"{label}, after 10 s: worst recording", "deg",
+                        {c: max(per.get(c, {}).get("inclination_rms_deg", math.nan)
+                                for per in res.flights.values()) for c in COLUMNS}))
+        return rows
+    for start in MIDAIR_STARTS_S:
+        mid = ev.run_midair(flights, params, start, peers, jobs=jobs)
+        for key, window in zip(ev.MIDAIR_SCORES, ("2-12 s", "12 s-end"), strict=True):
+            rows.append(Row(family, f"{label}, mid-air start {start:g} s: {window}", "deg",
+                            {c: mid.mean(c, key) for c in COLUMNS}))
+    return rows
+
+
+def _broad_rows(root: Path, params: FilterParams, peers: Sequence[str], jobs: int) -> list[Row]:
+    from cf_estimator.bench import broad
+    from cf_estimator.bench.evaluate import run_broad
+
+    paths = broad.list_trials(root)
+    res = run_broad(paths, broad.read_trial_info(root), params, peers, jobs)
+    rows = []
+    for group, members in res.group_members().items():
+        rows.append(Row("broad", f"BROAD {group} ({len(members)}): 6-D inclination", "deg",
+                        {c: res.group_mean(members, f"{c}_6d", "inclination_rmse_deg")
+                         for c in COLUMNS}))
+    rows.append(Row("broad", f"BROAD all ({len(paths)}): 9-D total", "deg",
+                    {c: res.group_mean(list(res.trials), f"{c}_9d", "total_rmse_deg")
+                     for c in COLUMNS}))
+    return rows
+
+
+def _scenario_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> list[Row]:
+    from cf_estimator.bench.scenarios import run_scenarios
+
+    found = run_scenarios(SCENARIOS, params, [p for p in peers if p == "vqf"], jobs=jobs)
+    rows = []
+    for name in SCENARIOS:
+        values = {r["algorithm"]: r["peak_arcmin"] for r in found
+                  if r["scenario"] == name and r["algorithm"] in COLUMNS}
+        rows.append(Row("scenarios", f"thesis {name}: peak (limit 90')", "arcmin", values))
+    return rows
+
+
+def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = FAMILIES,
+              jobs: int = 1, progress: Callable[[str], None] | None = None) -> CrossResult:
+    """The table over the families below ``data`` (``euroc/``, ``phantom4/``, ``broad/``)."""
+    from cf_estimator.bench.euroc_eval import ALGORITHMS, installed
+
+    root = Path(data)
+    result = CrossResult()
+    peers = ["vqf"] if installed(ALGORITHMS["vqf"]) else []
+    if not peers:
+        result.notes.append("VQF not installed (pip install vqf): its columns are empty")
+    for family in families:
+        if progress:
+            progress(family)
+        if family == "scenarios":
+            result.rows += _scenario_rows(params, peers, jobs)
+            continue
+        folder = root / family
+        if not folder.is_dir():
+            result.notes.append(f"{family}: {folder} not found, left out")
+            continue
+        if family == "euroc":
+            result.rows += _euroc_rows(folder, params, peers + ["vqf_offline"] * bool(peers),
+                                       jobs, "euroc", "EuRoC MH", midair=True)
+        elif family == "phantom4":
+            result.rows += _euroc_rows(folder, params, peers + ["vqf_offline"] * bool(peers),
+                                       jobs, "phantom4", "phantom4", midair=False)
+        elif family == "broad":
+            result.rows += _broad_rows(folder, params, peers, jobs)
+        else:
+            raise ValueError(f"unknown family {family!r}; valid: {', '.join(FAMILIES)}")
+    return result
+
+
+def format_table(result: CrossResult) -> str:
+    """Rows × the four columns, two decimals (arcmin one), '-' where not applicable."""
+    w = max([len(r.label) for r in result.rows] + [6])
+    cw = max(len(c) for c in COLUMNS)
+    lines = [f"  {'row':<{w}}  {'unit':<6}" + "".join(f"  {c:>{cw}}" for c in COLUMNS)]
+    for r in result.rows:
+        cells = []
+        for c in COLUMNS:
+            v = r.values.get(c, math.nan)
+            text = "-" if not math.isfinite(v) else (f"{v:.1f}" if r.unit == "arcmin"
+                                                     else f"{v:.2f}")
+            cells.append(f"  {text:>{cw}}")
+        lines.append(f"  {r.label:<{w}}  {r.unit:<6}" + "".join(cells))
+    return "\n".join(lines) + "\n"
