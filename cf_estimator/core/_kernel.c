@@ -816,18 +816,18 @@ static PyMethodDef State_methods[] = {
 #define SB(n) {#n, T_BOOL, offsetof(StateObject, s) + offsetof(cf_state, n), 0, NULL}
 #define SI(n) {#n, T_INT, offsetof(StateObject, s) + offsetof(cf_state, n), 0, NULL}
 static PyMemberDef State_members[] = {
-    SD(qw), SD(qx), SD(qy), SD(qz), SD(bx), SD(by), SD(bz), SD(cx), SD(cy), SD(cz), SD(lx),
-    SD(ly), SD(lz), SD(z_m), SD(time_s), SD(clip_timer_s), SB(recovering), SD(rest_timer_s),
-    SD(blk_n), SD(blk_t), SD(blk_gx), SD(blk_gy), SD(blk_gz), SD(blk_ax), SD(blk_ay),
-    SD(blk_az), SD(blk_g2), SD(blk_a2), SD(prev_n), SD(pgx), SD(pgy), SD(pgz), SD(pax), SD(pay),
-    SD(paz), SD(blk_d), SD(last_n), SD(lgx), SD(lgy), SD(lgz), SD(lax), SD(lay), SD(laz),
-    SD(noise_g2), SD(noise_a2), SD(bias_var), SD(blk_mx), SD(blk_my), SD(blk_mz),
-    SD(blk_mn), SD(pmx), SD(pmy), SD(pmz), SD(pm_n), SB(moved), SB(bias_unverified),
-    SD(mag_clip_timer_s), SB(mag_recovering), SB(at_rest), SD(mag_ref_norm),
-    SD(mag_ref_dip), SD(mag_ref_count), SB(mag_disturbed), SD(mag_reject_timer_s),
-    SD(mag_last_time_s), SB(heading_initialized), SD(g_ref), SD(accel_hold), SD(acx), SD(acy), SD(acz), SD(rate_lp),
-    SD(ex), SD(ey), SD(ez), SD(error_norm), SD(fx), SD(fy), SD(fz), SB(clipped),
-    SB(accel_used), SI(mag_status), SD(yaw_error_rad), SI(phase), SD(recovery_count),
+    SD(qw), SD(qx), SD(qy), SD(qz), SD(cx), SD(cy), SD(cz), SD(lx), SD(ly), SD(lz), SD(time_s),
+    SD(clip_timer_s), SB(recovering), SD(recovery_count), SD(accel_hold), SD(acx), SD(acy), SD(acz),
+    SD(rate_lp), SI(phase), SD(rest_timer_s), SB(at_rest), SB(moved), SD(blk_n), SD(blk_t),
+    SD(blk_gx), SD(blk_gy), SD(blk_gz), SD(blk_ax), SD(blk_ay), SD(blk_az), SD(blk_g2), SD(blk_a2),
+    SD(blk_d), SD(blk_mx), SD(blk_my), SD(blk_mz), SD(blk_mn), SD(prev_n), SD(pgx), SD(pgy),
+    SD(pgz), SD(pax), SD(pay), SD(paz), SD(pmx), SD(pmy), SD(pmz), SD(pm_n), SD(last_n), SD(lgx),
+    SD(lgy), SD(lgz), SD(lax), SD(lay), SD(laz), SD(noise_g2), SD(noise_a2), SD(g_ref), SD(bx),
+    SD(by), SD(bz), SD(bias_var), SB(bias_unverified), SD(z_m), SD(mag_ref_norm), SD(mag_ref_dip),
+    SD(mag_ref_count), SB(mag_disturbed), SD(mag_reject_timer_s), SD(mag_last_time_s),
+    SB(heading_initialized), SD(mag_clip_timer_s), SB(mag_recovering), SD(ex), SD(ey), SD(ez),
+    SD(error_norm), SD(fx), SD(fy), SD(fz), SB(clipped), SB(accel_used), SI(mag_status),
+    SD(yaw_error_rad),
     {NULL, 0, 0, 0, NULL}};
 
 static PyTypeObject StateType = {

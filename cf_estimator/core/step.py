@@ -24,10 +24,15 @@ One sample, in the order the code runs (world frame ENU inside; q = q_world_from
                   for recovery_trigger_s: heading recovery with startup_k1 (as the tilt's)
                   'full': e_m = m̂ × (R⁻ᵀ·m_ref) through W2 = r1 + r2/s on all axes (Ryzhkov, drift)
 
-Stillness and bias (``_stillness``): on blocks of rest_window_s, a block whose gyro and
-accelerometer means did not change from the previous block (beyond the thresholds plus the
-noise measured from sample-to-sample differences: vibration-robust; a constant bias cancels) is
-still; rest_time_s of still blocks is rest. At rest each still block's gyro mean is a bias
+The parts (each its own module, each with its own tests; the state's fields are typed and grouped
+by owner in :mod:`cf_estimator.core.state`): the rest/motion classifier
+(:mod:`cf_estimator.core.stillness`), the bias estimator (:mod:`cf_estimator.core.bias`), and
+here the compensation loop (steps 1-5) and the heading channel (step 6).
+
+Stillness and bias (``stillness.classify``, ``bias.*``): on blocks of rest_window_s, a block
+whose gyro and accelerometer means did not change from the previous block (beyond the
+thresholds plus the noise measured from sample-to-sample differences: vibration-robust; a
+constant bias cancels) is still; rest_time_s of still blocks is rest. At rest each still block's gyro mean is a bias
 measurement, fused by variance (scalar Kalman update; σ_b = √bias_var starts at
 bias_prior_sigma_rad_s, grows by a random walk, shrinks with each measurement and, in motion,
 with the integral's learning). Vibration widens the thresholds by at most REST_NOISE_CAP times
@@ -49,6 +54,23 @@ fast). While bypassed the unit follows the error with a 0.2 s lag, turned by eac
 from __future__ import annotations
 
 from typing import Any
+
+from cf_estimator.core import bias
+from cf_estimator.core.bias import (  # noqa: F401 - the constants of the whole step, here too
+    BIAS_CONVERGED_SIGMA_RAD_S,
+    BIAS_LEARNING_MAX_ERROR_RAD,
+    BIAS_RANDOM_WALK_RAD_S_SQRT_S,
+)
+from cf_estimator.core.state import StepState
+from cf_estimator.core.stillness import (  # noqa: F401
+    GRAVITY_TIME_CONSTANT_S,
+    REST_GATE_SIGMAS,
+    REST_MAG_TOLERANCE_RAD,
+    REST_NOISE_CAP,
+    REST_NOISE_SIGMAS,
+    REST_SAMPLE_SIGMAS,
+    classify,
+)
 
 PHASE_UNINITIALIZED = 0
 PHASE_STARTUP = 1
@@ -75,177 +97,12 @@ ACCEL_SPIKE_SIGMAS = 4.0
 ACCEL_DETECT_SIGMAS = 3.0
 #: Time constant [s] of the aperiodic unit while the error bypasses it (start-up, rest, recovery).
 QUICK_LAG_TIME_CONSTANT_S = 0.2
-#: Stillness: a change of the block means within this many standard deviations of the observed
-#: noise floor is no change (the floor includes rotor vibration, so vibration is not motion) ...
-REST_NOISE_SIGMAS = 2.0
-#: ... but the noise may widen each threshold by at most this multiple of the threshold itself:
-#: rotor vibration never widens "still" until flight fits inside it (phantom4, 3-6 m/s² of
-#: vibration: uncapped, 17 of 40 airborne recordings were taken for rest).
-REST_NOISE_CAP = 1.0
-#: Stillness with a magnetometer: the block-mean field direction (unit vector, sensor frame) may
-#: turn by at most this plus rest_gyro_threshold_rad_s × the block length [rad]; more is a turn
-#: (a steady turn looks still to the gyro and accelerometer, never to the magnetometer).
-REST_MAG_TOLERANCE_RAD = 0.01
-#: A single sample this many noise standard deviations (plus the thresholds) away from the last
-#: block mean ends a still phase at once, without waiting for the block to end.
-REST_SAMPLE_SIGMAS = 8.0
-#: A steady block whose gyro mean is, on any axis, this many standard deviations (of the bias
-#: estimate and of the block mean) from the bias estimate is a steady turn, not rest — however
-#: long it lasts: biases drift (BIAS_RANDOM_WALK_RAD_S_SQRT_S), they do not jump. At power-on
-#: the prior bias_prior_sigma_rad_s bounds what a still phase may take as bias.
-REST_GATE_SIGMAS = 3.0
-#: The integral (bias) learns only while the raw error is below this [rad]: a bias within the
-#: prior leaves an error of at most a few REST_GATE_SIGMAS·bias_prior_sigma_rad_s / k1 (< 0.2
-#: rad at the defaults); more is an attitude error, which must not wind the bias up.
-BIAS_LEARNING_MAX_ERROR_RAD = 0.35
-#: Bias random walk [rad/s/sqrt(s)]: how fast the confidence in a learned bias fades.
-BIAS_RANDOM_WALK_RAD_S_SQRT_S = 2e-4
-#: The bias estimate counts as converged below this standard deviation [rad/s].
-BIAS_CONVERGED_SIGMA_RAD_S = 0.005
-#: Time constant [s] with which ‖g‖ follows |a| while the sensor is steady: slow enough that a
-#: steady linear acceleration of a few seconds (the thesis's 25 m/s in 5 s) is not absorbed.
-GRAVITY_TIME_CONSTANT_S = 10.0
 #: Magnetometer samples averaged for the field reference (norm, dip) after start-up.
 MAG_REFERENCE_SAMPLES = 20
 #: A magnetic field rejected this long [s] is taken as the new normal and re-learned.
 MAG_RELEARN_AFTER_S = 20.0
 #: Longest time [s] one magnetometer sample's correction may stand for (sparse magnetometers).
 MAG_MAX_DT_S = 1.0
-
-
-class StepState:
-    """Filter state; each attribute is a float/bool (one filter) or an array (P parameter sets).
-
-    Frames and units: q* = q_world(ENU)_from_sensor; b* gyro-bias estimate [rad/s, sensor];
-    c* k3-path state [rad/s², sensor]; l* aperiodic-unit state [rad, world]; z_m yaw-rate
-    correction [rad/s, world z]; e* last raw error [rad, sensor]; f* last processed error.
-    Stillness: blk_* sums of the current block (gyro [rad/s], accel [m/s²], *2 sums of squared
-    differences), p* means of the previous block, l* the last sample, noise_*2 the last block's
-    noise variance (sum over axes), blk_m* / pm* the current / previous block's sum / mean of
-    unit magnetometer vectors (pm_n: how many samples the previous block had),
-    bias_var variance of the bias estimate [(rad/s)²] (per axis); moved: a non-still block was
-    seen since initialisation; bias_unverified: the last rest bias measurement came from a still
-    phase at power-on without a magnetometer (a steady turn then cannot be told from rest);
-    mag_clip_timer_s / mag_recovering: the heading channel's recovery (as the tilt's).
-    """
-
-    FIELDS = [
-        "qw",
-        "qx",
-        "qy",
-        "qz",
-        "bx",
-        "by",
-        "bz",
-        "cx",
-        "cy",
-        "cz",
-        "lx",
-        "ly",
-        "lz",
-        "z_m",
-        "time_s",
-        "clip_timer_s",
-        "recovering",
-        "rest_timer_s",
-        "blk_n",
-        "blk_t",
-        "blk_gx",
-        "blk_gy",
-        "blk_gz",
-        "blk_ax",
-        "blk_ay",
-        "blk_az",
-        "blk_g2",
-        "blk_a2",
-        "prev_n",
-        "pgx",
-        "pgy",
-        "pgz",
-        "pax",
-        "pay",
-        "paz",
-        "blk_d",
-        "last_n",
-        "lgx",
-        "lgy",
-        "lgz",
-        "lax",
-        "lay",
-        "laz",
-        "noise_g2",
-        "noise_a2",
-        "bias_var",
-        "blk_mx",
-        "blk_my",
-        "blk_mz",
-        "blk_mn",
-        "pmx",
-        "pmy",
-        "pmz",
-        "pm_n",
-        "moved",
-        "bias_unverified",
-        "mag_clip_timer_s",
-        "mag_recovering",
-        "at_rest",
-        "mag_ref_norm",
-        "mag_ref_dip",
-        "mag_ref_count",
-        "mag_disturbed",
-        "mag_reject_timer_s",
-        "mag_last_time_s",
-        "heading_initialized",
-        "g_ref",
-        "accel_hold",
-        "acx",
-        "acy",
-        "acz",
-        "rate_lp",
-        "ex",
-        "ey",
-        "ez",
-        "error_norm",
-        "fx",
-        "fy",
-        "fz",
-        "clipped",
-        "accel_used",
-        "mag_status",
-        "yaw_error_rad",
-        "phase",
-        "recovery_count",
-    ]
-
-    BOOL_FIELDS = (
-        "recovering",
-        "at_rest",
-        "mag_disturbed",
-        "heading_initialized",
-        "clipped",
-        "accel_used",
-        "moved",
-        "bias_unverified",
-        "mag_recovering",
-    )
-
-    def __init__(self, zero: Any, false: Any) -> None:
-        """``zero``/``false``: 0.0/False for one filter, or zero/False arrays of shape (P,)."""
-        for name in self.FIELDS:
-            setattr(self, name, zero * 1.0)
-        for name in self.BOOL_FIELDS:
-            setattr(self, name, false & True)
-        self.qw = zero + 1.0
-        self.mag_last_time_s = zero - 1.0
-        self.bias_var = zero - 1.0  # < 0: not yet set from the parameters (first step sets it)
-
-    def copy(self) -> StepState:
-        """A copy (arrays copied too)."""
-        new = StepState.__new__(StepState)
-        for name in self.FIELDS:
-            value = getattr(self, name)
-            setattr(new, name, value.copy() if hasattr(value, "copy") else value)
-        return new
 
 
 def _mul(aw: Any, ax: Any, ay: Any, az: Any, bw: Any, bx: Any, by: Any, bz: Any) -> tuple:
@@ -297,119 +154,6 @@ def _normalize(s: StepState, o: Any) -> None:
     s.qw, s.qx, s.qy, s.qz = s.qw / n, s.qx / n, s.qy / n, s.qz / n
 
 
-def _stillness(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple | None, dt: Any,
-               o: Any) -> None:
-    """Stillness detection and bias learning at rest, on blocks of ``rest_window_s``.
-
-    Still = the gyro and accelerometer block means did not change from the previous block by
-    more than the thresholds plus REST_NOISE_SIGMAS standard deviations of a block-mean
-    difference. The noise (sensor noise and rotor vibration) is measured in each block from
-    sample-to-sample differences, which slow motion hardly changes: vibration averages out in a
-    block mean and widens the tolerance by what it adds to it; a constant gyro bias cancels in
-    the difference. After ``rest_time_s`` of still blocks the sensor is at rest: each further
-    still block is a measurement of the bias (its gyro mean, variance from its noise), fused
-    with the estimate by its variance (a scalar Kalman update), and ‖g‖ follows |a| slowly.
-    The noise widens the thresholds by at most REST_NOISE_CAP times themselves; with a
-    magnetometer a turning field direction is motion (REST_MAG_TOLERANCE_RAD).
-    """
-    gx, gy, gz = gyro
-    ax, ay, az = accel
-    s.blk_n = s.blk_n + 1.0
-    s.blk_t = s.blk_t + dt
-    s.blk_gx, s.blk_gy, s.blk_gz = s.blk_gx + gx, s.blk_gy + gy, s.blk_gz + gz
-    s.blk_ax, s.blk_ay, s.blk_az = s.blk_ax + ax, s.blk_ay + ay, s.blk_az + az
-    # squared sample-to-sample differences (noise); the first sample has none
-    seen = o.where(s.last_n > 0.0, 1.0, 0.0)
-    s.blk_g2 = s.blk_g2 + seen * ((gx - s.lgx) ** 2 + (gy - s.lgy) ** 2 + (gz - s.lgz) ** 2)
-    s.blk_a2 = s.blk_a2 + seen * ((ax - s.lax) ** 2 + (ay - s.lay) ** 2 + (az - s.laz) ** 2)
-    s.blk_d = s.blk_d + seen
-    s.lgx, s.lgy, s.lgz, s.lax, s.lay, s.laz = gx, gy, gz, ax, ay, az
-    s.last_n = s.last_n + 1.0
-    if mag is not None:  # unit field direction, sensor frame (any unit in)
-        mx, my, mz = mag
-        mn = o.sqrt(mx * mx + my * my + mz * mz)
-        use = o.where(p.use_mag, 1.0, 0.0)
-        s.blk_mx = s.blk_mx + use * mx / mn
-        s.blk_my = s.blk_my + use * my / mn
-        s.blk_mz = s.blk_mz + use * mz / mn
-        s.blk_mn = s.blk_mn + use
-    has_prev = s.prev_n > 0.0
-    # a sample far outside the noise around the last block's mean ends rest at once
-    jump_g = o.sqrt((gx - s.pgx) ** 2 + (gy - s.pgy) ** 2 + (gz - s.pgz) ** 2) > (
-        p.rest_gyro_threshold_rad_s + REST_SAMPLE_SIGMAS * o.sqrt(s.noise_g2))
-    jump_a = o.sqrt((ax - s.pax) ** 2 + (ay - s.pay) ** 2 + (az - s.paz) ** 2) > (
-        p.rest_accel_threshold_m_s2 + REST_SAMPLE_SIGMAS * o.sqrt(s.noise_a2))
-    s.rest_timer_s = o.where(has_prev & (jump_g | jump_a), 0.0, s.rest_timer_s)
-
-    done = s.blk_t >= p.rest_window_s
-    n = s.blk_n
-    mgx, mgy, mgz = s.blk_gx / n, s.blk_gy / n, s.blk_gz / n
-    max_, may, maz = s.blk_ax / n, s.blk_ay / n, s.blk_az / n
-    # white-noise variance (sum over axes) from differences: E|x_k - x_k-1|^2 = 2 var
-    nd = 2.0 * o.maximum(s.blk_d, 1.0)
-    noise_g2, noise_a2 = s.blk_g2 / nd, s.blk_a2 / nd
-    spread = 1.0 / n + 1.0 / o.maximum(s.prev_n, 1.0)
-    dg = o.sqrt((mgx - s.pgx) ** 2 + (mgy - s.pgy) ** 2 + (mgz - s.pgz) ** 2)
-    da = o.sqrt((max_ - s.pax) ** 2 + (may - s.pay) ** 2 + (maz - s.paz) ** 2)
-    tol_g = p.rest_gyro_threshold_rad_s + REST_NOISE_SIGMAS * o.minimum(
-        o.sqrt(noise_g2 * spread), REST_NOISE_CAP * p.rest_gyro_threshold_rad_s)
-    tol_a = p.rest_accel_threshold_m_s2 + REST_NOISE_SIGMAS * o.minimum(
-        o.sqrt(noise_a2 * spread), REST_NOISE_CAP * p.rest_accel_threshold_m_s2)
-    # the field direction of this block against the previous one (both with samples)
-    mag_seen = (s.blk_mn > 0.0) & (s.pm_n > 0.0)
-    bm = o.maximum(o.sqrt(s.blk_mx * s.blk_mx + s.blk_my * s.blk_my + s.blk_mz * s.blk_mz),
-                   1e-300)
-    umx, umy, umz = s.blk_mx / bm, s.blk_my / bm, s.blk_mz / bm
-    dm = o.sqrt((umx - s.pmx) ** 2 + (umy - s.pmy) ** 2 + (umz - s.pmz) ** 2)
-    turned = mag_seen & (dm > REST_MAG_TOLERANCE_RAD + p.rest_gyro_threshold_rad_s * s.blk_t)
-    steady = (
-        has_prev
-        & (dg < tol_g)
-        & (da < tol_a)
-        & o.not_(turned)
-        & (o.sqrt(mgx * mgx + mgy * mgy + mgz * mgz) < p.bias_limit_rad_s * 1.7320508075688772)
-    )
-    # a steady turn at a constant rate looks still; a block whose gyro mean is far from the bias
-    # estimate on any axis (beyond REST_GATE_SIGMAS of the estimate's and the block's spread) is
-    # motion however long it lasts
-    r = o.maximum(noise_g2 / (3.0 * n), 1e-12)
-    gate = p.rest_gyro_threshold_rad_s + REST_GATE_SIGMAS * o.sqrt(s.bias_var + r)
-    consistent = ((o.maximum(mgx - s.bx, s.bx - mgx) < gate)
-                  & (o.maximum(mgy - s.by, s.by - mgy) < gate)
-                  & (o.maximum(mgz - s.bz, s.bz - mgz) < gate))
-    still = steady & consistent
-    s.moved = s.moved | (done & has_prev & o.not_(still))
-    s.rest_timer_s = o.where(done, o.where(still, s.rest_timer_s + s.blk_t, 0.0), s.rest_timer_s)
-    s.at_rest = p.rest_bias_learning & (s.rest_timer_s >= p.rest_time_s)
-    # a still block at rest measures the bias: scalar Kalman update per axis
-    measure = done & s.at_rest
-    s.bias_unverified = o.where(measure, o.not_(s.moved) & o.not_(mag_seen), s.bias_unverified)
-    k = o.where(measure, s.bias_var / (s.bias_var + r), 0.0)
-    s.bx, s.by, s.bz = s.bx + k * (mgx - s.bx), s.by + k * (mgy - s.by), s.bz + k * (mgz - s.bz)
-    s.bias_var = s.bias_var - k * s.bias_var
-    gw = o.where(done & still, s.blk_t / (GRAVITY_TIME_CONSTANT_S + s.blk_t), 0.0)
-    s.g_ref = s.g_ref + gw * (o.sqrt(max_ * max_ + may * may + maz * maz) - s.g_ref)
-    # next block
-    s.noise_g2 = o.where(done, noise_g2, s.noise_g2)
-    s.noise_a2 = o.where(done, noise_a2, s.noise_a2)
-    s.pgx, s.pgy, s.pgz = (o.where(done, mgx, s.pgx), o.where(done, mgy, s.pgy),
-                           o.where(done, mgz, s.pgz))
-    s.pax, s.pay, s.paz = (o.where(done, max_, s.pax), o.where(done, may, s.pay),
-                           o.where(done, maz, s.paz))
-    s.prev_n = o.where(done, n, s.prev_n)
-    has_mag = done & (s.blk_mn > 0.0)
-    s.pmx, s.pmy, s.pmz = (o.where(has_mag, umx, s.pmx), o.where(has_mag, umy, s.pmy),
-                           o.where(has_mag, umz, s.pmz))
-    s.pm_n = o.where(done, s.blk_mn, s.pm_n)
-    keep = o.where(done, 0.0, 1.0)
-    s.blk_n, s.blk_t, s.blk_d = s.blk_n * keep, s.blk_t * keep, s.blk_d * keep
-    s.blk_gx, s.blk_gy, s.blk_gz = s.blk_gx * keep, s.blk_gy * keep, s.blk_gz * keep
-    s.blk_ax, s.blk_ay, s.blk_az = s.blk_ax * keep, s.blk_ay * keep, s.blk_az * keep
-    s.blk_g2, s.blk_a2 = s.blk_g2 * keep, s.blk_a2 * keep
-    s.blk_mx, s.blk_my, s.blk_mz = s.blk_mx * keep, s.blk_my * keep, s.blk_mz * keep
-    s.blk_mn = s.blk_mn * keep
-
-
 def step(
     s: StepState,
     p: Any,
@@ -427,8 +171,7 @@ def step(
     """
     gx, gy, gz = gyro
     s.time_s = s.time_s + dt
-    s.bias_var = o.where(s.bias_var < 0.0, p.bias_prior_sigma_rad_s ** 2, s.bias_var) + (
-        BIAS_RANDOM_WALK_RAD_S_SQRT_S ** 2 * dt)
+    bias.add_process_noise(s, p, dt, o)
     startup = s.time_s <= p.startup_duration_s
     fast = startup | s.recovering  # trust the accelerometer fully, learn no bias
     learn = o.not_(fast)
@@ -449,7 +192,7 @@ def step(
         # an impact: a single sample far above the noise of the last block (see the detector)
         spike = deviation > p.acceleration_threshold_m_s2 + ACCEL_SPIKE_SIGMAS * o.sqrt(
             s.noise_a2)
-        _stillness(s, p, gyro, accel, mag, dt, o)
+        bias.fuse_rest(s, classify(s, p, gyro, accel, mag, dt, o), o)
         # at rest the block mean of the gyro is the bias, whatever the accelerometer says; but
         # the error path trusts the accelerometer only if |a| = ‖g‖: a steady linear
         # acceleration (constant accelerometer, still gyro: the 25 m/s manoeuvre) is not gravity
@@ -509,21 +252,12 @@ def step(
         # 5. PI(+k3) regulator: integral states are the bias estimate. While the bias is
         # uncertain (no still phase yet) the loop runs faster: k2 up to bias_learning_k2 in
         # proportion to the bias variance, k1 kept at least critically damping it
-        share = o.minimum(s.bias_var / (p.bias_prior_sigma_rad_s ** 2), 1.0)
-        k2 = o.maximum(p.k2, p.bias_learning_k2 * share)
-        k1 = o.maximum(p.k1, 2.0 * o.sqrt(k2))
-        k3dt = o.where(learn, p.k3 * dt, 0.0)
-        s.cx, s.cy, s.cz = s.cx + k3dt * fx, s.cy + k3dt * fy, s.cz + k3dt * fz
+        k1, k2 = bias.learning_gains(s, p, o)
         # an error beyond BIAS_LEARNING_MAX_ERROR_RAD is an attitude error (a gyro over range, a
         # glitch), not a bias: the integral does not learn from it (anti-windup; beyond 90° the
         # cross product shrinks again, hence the sign of the dot product too)
         small = (en < BIAS_LEARNING_MAX_ERROR_RAD) & (ux * vx + uy * vy + uz * vz > 0.0)
-        ldt = o.where(learn & small, dt, 0.0)
-        s.bx = s.bx - ldt * (k2 * fx + s.cx)
-        s.by = s.by - ldt * (k2 * fy + s.cy)
-        s.bz = s.bz - ldt * (k2 * fz + s.cz)
-        # the integral learns the bias with time constant ~k1/k2: its variance shrinks so
-        s.bias_var = s.bias_var / (1.0 + ldt * k2 / o.maximum(k1, 1e-3))
+        bias.integrate(s, p, (fx, fy, fz), k1, k2, learn, small, dt, o)
         k1 = o.where(quick, o.maximum(k1, p.startup_k1), k1)
         gain = k1 * dt / (1.0 + k1 * dt)
         dw, dx, dy, dz = _exp(gain * fx, gain * fy, gain * fz, o)
@@ -544,10 +278,7 @@ def step(
         s.clip_timer_s = o.where(enter, 0.0, s.clip_timer_s)
         s.clipped = clipped
 
-    lim = p.bias_limit_rad_s
-    s.bx = o.minimum(o.maximum(s.bx, -lim), lim)
-    s.by = o.minimum(o.maximum(s.by, -lim), lim)
-    s.bz = o.minimum(o.maximum(s.bz, -lim), lim)
+    bias.clamp(s, p, o)
 
     s.mag_reject_timer_s = o.where(s.mag_disturbed, s.mag_reject_timer_s + dt, 0.0)
     s.mag_status = o.where(p.use_mag, MAG_NONE, MAG_DISABLED)

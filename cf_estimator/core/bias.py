@@ -1,0 +1,86 @@
+"""Gyro-bias estimator: the regulator's integral, measured at rest, learned in motion.
+
+The estimate b (sensor frame, rad/s) is the PI regulator's integral state; its variance
+``bias_var`` (per axis) is tracked beside it:
+
+- :func:`add_process_noise` — every sample: the prior at the first one, then a random walk
+  (biases drift, BIAS_RANDOM_WALK_RAD_S_SQRT_S);
+- :func:`fuse_rest` — a still block at rest (from :mod:`cf_estimator.core.stillness`) is a
+  measurement of b: scalar Kalman update per axis;
+- :func:`learning_gains` — in motion, while b is uncertain, k2 is raised towards
+  ``bias_learning_k2`` in proportion to the variance and k1 to at least 2√k2 (critically damped):
+  learned within about 20 s of any start, in the air too;
+- :func:`integrate` — the integral itself (k2 and the k3 path on the processed error), except
+  from an error too large to be a bias (BIAS_LEARNING_MAX_ERROR_RAD, anti-windup); the variance
+  shrinks as it learns (time constant k1/k2);
+- :func:`clamp` — bounded by ``bias_limit_rad_s``.
+
+Owns the ``BIAS`` fields of :mod:`cf_estimator.core.state` (and the k3 path's ``c*``). Written
+once for floats and arrays; ``_kernel.c`` repeats it inline in ``cf_step``/``stillness``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from cf_estimator.core.state import StepState
+from cf_estimator.core.stillness import RestMeasurement
+
+#: The integral (bias) learns only while the raw error is below this [rad]: a bias within the
+#: prior leaves an error of at most a few REST_GATE_SIGMAS·bias_prior_sigma_rad_s / k1 (< 0.2
+#: rad at the defaults); more is an attitude error, which must not wind the bias up.
+BIAS_LEARNING_MAX_ERROR_RAD = 0.35
+#: Bias random walk [rad/s/sqrt(s)]: how fast the confidence in a learned bias fades.
+BIAS_RANDOM_WALK_RAD_S_SQRT_S = 2e-4
+#: The bias estimate counts as converged below this standard deviation [rad/s].
+BIAS_CONVERGED_SIGMA_RAD_S = 0.005
+
+
+def add_process_noise(s: StepState, p: Any, dt: Any, o: Any) -> None:
+    """The prior (``bias_prior_sigma_rad_s``²) at the first step, then + random walk × dt."""
+    s.bias_var = o.where(s.bias_var < 0.0, p.bias_prior_sigma_rad_s ** 2, s.bias_var) + (
+        BIAS_RANDOM_WALK_RAD_S_SQRT_S ** 2 * dt)
+
+
+def fuse_rest(s: StepState, m: RestMeasurement, o: Any) -> None:
+    """A still block at rest measures b: scalar Kalman update per axis (gain var/(var + r)).
+    Marks the bias unverified when the still phase began at power-on without a magnetometer."""
+    s.bias_unverified = o.where(m.measure, o.not_(s.moved) & o.not_(m.mag_seen),
+                                s.bias_unverified)
+    k = o.where(m.measure, s.bias_var / (s.bias_var + m.variance), 0.0)
+    s.bx = s.bx + k * (m.mean_x - s.bx)
+    s.by = s.by + k * (m.mean_y - s.by)
+    s.bz = s.bz + k * (m.mean_z - s.bz)
+    s.bias_var = s.bias_var - k * s.bias_var
+
+
+def learning_gains(s: StepState, p: Any, o: Any) -> tuple[Any, Any]:
+    """(k1 [1/s], k2 [1/s²]) of the regulator at this step: raised while b is uncertain."""
+    share = o.minimum(s.bias_var / (p.bias_prior_sigma_rad_s ** 2), 1.0)
+    k2 = o.maximum(p.k2, p.bias_learning_k2 * share)
+    k1 = o.maximum(p.k1, 2.0 * o.sqrt(k2))
+    return k1, k2
+
+
+def integrate(s: StepState, p: Any, f: tuple, k1: Any, k2: Any, learn: Any, small: Any,
+              dt: Any, o: Any) -> None:
+    """The integral states on the processed error ``f`` [rad, sensor]: the k3 path c and b
+    (``learn``: not in start-up/recovery; ``small``: the raw error is small enough to be a
+    bias's, see BIAS_LEARNING_MAX_ERROR_RAD); the variance shrinks as the integral learns."""
+    fx, fy, fz = f
+    k3dt = o.where(learn, p.k3 * dt, 0.0)
+    s.cx, s.cy, s.cz = s.cx + k3dt * fx, s.cy + k3dt * fy, s.cz + k3dt * fz
+    ldt = o.where(learn & small, dt, 0.0)
+    s.bx = s.bx - ldt * (k2 * fx + s.cx)
+    s.by = s.by - ldt * (k2 * fy + s.cy)
+    s.bz = s.bz - ldt * (k2 * fz + s.cz)
+    # the integral learns the bias with time constant ~k1/k2: its variance shrinks so
+    s.bias_var = s.bias_var / (1.0 + ldt * k2 / o.maximum(k1, 1e-3))
+
+
+def clamp(s: StepState, p: Any, o: Any) -> None:
+    """Each component within ±``bias_limit_rad_s`` (anti-windup)."""
+    lim = p.bias_limit_rad_s
+    s.bx = o.minimum(o.maximum(s.bx, -lim), lim)
+    s.by = o.minimum(o.maximum(s.by, -lim), lim)
+    s.bz = o.minimum(o.maximum(s.bz, -lim), lim)

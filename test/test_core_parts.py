@@ -1,0 +1,154 @@
+"""The filter's parts tested one by one, on data (issue 16 item 6).
+
+- state: every field owned by exactly one part, documented, in the compiled twin's order;
+- rest/motion classifier (core/stillness.py) alone, on real recordings: airborne phantom4
+  blocks are never rest, EuRoC's ground phase is; a steady turn with a magnetometer is motion;
+- bias estimator (core/bias.py): the Kalman fusion at rest, the gains while uncertain, the
+  anti-windup and the bound.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from cf_estimator.core import bias, state, stillness
+from cf_estimator.core.filter import step_params
+from cf_estimator.core.kernel import compiled_available, compiled_kernel
+from cf_estimator.core.ops import FloatOps
+from cf_estimator.core.params import FilterParams
+
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+G = 9.80665
+
+
+# -- state ------------------------------------------------------------------------------------
+def test_every_field_has_one_owner_a_kind_and_a_meaning():
+    names = [f.name for f in state.ALL_FIELDS]
+    assert len(names) == len(set(names)) == len(state.StepState.FIELDS)
+    for f in state.ALL_FIELDS:
+        assert f.kind in ("float", "bool", "int") and f.doc, f
+    owners = {f.name: g for g, fields in state.GROUPS.items() for f in fields}
+    assert owners["bx"] == owners["bias_var"] == "bias"
+    assert owners["at_rest"] == owners["blk_n"] == owners["g_ref"] == "classifier"
+    assert owners["z_m"] == owners["mag_recovering"] == "heading"
+
+
+@pytest.mark.skipif(not compiled_available(), reason="the compiled kernel is not built")
+def test_compiled_twin_holds_the_same_fields_in_the_same_order():
+    assert list(compiled_kernel.State.FIELDS) == state.StepState.FIELDS
+
+
+# -- classifier ------------------------------------------------------------------------------
+def _classify_recording(gyro, accel, t, mag=None, bias_var=None, params=None):
+    """Only the classifier (no loop, no bias learning): at_rest per sample."""
+    p = step_params(params or FilterParams(use_mag=mag is not None))
+    s = state.StepState(0.0, False)
+    s.bias_var = (p.bias_prior_sigma_rad_s ** 2) if bias_var is None else bias_var
+    rest = np.zeros(len(t), bool)
+    dts = np.diff(t, prepend=t[0] - np.median(np.diff(t)))
+    for k in range(len(t)):
+        stillness.classify(s, p, tuple(gyro[k]), tuple(accel[k]),
+                           None if mag is None else tuple(mag[k]), float(dts[k]), FloatOps)
+        rest[k] = s.at_rest
+    return rest
+
+
+def _flights(name):
+    from cf_estimator.bench.euroc import load_flights
+
+    if not (DATA / name).is_dir():
+        pytest.skip(f"{DATA / name} not present")
+    return load_flights(DATA / name)
+
+
+def test_classifier_alone_never_takes_airborne_phantom4_blocks_for_rest():
+    for f in _flights("phantom4")[::4]:  # every 4th recording: one per path, all IMUs cycled
+        assert not _classify_recording(f.gyro_rad_s, f.accel_m_s2, f.t_s).any(), f.name
+
+
+def test_classifier_alone_finds_the_euroc_ground_phase():
+    for f in _flights("euroc"):
+        n = int(np.searchsorted(f.t_s, 20.0))
+        rest = _classify_recording(f.gyro_rad_s[:n], f.accel_m_s2[:n], f.t_s[:n])
+        assert rest.mean() > 0.05, f.name
+
+
+def test_classifier_takes_a_steady_turn_with_a_magnetometer_for_motion():
+    """10 deg/s about the vertical, constant specific force: with an open gate (prior bias
+    variance) the gyro and the accelerometer alone would call it rest; the field turns."""
+    rate, n = 100.0, 2000
+    t = np.arange(n) / rate
+    w = math.radians(10.0)
+    gyro = np.tile([0.0, 0.0, w], (n, 1))
+    accel = np.tile([0.0, 0.0, G], (n, 1))
+    yaw = w * t
+    field = np.stack([25e-6 * np.sin(yaw), 25e-6 * np.cos(yaw), np.full(n, -43e-6)], axis=1)
+    assert _classify_recording(gyro, accel, t).any(), "without the field: rest (the gate's job)"
+    assert not _classify_recording(gyro, accel, t, mag=field).any()
+
+
+def test_classifier_returns_the_block_mean_as_the_measurement():
+    p = step_params(FilterParams(use_mag=False))
+    s = state.StepState(0.0, False)
+    s.bias_var = 0.01
+    rng = np.random.default_rng(0)
+    b = np.array([0.01, -0.02, 0.03])
+    found = []
+    for _ in range(300):
+        m = stillness.classify(s, p, tuple(b + rng.normal(0, 0.002, 3)),
+                               (0.0, 0.0, G), None, 0.01, FloatOps)
+        if m.measure:
+            found.append((m.mean_x, m.mean_y, m.mean_z, m.variance))
+    assert found, "rest reached within 3 s"
+    mx, my, mz, var = found[-1]
+    assert np.allclose([mx, my, mz], b, atol=0.001)
+    assert 0 < var < (0.002 ** 2) * 2 / 10  # ~ sigma^2 / n for a 50-sample block
+
+
+# -- bias estimator ---------------------------------------------------------------------------
+def _bias_state(var: float) -> state.StepState:
+    s = state.StepState(0.0, False)
+    s.bias_var = var
+    return s
+
+
+def test_fuse_rest_is_the_scalar_kalman_update():
+    s = _bias_state(0.01)
+    m = stillness.RestMeasurement(True, 0.05, -0.02, 0.0, 0.0001, False)
+    bias.fuse_rest(s, m, FloatOps)
+    k = 0.01 / (0.01 + 0.0001)
+    assert s.bx == pytest.approx(k * 0.05) and s.by == pytest.approx(k * -0.02)
+    assert s.bias_var == pytest.approx(0.01 * 0.0001 / 0.0101)
+    assert s.bias_unverified, "a power-on still phase without a magnetometer"
+    s.moved = True
+    bias.fuse_rest(s, m, FloatOps)
+    assert not s.bias_unverified
+    before = (s.bx, s.bias_var)
+    bias.fuse_rest(s, m._replace(measure=False), FloatOps)
+    assert (s.bx, s.bias_var) == before
+
+
+def test_learning_gains_follow_the_bias_uncertainty():
+    p = step_params(FilterParams())
+    k1, k2 = bias.learning_gains(_bias_state(p.bias_prior_sigma_rad_s ** 2), p, FloatOps)
+    assert k2 == p.bias_learning_k2 and k1 == pytest.approx(2 * math.sqrt(p.bias_learning_k2))
+    k1, k2 = bias.learning_gains(_bias_state(1e-10), p, FloatOps)
+    assert (k1, k2) == (p.k1, p.k2)
+
+
+def test_integral_learns_only_from_a_bias_sized_error_and_is_bounded():
+    p = step_params(FilterParams())
+    s = _bias_state(0.01)
+    bias.integrate(s, p, (0.0, 0.1, 0.0), 1.8, 0.8, True, True, 0.01, FloatOps)
+    assert s.by == pytest.approx(-0.01 * 0.8 * 0.1) and s.bias_var < 0.01
+    by, var = s.by, s.bias_var
+    bias.integrate(s, p, (0.0, 0.1, 0.0), 1.8, 0.8, True, False, 0.01, FloatOps)  # too large
+    assert (s.by, s.bias_var) == (by, var)
+    s.bz = 7.0
+    bias.clamp(s, SimpleNamespace(bias_limit_rad_s=0.5), FloatOps)
+    assert s.bz == 0.5
