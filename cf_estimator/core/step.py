@@ -30,10 +30,10 @@ by owner in :mod:`cf_estimator.core.state`): the rest/motion classifier
 here the compensation loop (steps 1-5) and the heading channel (step 6).
 
 Stillness and bias (``stillness.classify``, ``bias.*``): on blocks of rest_window_s, a block
-whose gyro and accelerometer means did not change from the previous block (beyond the
-thresholds plus the noise measured from sample-to-sample differences: vibration-robust; a
-constant bias cancels) is still; rest_time_s of still blocks is rest. At rest each still block's gyro mean is a bias
-measurement, fused by variance (scalar Kalman update; σ_b = √bias_var starts at
+whose gyro and accelerometer means did not change from the previous block (beyond the thresholds
+plus the noise measured from sample-to-sample differences: vibration-robust; a constant bias
+cancels) is still; rest_time_s of still blocks is rest. At rest each still block's gyro mean is
+a bias measurement, fused by variance (scalar Kalman update; σ_b = √bias_var starts at
 bias_prior_sigma_rad_s, grows by a random walk, shrinks with each measurement and, in motion,
 with the integral's learning). Vibration widens the thresholds by at most REST_NOISE_CAP times
 themselves; a turning magnetic field is motion; a steady block far from the bias estimate (on
