@@ -227,6 +227,13 @@ class InputBag:
         return None
 
     # -- messages ------------------------------------------------------------------------------
+    def _raw_messages(self, topics: Iterable[str]) -> Iterator[tuple] | None:
+        """rosbags' (connection, log stamp, raw bytes) iterator over ``topics``, None if the
+        bag has none of them."""
+        wanted = set(topics)
+        conns = [c for c in self._reader.connections if c.topic in wanted]
+        return self._reader.messages(connections=conns) if conns else None
+
     def messages(self, topics: Iterable[str], *, bulk: bool = False) -> Iterator[BagMessage]:
         """Deserialized messages of ``topics`` in log-time order (as recorded, interleaved).
 
@@ -237,12 +244,10 @@ class InputBag:
         Any failure of the reader (truncated chunk, corrupt record, undecodable message) is
         raised as :class:`BagError` naming the file.
         """
-        wanted = set(topics)
-        conns = [c for c in self._reader.connections if c.topic in wanted]
-        if not conns:
+        it = self._raw_messages(topics)
+        if it is None:
             return
         reader = self._reader
-        it = reader.messages(connections=conns)
 
         def decode_one(conn: Any, log_ns: int, raw: bytes) -> Any:
             try:
@@ -307,12 +312,9 @@ class InputBag:
         by rosbags when asked for (:meth:`MessageChunk.msg`). Failures as :meth:`messages`."""
         from cf_estimator.bag import cdr
 
-        wanted = set(topics)
-        conns = [c for c in self._reader.connections if c.topic in wanted]
-        if not conns:
+        it = self._raw_messages(topics)
+        if it is None:
             return
-        reader = self._reader
-        it = reader.messages(connections=conns)
         ros2 = self.is_ros2
         done = False
         while not done:

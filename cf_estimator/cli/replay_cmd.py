@@ -262,13 +262,7 @@ def run_fleet(args: argparse.Namespace) -> int:
     except ClusterError as exc:
         raise CliError(str(exc), 2) from None
     for s in result["bags"]:
-        s["params_file"] = args.params
-        s["node_name"] = args.node_name
-        mag_warning = heading_warning(s)
-        if mag_warning:
-            s["warnings"].append(mag_warning)
-        for text in s["warnings"]:
-            warn(f"{s['name']}: {text}")
+        _finish_summary(s, args, prefix=f"{s['name']}: ")
     if args.json is not None:
         write_json(args.json, result)
     if args.json != "-":
@@ -276,6 +270,18 @@ def run_fleet(args: argparse.Namespace) -> int:
         if args.json is not None:
             print(f"json    {args.json}")
     return min(result["fleet"]["failed"], MAX_FAILED_EXIT)
+
+
+def _finish_summary(summary: dict, args: argparse.Namespace, prefix: str = "") -> None:
+    """The parameter file and node name into a replay summary, the heading warning added, and
+    every warning printed once (``prefix``: the bag's name in a fleet)."""
+    summary["params_file"] = args.params
+    summary["node_name"] = args.node_name
+    mag_warning = heading_warning(summary)
+    if mag_warning:
+        summary["warnings"].append(mag_warning)
+    for text in summary["warnings"]:
+        warn(f"{prefix}{text}")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -302,13 +308,7 @@ def run(args: argparse.Namespace) -> int:
     except ReplayError as exc:
         raise CliError(str(exc), 2) from None
     summary = result.summary
-    summary["params_file"] = args.params
-    summary["node_name"] = args.node_name
-    mag_warning = heading_warning(summary)
-    if mag_warning:
-        summary["warnings"].append(mag_warning)
-    for text in summary["warnings"]:
-        warn(text)
+    _finish_summary(summary, args)
     if args.plot is not None:
         from cf_estimator.bag.plots import plot_replay
 
