@@ -40,7 +40,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import expm
 
 from cf_estimator.core.axis import AxisFilter, AxisParams
 
@@ -294,6 +293,8 @@ class _StateSpace:
         big = np.zeros((m + 1, m + 1))
         big[:m, :m] = self.a * dt
         big[:m, m] = self.b * dt
+        from scipy.linalg import expm  # local: the CLI builds every parser at start-up
+
         return expm(big)
 
     def output(self, z: np.ndarray) -> np.ndarray:
