@@ -34,7 +34,7 @@ from rcl_interfaces.msg import (
 from rclpy.clock import Clock, ClockType, JumpThreshold
 from rclpy.duration import Duration
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.logging import get_logger
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, qos_profile_sensor_data
@@ -405,9 +405,14 @@ def run(args: list[str]) -> int:
 
     node = None
     code = 0
+    # the executor exists before the node logs that it started: a SIGINT right after that log
+    # (launch, a test) must not land inside the executor's construction (rclpy then prints a
+    # traceback from SingleThreadedExecutor.__del__ at exit)
+    executor = SingleThreadedExecutor()
     try:
         node = CfEstimatorNode(params_files=params_files(args))
-        rclpy.spin(node)
+        executor.add_node(node)
+        executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (
@@ -422,6 +427,7 @@ def run(args: list[str]) -> int:
         # must not interrupt the clean-up (a traceback from destroy_node, "exit code -2")
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         try:
+            executor.shutdown()
             if node is not None:
                 node.destroy_node()
             rclpy.try_shutdown()
