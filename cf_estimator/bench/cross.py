@@ -113,12 +113,12 @@ def _scenario_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> lis
 def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = FAMILIES,
               jobs: int = 1, progress: Callable[[str], None] | None = None) -> CrossResult:
     """The table over the families below ``data`` (``euroc/``, ``phantom4/``, ``broad/``)."""
-    from cf_estimator.bench.euroc_eval import ALGORITHMS, installed
+    from cf_estimator.bench.euroc_eval import select_peers
 
     root = Path(data)
     result = CrossResult()
-    peers = ["vqf"] if installed(ALGORITHMS["vqf"]) else []
-    if not peers:
+    peers, missing = select_peers(["vqf"])  # vqf and vqf_offline, if installed
+    if missing:
         result.notes.append("VQF not installed (pip install vqf): its columns are empty")
     for family in families:
         if progress:
@@ -131,13 +131,14 @@ def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = 
             result.notes.append(f"{family}: {folder} not found, left out")
             continue
         if family == "euroc":
-            result.rows += _euroc_rows(folder, params, peers + ["vqf_offline"] * bool(peers),
-                                       jobs, "euroc", "EuRoC MH", midair=True)
+            result.rows += _euroc_rows(folder, params, peers, jobs, "euroc", "EuRoC MH",
+                                       midair=True)
         elif family == "phantom4":
-            result.rows += _euroc_rows(folder, params, peers + ["vqf_offline"] * bool(peers),
-                                       jobs, "phantom4", "phantom4", midair=False)
+            result.rows += _euroc_rows(folder, params, peers, jobs, "phantom4", "phantom4",
+                                       midair=False)
         elif family == "broad":
-            result.rows += _broad_rows(folder, params, peers, jobs)
+            # BROAD's evaluation runs VQF's offline mode with VQF itself
+            result.rows += _broad_rows(folder, params, [p for p in peers if p == "vqf"], jobs)
         else:
             raise ValueError(f"unknown family {family!r}; valid: {', '.join(FAMILIES)}")
     return result

@@ -161,11 +161,8 @@ def score_windows(flight: Flight, q_est: np.ndarray,
 
 def _midair_worker(task: tuple) -> dict[str, dict[str, float]]:
     flight, params, peers, velocity = task
-    algos = [a for a in ALGORITHMS.values() if a.ours]
-    if velocity is not None:
-        algos += aided_algorithms(velocity)
-    algos += [ALGORITHMS[n] for n in peers]
-    return {a.name: score_windows(flight, a.run(flight, params)) for a in algos}
+    return {a.name: score_windows(flight, a.run(flight, params))
+            for a in _algorithms(peers, velocity)}
 
 
 def run_midair(flights: Sequence[Flight], params: FilterParams, start_s: float,
@@ -176,11 +173,7 @@ def run_midair(flights: Sequence[Flight], params: FilterParams, start_s: float,
     the later window are left out. ``velocity``: ours aided too (as in :func:`run_euroc`)."""
     crops = [f.cropped(start_s) for f in flights if f.t_s[-1] - start_s > MIDAIR_WINDOWS[1][0]]
     tasks = [(f, params, tuple(peers), velocity) for f in crops]
-    result = EurocResult(settle_s=MIDAIR_WINDOWS[0][0])
-    for flight, scores in zip(crops, run_tasks(_midair_worker, tasks, jobs), strict=True):
-        result.flights[flight.name] = scores
-        result.info[flight.name] = flight_info(flight)
-    return result
+    return _collect(crops, run_tasks(_midair_worker, tasks, jobs), MIDAIR_WINDOWS[0][0])
 
 
 # -- velocity aiding (issue 17) ------------------------------------------------------------
@@ -216,20 +209,25 @@ def degraded_velocity(flight: Flight, vin: VelocityInput) -> tuple[np.ndarray, n
 def aided_algorithms(vin: VelocityInput) -> list[Algorithm]:
     """Our filter online and offline with the (degraded) ground-truth velocity as aiding."""
 
-    def online(flight: Flight, params: FilterParams) -> np.ndarray:
-        p = dataclasses.replace(params, use_mag=False)
-        return estimate(flight.gyro_rad_s, flight.accel_m_s2, None, timestamps_s=flight.t_s,
-                        params=p, velocity=degraded_velocity(flight, vin),
-                        velocity_latency_s=vin.latency_s).quaternion
+    def runner(offline: bool) -> Runner:
+        def run(flight: Flight, params: FilterParams) -> np.ndarray:
+            p = dataclasses.replace(params, use_mag=False)
+            return estimate(flight.gyro_rad_s, flight.accel_m_s2, None, timestamps_s=flight.t_s,
+                            params=p, velocity=degraded_velocity(flight, vin),
+                            velocity_latency_s=vin.latency_s, offline=offline).quaternion
 
-    def offline(flight: Flight, params: FilterParams) -> np.ndarray:
-        p = dataclasses.replace(params, use_mag=False)
-        return estimate(flight.gyro_rad_s, flight.accel_m_s2, None, timestamps_s=flight.t_s,
-                        params=p, velocity=degraded_velocity(flight, vin),
-                        velocity_latency_s=vin.latency_s, offline=True).quaternion
+        return run
 
-    return [Algorithm("cf_estimator_aided", online, ours=True),
-            Algorithm("cf_estimator_aided_offline", offline, ours=True)]
+    return [Algorithm("cf_estimator_aided", runner(False), ours=True),
+            Algorithm("cf_estimator_aided_offline", runner(True), ours=True)]
+
+
+def _algorithms(peers: Sequence[str], velocity: VelocityInput | None) -> list[Algorithm]:
+    """Ours (and, with ``velocity``, ours aided), then the named peers."""
+    algos = [a for a in ALGORITHMS.values() if a.ours]
+    if velocity is not None:
+        algos += aided_algorithms(velocity)
+    return algos + [ALGORITHMS[n] for n in peers]
 
 
 def evaluate_flight(flight: Flight, params: FilterParams, peers: Sequence[str] = (),
@@ -237,11 +235,8 @@ def evaluate_flight(flight: Flight, params: FilterParams, peers: Sequence[str] =
                     ) -> dict[str, dict[str, float]]:
     """``{algorithm: score}`` for ours (and, with ``velocity``, ours aided) and ``peers`` on one
     flight."""
-    algos = [a for a in ALGORITHMS.values() if a.ours]
-    if velocity is not None:
-        algos += aided_algorithms(velocity)
-    algos += [ALGORITHMS[n] for n in peers]
-    return {a.name: score_flight(flight, a.run(flight, params), settle_s) for a in algos}
+    return {a.name: score_flight(flight, a.run(flight, params), settle_s)
+            for a in _algorithms(peers, velocity)}
 
 
 @dataclass
@@ -299,9 +294,14 @@ def run_euroc(flights: Sequence[Flight], params: FilterParams, peers: Sequence[s
               ) -> EurocResult:
     """Evaluate every flight (one process per flight when ``jobs`` > 1), order kept."""
     tasks = [(f, params, tuple(peers), settle_s, velocity) for f in flights]
+    return _collect(flights, run_tasks(_worker, tasks, jobs), settle_s)
+
+
+def _collect(flights: Sequence[Flight], scores: Sequence[dict], settle_s: float) -> EurocResult:
+    """One result from each flight's scores (same order) and its facts."""
     result = EurocResult(settle_s=settle_s)
-    for flight, scores in zip(flights, run_tasks(_worker, tasks, jobs), strict=True):
-        result.flights[flight.name] = scores
+    for flight, per in zip(flights, scores, strict=True):
+        result.flights[flight.name] = per
         result.info[flight.name] = flight_info(flight)
     return result
 
