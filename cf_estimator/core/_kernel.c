@@ -36,6 +36,7 @@
 #define ACCEL_LOWPASS_TIME_CONSTANT_S 0.05
 #define ACCEL_SPIKE_SIGMAS 4.0
 #define QUICK_LAG_TIME_CONSTANT_S 0.2
+#define AIDED_LAG_TIME_CONSTANT_S 0.2
 #define REST_SAMPLE_SIGMAS 8.0
 #define REST_GATE_SIGMAS 3.0
 #define REST_NOISE_CAP 1.0
@@ -79,9 +80,9 @@ typedef struct {
         mag_last_time_s, mvx, mvy, mvz, mcx, mcy, mcz, mmx, mmy, mmz, mag_cand_norm, mag_seen_time_s,
         mag_ok_timer_s, mag_cand_timer_s, mag_ref_time_s, g_ref, accel_hold, acx, acy, acz, rate_lp, ex, ey,
         ez, error_norm,
-        fx, fy, fz, yaw_error_rad, recovery_count;
+        fx, fy, fz, yaw_error_rad, recovery_count, quick_until_s;
     char recovering, at_rest, mag_disturbed, heading_initialized, clipped, accel_used, moved,
-        bias_unverified, mag_recovering;
+        bias_unverified, mag_recovering, aided;
     int mag_status, phase;
 } cf_state;
 
@@ -403,7 +404,7 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
     s->bias_var = (s->bias_var < 0.0 ? pow(p->bias_prior_sigma_rad_s, 2.0) : s->bias_var) +
                   pow(BIAS_RANDOM_WALK_RAD_S_SQRT_S, 2.0) * dt;
     int startup = s->time_s <= p->startup_duration_s;
-    int fast = startup || s->recovering;
+    int fast = startup || s->recovering || (s->time_s <= s->quick_until_s);
     int learn = !fast;
 
     /* 1. predict */
@@ -475,8 +476,8 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
         double scale = clipped ? limit / maxd(en, 1e-300) : 1.0;
         /* 4. aperiodic unit in the world frame */
         rotate(s->qw, s->qx, s->qy, s->qz, ex * scale, ey * scale, ez * scale, w);
-        double weight =
-            dt / ((quick ? QUICK_LAG_TIME_CONSTANT_S : p->aperiodic_time_constant_s) + dt);
+        double lag = s->aided ? AIDED_LAG_TIME_CONSTANT_S : p->aperiodic_time_constant_s;
+        double weight = dt / ((quick ? QUICK_LAG_TIME_CONSTANT_S : lag) + dt);
         s->lx = s->lx + weight * (w[0] - s->lx);
         s->ly = s->ly + weight * (w[1] - s->ly);
         s->lz = s->lz + weight * (w[2] - s->lz);
@@ -890,7 +891,7 @@ static PyMethodDef State_methods[] = {
 static PyMemberDef State_members[] = {
     SD(qw), SD(qx), SD(qy), SD(qz), SD(cx), SD(cy), SD(cz), SD(lx), SD(ly), SD(lz), SD(time_s),
     SD(clip_timer_s), SB(recovering), SD(recovery_count), SD(accel_hold), SD(acx), SD(acy), SD(acz),
-    SD(rate_lp), SI(phase), SD(rest_timer_s), SB(at_rest), SB(moved), SD(blk_n), SD(blk_t),
+    SD(rate_lp), SI(phase), SB(aided), SD(quick_until_s), SD(rest_timer_s), SB(at_rest), SB(moved), SD(blk_n), SD(blk_t),
     SD(blk_gx), SD(blk_gy), SD(blk_gz), SD(blk_ax), SD(blk_ay), SD(blk_az), SD(blk_g2), SD(blk_a2),
     SD(blk_d), SD(blk_mx), SD(blk_my), SD(blk_mz), SD(blk_mn), SD(prev_n), SD(pgx), SD(pgy),
     SD(pgz), SD(pax), SD(pay), SD(paz), SD(pmx), SD(pmy), SD(pmz), SD(pm_n), SD(last_n), SD(lgx),
@@ -930,7 +931,7 @@ PyMODINIT_FUNC PyInit__kernel(void)
     }
     if (PyDict_SetItemString(StateType.tp_dict, "FIELDS", fields) < 0) return NULL;
     Py_DECREF(fields);
-    PyObject *consts = Py_BuildValue("{s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:i,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:i}",
+    PyObject *consts = Py_BuildValue("{s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:i,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:i}",
                                      "ACCEL_LOWPASS_TIME_CONSTANT_S", ACCEL_LOWPASS_TIME_CONSTANT_S,
                                      "ACCEL_SPIKE_SIGMAS", ACCEL_SPIKE_SIGMAS,
                                      "REST_GATE_SIGMAS", REST_GATE_SIGMAS,
@@ -939,6 +940,7 @@ PyMODINIT_FUNC PyInit__kernel(void)
                                      "REST_MAG_TOLERANCE_RAD", REST_MAG_TOLERANCE_RAD,
                                      "ACCEL_DETECT_SIGMAS", ACCEL_DETECT_SIGMAS,
                                      "QUICK_LAG_TIME_CONSTANT_S", QUICK_LAG_TIME_CONSTANT_S,
+                                     "AIDED_LAG_TIME_CONSTANT_S", AIDED_LAG_TIME_CONSTANT_S,
                                      "RATE_LOWPASS_TIME_CONSTANT_S", RATE_LOWPASS_TIME_CONSTANT_S,
                                      "REST_NOISE_SIGMAS", REST_NOISE_SIGMAS,
                                      "REST_SAMPLE_SIGMAS", REST_SAMPLE_SIGMAS,

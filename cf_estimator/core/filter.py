@@ -223,6 +223,23 @@ class ComplementaryFilter:
         s.phase = PHASE_STARTUP
         self._initialized = True
 
+    def set_aided(self, aided: bool) -> None:
+        """Say whether the next update's accelerometer sample is velocity-aided (the vehicle's
+        acceleration taken out): the aperiodic unit then only averages vibration
+        (AIDED_LAG_TIME_CONSTANT_S instead of aperiodic_time_constant_s)."""
+        self._state.aided = bool(aided)
+
+    def take_hold(self, duration_s: float, reopen_bias: bool = False) -> None:
+        """Run the loop as in start-up (gain startup_k1, no clip, no bias learning) for the next
+        ``duration_s`` [s]: a correction that has just become trustworthy (velocity aiding that
+        began) reveals a tilt error that is real, not a disturbance to reject."""
+        s = self._state
+        s.quick_until_s = max(float(s.quick_until_s), float(s.time_s) + float(duration_s))
+        if reopen_bias:
+            # what the bias estimator learned from the untrustworthy error is suspect: uncertain
+            # again (the prior), so it is learned afresh from the trustworthy one
+            s.bias_var = max(float(s.bias_var), self._params.bias_prior_sigma_rad_s ** 2)
+
     def initialize_from(self, accel_m_s2: Vector, mag: Vector | None = None) -> bool:
         """Initialise from one accelerometer (and magnetometer) sample; False if not valid."""
         if not valid_vector(accel_m_s2):

@@ -373,10 +373,11 @@ class FilterParams:
         group="velocity aiding",
     )
     velocity_heading_sigma_rad: float = param(
-        0.1,
+        0.3,
         "rad",
         "Velocity aiding ('auto'): aid only while the heading offset's standard deviation is "
-        "below this (0.1 rad = 5.7 deg: the tilt error left by it is about sigma*|a_h|/g).",
+        "below this (0.3 rad = 17 deg: the tilt error left by it is about sigma*|a_h|/g, "
+        "against |a_h|/g unaided: aiding that early already removes most of the error).",
         minimum=0.0,
         maximum=3.2,
         minimum_exclusive=True,

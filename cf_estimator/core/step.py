@@ -97,6 +97,9 @@ ACCEL_SPIKE_SIGMAS = 4.0
 ACCEL_DETECT_SIGMAS = 3.0
 #: Time constant [s] of the aperiodic unit while the error bypasses it (start-up, rest, recovery).
 QUICK_LAG_TIME_CONSTANT_S = 0.2
+#: Time constant [s] of the aperiodic unit while the specific force is velocity-aided (the
+#: vehicle's acceleration taken out: what is left to average is vibration, not manoeuvres).
+AIDED_LAG_TIME_CONSTANT_S = 0.2
 #: Magnetometer samples averaged for the field reference (norm, dip) after start-up.
 MAG_REFERENCE_SAMPLES = 20
 #: A rejected field that has stayed steady and turned as the gyro says for as long as the
@@ -199,7 +202,9 @@ def step(
     s.time_s = s.time_s + dt
     bias.add_process_noise(s, p, dt, o)
     startup = s.time_s <= p.startup_duration_s
-    fast = startup | s.recovering  # trust the accelerometer fully, learn no bias
+    # trust the accelerometer fully, learn no bias: start-up, recovery, and a take-hold phase
+    # (velocity aiding that just began: the tilt error it reveals is real)
+    fast = startup | s.recovering | (s.time_s <= s.quick_until_s)
     learn = o.not_(fast)
 
     # 1. predict with the bias-corrected gyro, then the magnetometer's yaw-rate correction
@@ -268,7 +273,9 @@ def step(
         scale = o.where(clipped, limit / o.maximum(en, 1e-300), 1.0)
         # 4. aperiodic unit in the world frame (weight 1 = unit bypassed)
         wx, wy, wz = _rotate(s.qw, s.qx, s.qy, s.qz, ex * scale, ey * scale, ez * scale)
-        weight = dt / (o.where(quick, QUICK_LAG_TIME_CONSTANT_S, p.aperiodic_time_constant_s) + dt)
+        # aided (velocity aiding took the vehicle's acceleration out): nothing slow to average
+        lag = o.where(s.aided, AIDED_LAG_TIME_CONSTANT_S, p.aperiodic_time_constant_s)
+        weight = dt / (o.where(quick, QUICK_LAG_TIME_CONSTANT_S, lag) + dt)
         s.lx = s.lx + weight * (wx - s.lx)
         s.ly = s.ly + weight * (wy - s.ly)
         s.lz = s.lz + weight * (wz - s.lz)

@@ -52,6 +52,9 @@ from typing import Any
 from cf_estimator.core.heading_offset import HeadingOffset, HeadingOffsetEstimator
 from cf_estimator.core.params import FilterParams
 
+#: Velocity aiding that begins (or comes back after a dropout) lets the filter take hold for
+#: this long [s]: start-up gain, no clip, no bias learning (the tilt error it reveals is real).
+AIDING_TAKE_HOLD_S = 2.0
 #: Time constant [s] of the low-pass whose complement (the specific force's fast content:
 #: vibration, impacts) is passed through while aided: slower content is replaced by the
 #: velocity-aided gravity measurement.
@@ -129,12 +132,15 @@ class VelocityAiding:
         self._jump = params.velocity_jump_threshold_m_s
         self._auto = params.velocity_heading == "auto"
         self._span = params.velocity_timeout_s + params.velocity_window_s + BUFFER_MARGIN_S
+        # differentiation noise of the velocity over one window, both horizontal axes [m²/s⁴]
+        noise2 = 4.0 * (params.velocity_noise_m_s / params.velocity_window_s) ** 2
         if hasattr(self, "_heading"):
             self._heading.required_sigma_rad = params.velocity_heading_sigma_rad
             self._heading.memory_s = params.velocity_heading_memory_s
+            self._heading.noise2_m2_s4 = noise2
         else:
             self._heading = HeadingOffsetEstimator(params.velocity_heading_sigma_rad,
-                                                   params.velocity_heading_memory_s)
+                                                   params.velocity_heading_memory_s, noise2)
 
     def reset(self) -> None:
         """Forget the IMU history, the velocity window and the heading offset (counters kept
@@ -154,7 +160,7 @@ class VelocityAiding:
         self._m_t = -math.inf
         self._heading.reset()
         self._hd = HeadingOffset(0.0, math.inf, False)
-        self._active = False
+        self._active = self._started = self._first = self._ever = False
         if not hasattr(self, "_received"):
             self.reset_counters()
 
@@ -236,7 +242,7 @@ class VelocityAiding:
         if bt:
             d = t_s - bt[-1]
             if d <= 0.0:  # not after the last stamp: nothing to add
-                self._active = False
+                self._active = self._started = self._first = False
                 return accel_m_s2
             sx, sy, sz = self._sum
             self._sum = (sx + fx * d, sy + fy * d, sz + fz * d)
@@ -257,11 +263,13 @@ class VelocityAiding:
                     self._b0 = 0
         m = self._m
         if m is None or t_s - self._m_t > self._timeout:
-            self._active = False
+            self._active = self._started = self._first = False
             if m is not None:
                 self._stale += 1
             return accel_m_s2
-        self._active = True
+        self._started = not self._active
+        self._first = self._started and not self._ever
+        self._active = self._ever = True
         self._aided += 1
         # Pᵀ·(m_P + f_P − lowpass(f_P)): gravity from the velocity window, fast content kept
         gx, gy, gz = m[0] + fx - lp[0], m[1] + fy - lp[1], m[2] + fz - lp[2]
@@ -361,6 +369,20 @@ class VelocityAiding:
     def active(self) -> bool:
         """True when the last IMU sample was aided (vertically or fully)."""
         return self._active
+
+    @property
+    def started(self) -> bool:
+        """True when the last IMU sample was the first aided one after unaided ones (aiding
+        began, or came back after a dropout): the caller lets the filter take hold
+        (:meth:`~cf_estimator.core.filter.ComplementaryFilter.take_hold`)."""
+        return self._started
+
+    @property
+    def first_start(self) -> bool:
+        """True when :attr:`started` is the first start since the last reset: the bias learned
+        before it came from the unaided (untrustworthy) error and is learned afresh; after a
+        dropout it was learned while aided and is kept."""
+        return self._first
 
     @property
     def mode(self) -> str:
