@@ -124,6 +124,8 @@ def test_aiding_removes_most_of_the_manoeuvre_error_in_a_multirotor_flight(uav, 
     yaw_err = _yaw_offset(r.quaternion[-1], uav.truth.q_world_from_body[-1])
     d = math.remainder(r.velocity_status.heading_offset_rad - yaw_err, 2 * math.pi)
     assert abs(d) < 0.1
+    # ... and the 6-D filter was steered onto the velocity's frame (ENU): no heading drift
+    assert abs(yaw_err) < 0.05
 
 
 def _yaw_offset(q_est, q_true):

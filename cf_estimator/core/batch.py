@@ -185,6 +185,7 @@ def run_aided(f: ComplementaryFilter, aiding: VelocityAiding, gyro: np.ndarray, 
             if aiding.started:
                 f.take_hold(AIDING_TAKE_HOLD_S, reopen_bias=aiding.first_start)
             f.set_aided(aiding.active)
+            f.correct_heading(aiding.take_heading_correction())
             f.update(g_rows[i], a_in, dts[i], m)
         q_out[i] = f.orientation_tuple()
         aided_out[i] = aiding.active

@@ -32,6 +32,7 @@ from cf_estimator.core.step import (
     PHASE_STARTUP,
     StepState,
     step,
+    turn_heading,
 )
 from cf_estimator.schema import as_dict
 
@@ -222,6 +223,14 @@ class ComplementaryFilter:
         s.heading_initialized = heading_known
         s.phase = PHASE_STARTUP
         self._initialized = True
+
+    def correct_heading(self, turn_rad: float) -> None:
+        """Turn the heading by ``turn_rad`` about the output world frame's z axis (ENU: up,
+        NED: down; roll/pitch unchanged): an outside heading reference (velocity aiding's
+        heading offset, 6-D)."""
+        if turn_rad:
+            up = -1.0 if self._params.world_frame == "ned" else 1.0  # the state is ENU inside
+            turn_heading(self._state, up * float(turn_rad), FloatOps)
 
     def set_aided(self, aided: bool) -> None:
         """Say whether the next update's accelerometer sample is velocity-aided (the vehicle's

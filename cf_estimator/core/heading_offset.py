@@ -89,6 +89,13 @@ class HeadingOffsetEstimator:
         self._n += w
         return self.estimate()
 
+    def rotate(self, angle_rad: float) -> None:
+        """The filter's world frame was turned by ``angle_rad`` about the vertical (z_f →
+        e^{i·angle}·z_f): the sums follow, so the windows seen so far stay consistent."""
+        turn = cmath.exp(1j * angle_rad)
+        self._c *= turn
+        self._sf *= turn
+
     def estimate(self) -> HeadingOffset:
         """The current δ, σ and known flag."""
         n = self._n

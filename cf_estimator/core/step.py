@@ -161,7 +161,7 @@ def _rotate(qw: Any, qx: Any, qy: Any, qz: Any, vx: Any, vy: Any, vz: Any) -> tu
     )
 
 
-def _turn_heading(s: StepState, angle: Any, o: Any) -> None:
+def turn_heading(s: StepState, angle: Any, o: Any) -> None:
     """q ← Exp_z(angle) ⊗ q (a world-vertical rotation), and the world-frame lag state with it.
 
     Turning the lag state too keeps the tilt path exactly independent of heading corrections:
@@ -211,7 +211,7 @@ def step(
     dw, dx, dy, dz = _exp((gx - s.bx) * dt, (gy - s.by) * dt, (gz - s.bz) * dt, o)
     qw, qx, qy, qz = _mul(s.qw, s.qx, s.qy, s.qz, dw, dx, dy, dz)
     s.qw, s.qx, s.qy, s.qz = qw, qx, qy, qz
-    _turn_heading(s, s.z_m * dt, o)
+    turn_heading(s, s.z_m * dt, o)
     # the field directions the heading channel checks samples against turn with the body
     s.mvx, s.mvy, s.mvz = _rotate(dw, -dx, -dy, -dz, s.mvx, s.mvy, s.mvz)
     s.mcx, s.mcy, s.mcz = _rotate(dw, -dx, -dy, -dz, s.mcx, s.mcy, s.mcz)
@@ -434,7 +434,7 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
     yaw_mode = o.not_(p.mag_full) | first
     angle = o.where(first, yaw_error, o.where(yaw_mode, gain * yaw_c, 0.0))
     s.z_m = s.z_m + o.where(yaw_mode & o.not_(first), p.r2 * ldt * yaw_c, 0.0)
-    _turn_heading(s, angle, o)
+    turn_heading(s, angle, o)
 
     # 'full' mode (Ryzhkov, drift): vector error against the reference field, all axes
     full = p.mag_full & o.not_(first) & usable

@@ -482,6 +482,7 @@ class ImuPipeline:
                 if self._aiding.started:
                     f.take_hold(AIDING_TAKE_HOLD_S, reopen_bias=self._aiding.first_start)
                 f.set_aided(self._aiding.active)
+                f.correct_heading(self._aiding.take_heading_correction())
             q = f.update((gx, gy, gz), acc, dt, mag)
             s = f._state  # noqa: SLF001 - per-sample flags without building FilterStatus (20 us)
             if mag is not None:
