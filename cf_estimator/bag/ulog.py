@@ -150,6 +150,9 @@ class UlogBag(io.InputBag):
             raise io.BagError(f"{path}: no {IMU_TOPIC} in this ulog (the IMU the estimator "
                               f"needs); its topics: {listing}")
         chosen = {name: self._pick(name, inst, instance) for name, inst in by_name.items()}
+        if instance is not None and not any(len(by_name.get(n, {})) > 1 for n in _WANTED):
+            self.notes.append(f"--instance {instance}: no topic the replay reads has several "
+                              "instances in this log (each has one)")
         self.streams: dict[str, _Stream] = {}
         self._imu(chosen[IMU_TOPIC].data)
         if MAG_TOPIC in chosen:
