@@ -678,7 +678,10 @@ def replay_variants(
                     bulk_run.events(bulk.Events(
                         kinds, chunk.log_ns, chunk.row, chunk.blocks.get(io.IMU_TYPE),
                         chunk.blocks.get(io.MAG_TYPE), chunk.msg))
-                    if ref_topic is not None:
+                    fast_ref = getattr(chunk, "references", None)  # a ulog's, as arrays
+                    if ref_topic is not None and fast_ref is not None and ref_topic != imu_topic:
+                        n_ref += fast_ref(ref_topic, ref_t, ref_q)
+                    elif ref_topic is not None:
                         for i, t in enumerate(chunk.topic):
                             if t == ref_topic:
                                 if t != imu_topic:

@@ -60,30 +60,18 @@ def is_ulog(path: str | os.PathLike[str]) -> bool:
     return Path(path).suffix.lower() == ".ulg"
 
 
-class _Tracked:
-    """The log file for pyulog, noting a short read: pyulog stops silently at a message cut by
-    the end of the file (a truncated log); a clean end reads nothing at all."""
-
-    def __init__(self, path: Path) -> None:
-        self._fh = open(path, "rb")  # noqa: SIM115 - closed by UlogBag after parsing
-        self.size = os.fstat(self._fh.fileno()).st_size
-        self.cut_at: int | None = None  #: file offset where a message was cut
-
-    def read(self, n: int = -1) -> bytes:
-        pos = self._fh.tell()
-        data = self._fh.read(n)
-        if n is not None and n > 0 and 0 < len(data) < n:
-            self.cut_at = pos
-        return data
-
-    def seek(self, *args: Any) -> int:
-        return self._fh.seek(*args)
-
-    def tell(self) -> int:
-        return self._fh.tell()
-
-    def close(self) -> None:
-        self._fh.close()
+def _cut_at(data: bytes) -> int | None:
+    """The offset of a message cut by the end of the file (a truncated log), None when the
+    messages end exactly at the end: pyulog stops silently at such a message. Walks the
+    message headers (uint16 size, uint8 type) from the end of the 16-byte file header."""
+    n = len(data)
+    pos = 16
+    while pos + 3 <= n:
+        nxt = pos + 3 + (data[pos] | (data[pos + 1] << 8))
+        if nxt > n:
+            return pos
+        pos = nxt
+    return None if pos == n else pos
 
 
 @dataclass
@@ -119,29 +107,32 @@ class UlogBag(io.InputBag):
         self.is_ros2 = True
         self.notes: list[str] = []  #: what the reader had to say (instances, truncation, span)
         self.instances: dict[str, int] = {}  #: topic -> multi_id used
-        tracked = _Tracked(path)
         try:
-            try:
-                # every topic: the log's span (last_timestamp) counts them all, and the
-                # error without sensor_combined lists them (the parse loop is the cost anyway)
-                with contextlib.redirect_stdout(io_.StringIO()):  # pyulog prints its warnings
-                    log = ULog(tracked)  # type: ignore[arg-type]
-            except ULogException as exc:
-                raise io.BagError(f"{path}: not a readable PX4 ulog: {io._short(exc)}") from exc
-            except Exception as exc:  # noqa: BLE001 - pyulog on garbage raises anything
-                raise io.BagError(f"{path}: not a readable PX4 ulog: {io._short(exc)}") from exc
-        finally:
-            tracked.close()
+            data = path.read_bytes()  # pyulog keeps it all in memory anyway; reads are faster
+        except OSError as exc:
+            raise io.BagError(f"{path}: cannot read: {exc.strerror or exc}", 2) from None
+        try:
+            # every topic: the log's span (last_timestamp) counts them all, and the error
+            # without sensor_combined lists them (the parse loop is the cost anyway)
+            with contextlib.redirect_stdout(io_.StringIO()):  # pyulog prints its warnings
+                log = ULog(io_.BytesIO(data))  # type: ignore[arg-type]
+        except ULogException as exc:
+            raise io.BagError(f"{path}: not a readable PX4 ulog: {io._short(exc)}") from exc
+        except Exception as exc:  # noqa: BLE001 - pyulog on garbage raises anything
+            raise io.BagError(f"{path}: not a readable PX4 ulog: {io._short(exc)}") from exc
         self.log_start_us = int(log.start_timestamp)
         self.log_last_us = int(log.last_timestamp)
-        if tracked.cut_at is not None or log.file_corruption:
-            where = (f"cut at byte {tracked.cut_at} of {tracked.size}"
-                     if tracked.cut_at is not None else "corrupt data skipped")
+        cut = None if log.file_corruption else _cut_at(data)
+        size = len(data)
+        del data
+        if cut is not None or log.file_corruption:
+            where = (f"cut at byte {cut} of {size}" if cut is not None
+                     else "corrupt data skipped")
             self.notes.append(
                 f"{path.name}: truncated ulog ({where}): replaying what was readable, "
                 f"{(self.log_last_us - self.log_start_us) * 1e-6:.1f} s of log (up to "
                 f"{self.log_last_us * 1e-6:.1f} s since boot)")
-        self.truncated = tracked.cut_at is not None or bool(log.file_corruption)
+        self.truncated = cut is not None or bool(log.file_corruption)
         by_name: dict[str, dict[int, Any]] = {}
         for d in log.data_list:
             by_name.setdefault(d.name, {})[int(d.multi_id)] = d
@@ -393,6 +384,24 @@ class _UlogChunk:
 
     def __len__(self) -> int:
         return len(self.topic)
+
+    def references(self, topic: str, ref_t: list[float], ref_q: list[Any]) -> int:
+        """The QuaternionStamped messages of ``topic`` in this chunk appended as stamps [s]
+        and normalised (w, x, y, z) (what the replay takes from each one); returns how many
+        messages there were."""
+        k = next((j for j, s in enumerate(self._streams) if s.topic == topic), None)
+        if k is None:
+            return 0
+        s = self._streams[k]
+        rows = np.asarray(self._rows)[np.asarray(self._which) == k]
+        if rows.size == 0:
+            return 0
+        q = s.values[rows]
+        q = q / np.linalg.norm(q, axis=1, keepdims=True)  # rows of norm > 0.5 (the reader's)
+        sec, ns = np.divmod(s.t_ns[rows], 1_000_000_000)
+        ref_t.extend((sec + ns * 1e-9).tolist())
+        ref_q.extend(tuple(r) for r in q.tolist())
+        return int(rows.size)
 
     def msg(self, i: int) -> Any:
         """Message i as a light object."""
