@@ -269,3 +269,29 @@ def test_tune_reads_a_ulog_with_vehicle_attitude_as_reference():
     w, x, y, z = q
     up_in_body = np.array([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)])
     assert np.dot(up_in_body, acc) > 0.99  # at rest the accelerometer points up
+
+
+def test_bulk_and_message_by_message_replays_agree(sitl):
+    one = replay_bag(SITL, None, options=ReplayOptions(progress=False, bulk_decode=False))
+    bulk = sitl["result"].summary["reference"]
+    ref = one.summary["reference"]
+    assert ref["samples_scored"] == bulk["samples_scored"]
+    assert ref["rmse_deg"] == pytest.approx(bulk["rmse_deg"])
+
+
+def test_reference_topic_none_leaves_the_autopilot_out():
+    result = replay_bag(_require(SITL), None,
+                        options=ReplayOptions(progress=False, reference_topic="none"))
+    assert "reference" not in result.summary
+    assert result.summary["px4"]["output_frames"] == "frd body -> ned world"
+
+
+def test_copy_inputs_writes_the_log_topics_as_ros_messages(tmp_path):
+    log = ulogwrite.static_tilt_log(tmp_path / "t.ulg", 3.0)
+    replay_bag(log, tmp_path / "out", options=ReplayOptions(progress=False, copy_inputs=True))
+    topics = read_topics(tmp_path / "out")
+    assert {"sensor_combined", "vehicle_magnetometer", OUT_IMU_TOPIC} <= set(topics)
+    imu = topics["sensor_combined"][0].msg
+    assert imu.header.frame_id == "base_link_frd"
+    assert imu.linear_acceleration.z == pytest.approx(-9.80665 * math.cos(math.radians(10)),
+                                                      abs=0.1)
