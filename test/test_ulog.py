@@ -295,3 +295,29 @@ def test_copy_inputs_writes_the_log_topics_as_ros_messages(tmp_path):
     assert imu.header.frame_id == "base_link_frd"
     assert imu.linear_acceleration.z == pytest.approx(-9.80665 * math.cos(math.radians(10)),
                                                       abs=0.1)
+
+
+@pytest.mark.parametrize("name", ["sample_px4_events.ulg", "sample_log_small.ulg"])
+def test_fast_parse_gives_what_pyulog_gives(name):
+    import contextlib
+    import io as io_
+
+    data = _require(ULOGS / name).read_bytes()
+    parsed = ulog._fast_parse(data)
+    assert parsed is not None
+    fast, cut = parsed
+    assert cut is None
+    with contextlib.redirect_stdout(io_.StringIO()):
+        ref = pyulog.ULog(io_.BytesIO(data))
+    assert (fast.start_timestamp, fast.last_timestamp) == (ref.start_timestamp,
+                                                           ref.last_timestamp)
+    assert [(d.name, d.multi_id) for d in fast.data_list] == \
+        [(d.name, d.multi_id) for d in ref.data_list]
+    for a, b in zip(fast.data_list, ref.data_list, strict=True):
+        assert a.data.keys() == b.data.keys()
+        for k in a.data:
+            assert np.array_equal(a.data[k], b.data[k], equal_nan=True), (a.name, k)
+
+
+def test_appended_data_is_left_to_pyulog():
+    assert ulog._fast_parse(_require(BOARD).read_bytes()) is None
