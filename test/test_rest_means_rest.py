@@ -200,9 +200,11 @@ def test_glitch_and_impact_at_rest_are_gone_within_10_s(rate_hz, glitch):
 
 # -- heading recovery -------------------------------------------------------------------------
 def test_a_compass_wrong_at_start_comes_back_within_seconds():
-    """Issue 19 item 2: the field 90 deg off for the first 3 s, then clean, still vehicle: the
-    heading error saturates, the heading recovery takes over after recovery_trigger_s and the
-    heading is within 2 deg soon after (it took 126 s at the saturation-limited rate)."""
+    """Issue 19 item 2: the field 90 deg off for the first 3 s, then clean, still vehicle. The
+    clean field turned when the gyro says the body did not: rejected (issue 22), until it has
+    been steady as long as the wrong reference was in use (3 s); then re-learned, the heading
+    error saturates, the heading recovery takes over after recovery_trigger_s and the heading is
+    within 2 deg by 20 s (issue 22's target; it took 126 s at the saturation-limited rate)."""
     p = FilterParams()
     f = ComplementaryFilter(p)
     rng = np.random.default_rng(3)
@@ -217,6 +219,6 @@ def test_a_compass_wrong_at_start_comes_back_within_seconds():
         err.append(abs(math.degrees(_wrap(_yaw(q)))))
     t = np.arange(len(err)) * dt
     err = np.array(err)
-    limit_s = 3.0 + p.recovery_trigger_s + 3.0
-    assert err[t >= limit_s].max() < 2.0, err[t >= limit_s].max()
+    assert err[t >= 20.0].max() < 2.0, err[t >= 20.0].max()
+    assert err[(t > 3.5) & (t < 5.0)].min() > 80.0  # the clean field is not taken at once
     assert not f.status().heading_recovering

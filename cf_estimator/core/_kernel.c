@@ -47,6 +47,13 @@
 #define MAG_REFERENCE_SAMPLES 20
 #define MAG_RELEARN_AFTER_S 20.0
 #define MAG_MAX_DT_S 1.0
+#define MAG_SETTLE_S 3.0
+#define MAG_TURN_TIME_CONSTANT_S 1.0
+#define MAG_SMOOTH_TIME_CONSTANT_S 0.25
+#define MAG_TURN_TOLERANCE_RAD 0.05
+#define MAG_TURN_FRACTION 0.05
+#define MAG_DRIFT_SIGMAS 3.0
+#define MAG_CANDIDATE_NORM_TOLERANCE 0.05
 #define SMALL_ANGLE_RAD 1e-6
 #define EXTRA_COLUMNS 11
 #define GYRO_LIMIT_RAD_S 1e9 /* filter.GYRO_LIMIT_RAD_S */
@@ -69,7 +76,8 @@ typedef struct {
         prev_n, pgx, pgy, pgz, pax, pay, paz, blk_d, last_n, lgx, lgy, lgz, lax, lay, laz,
         noise_g2, noise_a2, bias_var, blk_mx, blk_my, blk_mz, blk_mn, pmx, pmy, pmz, pm_n,
         mag_clip_timer_s, mag_ref_norm, mag_ref_dip, mag_ref_count,
-        mag_reject_timer_s, mag_last_time_s, g_ref, accel_hold, acx, acy, acz, rate_lp, ex, ey,
+        mag_last_time_s, mvx, mvy, mvz, mcx, mcy, mcz, mmx, mmy, mmz, mag_cand_norm, mag_seen_time_s,
+        mag_ok_timer_s, mag_cand_timer_s, mag_ref_time_s, g_ref, accel_hold, acx, acy, acz, rate_lp, ex, ey,
         ez, error_norm,
         fx, fy, fz, yaw_error_rad, recovery_count;
     char recovering, at_rest, mag_disturbed, heading_initialized, clipped, accel_used, moved,
@@ -82,6 +90,7 @@ static void state_init(cf_state *s)
     memset(s, 0, sizeof(*s));
     s->qw = 1.0;
     s->mag_last_time_s = -1.0;
+    s->mag_seen_time_s = -1.0;
     s->bias_var = -1.0;
 }
 
@@ -156,12 +165,22 @@ static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int
     double dt_m = mind(s->mag_last_time_s < 0.0 ? 0.0 : s->time_s - s->mag_last_time_s,
                        MAG_MAX_DT_S);
 
-    int learning = p->use_mag && (s->mag_ref_count < MAG_REFERENCE_SAMPLES);
-    int relearn = s->mag_reject_timer_s > MAG_RELEARN_AFTER_S;
+    double dt_s = mind(s->mag_seen_time_s < 0.0 ? 0.0 : s->time_s - s->mag_seen_time_s,
+                       MAG_MAX_DT_S);
+    int fresh = s->mag_seen_time_s < 0.0;
+    s->mag_seen_time_s = s->time_s;
+
+    double in_use = s->mag_last_time_s < 0.0 ? 0.0 : s->mag_last_time_s - s->mag_ref_time_s;
+    int relearn = s->mag_cand_timer_s > mind(maxd(in_use, MAG_SETTLE_S), MAG_RELEARN_AFTER_S);
     if (relearn) {
         s->mag_ref_count = 0.0;
-        s->mag_reject_timer_s = 0.0;
+        s->mag_ref_time_s = s->time_s;
+        s->mag_cand_timer_s = 0.0;
+        s->mvx = s->mcx;
+        s->mvy = s->mcy;
+        s->mvz = s->mcz;
     }
+    int learning = p->use_mag && (s->mag_ref_count < MAG_REFERENCE_SAMPLES);
     double n = s->mag_ref_count + 1;
     if (learning) {
         s->mag_ref_norm = s->mag_ref_norm + (mn - s->mag_ref_norm) / n;
@@ -171,9 +190,48 @@ static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int
     double off_norm = maxd(mn / maxd(s->mag_ref_norm, 1e-300) - 1.0,
                            1.0 - mn / maxd(s->mag_ref_norm, 1e-300));
     double off_dip = maxd(dip - s->mag_ref_dip, s->mag_ref_dip - dip);
-    int disturbed = p->mag_rejection && !learning &&
-                    ((off_norm > p->mag_norm_tolerance) || (off_dip > p->mag_dip_tolerance_rad));
+    double a = fresh ? 1.0 : dt_s / (MAG_SMOOTH_TIME_CONSTANT_S + dt_s);
+    double vx = s->mmx + a * (ux - s->mmx), vy = s->mmy + a * (uy - s->mmy),
+           vz = s->mmz + a * (uz - s->mmz);
+    double vn = maxd(sqrt(vx * vx + vy * vy + vz * vz), 1e-300);
+    double mmx = vx / vn, mmy = vy / vn, mmz = vz / vn;
+    s->mmx = mmx;
+    s->mmy = mmy;
+    s->mmz = mmz;
+    double tol = MAG_TURN_TOLERANCE_RAD +
+                 MAG_TURN_FRACTION * MAG_TURN_TIME_CONSTANT_S * s->rate_lp;
+    double age = s->mag_last_time_s < 0.0 ? 0.0 : s->time_s - s->mag_last_time_s;
+    double drift = MAG_DRIFT_SIGMAS * sqrt(maxd(s->bias_var, 0.0)) * age;
+    int turned =
+        sqrt(pow(mmx - s->mvx, 2.0) + pow(mmy - s->mvy, 2.0) + pow(mmz - s->mvz, 2.0)) > tol + drift;
+    int off = (off_norm > p->mag_norm_tolerance) || (off_dip > p->mag_dip_tolerance_rad) || turned;
+    s->mag_ok_timer_s = learning ? MAG_SETTLE_S : (turned ? 0.0 : s->mag_ok_timer_s + dt_s);
+    int disturbed = p->mag_rejection && !learning && (off || (s->mag_ok_timer_s < MAG_SETTLE_S));
     s->mag_disturbed = (char)disturbed;
+    double drift_c = MAG_DRIFT_SIGMAS * sqrt(maxd(s->bias_var, 0.0)) * s->mag_cand_timer_s;
+    int cand_moved =
+        (sqrt(pow(mmx - s->mcx, 2.0) + pow(mmy - s->mcy, 2.0) + pow(mmz - s->mcz, 2.0)) >
+         2.0 * MAG_TURN_TOLERANCE_RAD + drift_c) ||
+        (maxd(mn - s->mag_cand_norm, s->mag_cand_norm - mn) >
+         MAG_CANDIDATE_NORM_TOLERANCE * s->mag_cand_norm);
+    int keep = disturbed && !cand_moved;
+    s->mag_cand_timer_s = keep ? s->mag_cand_timer_s + dt_s : 0.0;
+    if (!keep) {
+        s->mcx = mmx;
+        s->mcy = mmy;
+        s->mcz = mmz;
+        s->mag_cand_norm = mn;
+    }
+    a = fresh ? 1.0 : dt_s / (MAG_TURN_TIME_CONSTANT_S + dt_s);
+    double ar = disturbed ? 0.0 : a;
+    vx = s->mvx + ar * (ux - s->mvx);
+    vy = s->mvy + ar * (uy - s->mvy);
+    vz = s->mvz + ar * (uz - s->mvz);
+    vn = maxd(sqrt(vx * vx + vy * vy + vz * vz), 1e-300);
+    s->mvx = vx / vn;
+    s->mvy = vy / vn;
+    s->mvz = vz / vn;
+
     int usable = p->use_mag && !disturbed && (horizontal > 1e-3);
     s->mag_status = p->use_mag ? (disturbed ? MAG_REJECTED : MAG_USED) : MAG_DISABLED;
     if (usable) s->mag_last_time_s = s->time_s;
@@ -182,7 +240,10 @@ static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int
 
     double yaw_error = atan2(w[0], w[1]);
     int big = maxd(yaw_error, -yaw_error) > p->mag_saturation_limit_rad;
-    if (usable) s->mag_clip_timer_s = (big && learn && !first) ? s->mag_clip_timer_s + dt_m : 0.0;
+    if (usable)
+        s->mag_clip_timer_s = (big && learn && !first) ? s->mag_clip_timer_s + dt_m : 0.0;
+    else if (disturbed)
+        s->mag_clip_timer_s = 0.0;
     int enter = (p->recovery_trigger_s > 0.0) && (s->mag_clip_timer_s >= p->recovery_trigger_s);
     int leave = usable && (maxd(yaw_error, -yaw_error) < 0.1 * p->mag_saturation_limit_rad);
     s->mag_recovering = (char)(s->mag_recovering ? !leave : enter);
@@ -349,6 +410,18 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
     expmap((gx - s->bx) * dt, (gy - s->by) * dt, (gz - s->bz) * dt, d);
     mul_into(s, d);
     turn_heading(s, s->z_m * dt);
+    rotate(d[0], -d[1], -d[2], -d[3], s->mvx, s->mvy, s->mvz, w);
+    s->mvx = w[0];
+    s->mvy = w[1];
+    s->mvz = w[2];
+    rotate(d[0], -d[1], -d[2], -d[3], s->mcx, s->mcy, s->mcz, w);
+    s->mcx = w[0];
+    s->mcy = w[1];
+    s->mcz = w[2];
+    rotate(d[0], -d[1], -d[2], -d[3], s->mmx, s->mmy, s->mmz, w);
+    s->mmx = w[0];
+    s->mmy = w[1];
+    s->mmz = w[2];
 
     s->clipped = 0;
     s->accel_used = acc != NULL;
@@ -452,7 +525,6 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
     s->by = mind(maxd(s->by, -lim), lim);
     s->bz = mind(maxd(s->bz, -lim), lim);
 
-    s->mag_reject_timer_s = s->mag_disturbed ? s->mag_reject_timer_s + dt : 0.0;
     s->mag_status = p->use_mag ? MAG_NONE : MAG_DISABLED;
     if (mag != NULL) magnetometer(s, p, mag, fast, learn);
     double qn = sqrt(s->qw * s->qw + s->qx * s->qx + s->qy * s->qy + s->qz * s->qz);
@@ -824,8 +896,10 @@ static PyMemberDef State_members[] = {
     SD(pgz), SD(pax), SD(pay), SD(paz), SD(pmx), SD(pmy), SD(pmz), SD(pm_n), SD(last_n), SD(lgx),
     SD(lgy), SD(lgz), SD(lax), SD(lay), SD(laz), SD(noise_g2), SD(noise_a2), SD(g_ref), SD(bx),
     SD(by), SD(bz), SD(bias_var), SB(bias_unverified), SD(z_m), SD(mag_ref_norm), SD(mag_ref_dip),
-    SD(mag_ref_count), SB(mag_disturbed), SD(mag_reject_timer_s), SD(mag_last_time_s),
-    SB(heading_initialized), SD(mag_clip_timer_s), SB(mag_recovering), SD(ex), SD(ey), SD(ez),
+    SD(mag_ref_count), SB(mag_disturbed), SD(mag_last_time_s), SB(heading_initialized),
+    SD(mag_clip_timer_s), SB(mag_recovering), SD(mvx), SD(mvy), SD(mvz), SD(mcx), SD(mcy),
+    SD(mcz), SD(mmx), SD(mmy), SD(mmz), SD(mag_cand_norm), SD(mag_seen_time_s), SD(mag_ok_timer_s), SD(mag_cand_timer_s),
+    SD(mag_ref_time_s), SD(ex), SD(ey), SD(ez),
     SD(error_norm), SD(fx), SD(fy), SD(fz), SB(clipped), SB(accel_used), SI(mag_status),
     SD(yaw_error_rad),
     {NULL, 0, 0, 0, NULL}};
@@ -856,7 +930,7 @@ PyMODINIT_FUNC PyInit__kernel(void)
     }
     if (PyDict_SetItemString(StateType.tp_dict, "FIELDS", fields) < 0) return NULL;
     Py_DECREF(fields);
-    PyObject *consts = Py_BuildValue("{s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:i,s:d,s:d,s:d,s:i}",
+    PyObject *consts = Py_BuildValue("{s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:i,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:i}",
                                      "ACCEL_LOWPASS_TIME_CONSTANT_S", ACCEL_LOWPASS_TIME_CONSTANT_S,
                                      "ACCEL_SPIKE_SIGMAS", ACCEL_SPIKE_SIGMAS,
                                      "REST_GATE_SIGMAS", REST_GATE_SIGMAS,
@@ -872,6 +946,12 @@ PyMODINIT_FUNC PyInit__kernel(void)
                                      GRAVITY_TIME_CONSTANT_S, "MAG_REFERENCE_SAMPLES",
                                      MAG_REFERENCE_SAMPLES, "MAG_RELEARN_AFTER_S",
                                      MAG_RELEARN_AFTER_S, "MAG_MAX_DT_S", MAG_MAX_DT_S,
+                                     "MAG_SMOOTH_TIME_CONSTANT_S", MAG_SMOOTH_TIME_CONSTANT_S,
+                                     "MAG_SETTLE_S", MAG_SETTLE_S, "MAG_TURN_TIME_CONSTANT_S",
+                                     MAG_TURN_TIME_CONSTANT_S, "MAG_TURN_TOLERANCE_RAD",
+                                     MAG_TURN_TOLERANCE_RAD, "MAG_TURN_FRACTION", MAG_TURN_FRACTION,
+                                     "MAG_DRIFT_SIGMAS", MAG_DRIFT_SIGMAS,
+                                     "MAG_CANDIDATE_NORM_TOLERANCE", MAG_CANDIDATE_NORM_TOLERANCE,
                                      "SMALL_ANGLE_RAD", SMALL_ANGLE_RAD, "EXTRA_COLUMNS",
                                      EXTRA_COLUMNS);
     Py_INCREF(&ParamsType);

@@ -119,6 +119,10 @@ class FilterStatus:
     #: rest, so the heading rate is not verified until a later still phase or a magnetometer
     heading_rate_unverified: bool = False
     heading_recovering: bool = False  #: the heading channel is in its recovery (quick) mode
+    #: what the heading rests on: 'magnetometer' (the last sample was used), 'gyro' (the field
+    #: is disturbed: off the reference, turned when the body did not, or not yet settled back;
+    #: the heading integrates the gyro alone), 'none' (no heading reference: 6-D or no sample)
+    heading_source: str = "none"
 
 
 #: Columns of :meth:`ComplementaryFilter.run_rows`'s ``extra_out``: raw error e (3, rad, sensor),
@@ -348,6 +352,8 @@ class ComplementaryFilter:
             mag_yaw_rate_correction_rad_s=float(s.z_m),
             heading_rate_unverified=bool(s.bias_unverified),
             heading_recovering=bool(s.mag_recovering),
+            heading_source=("none" if not s.heading_initialized else
+                            "gyro" if s.mag_disturbed else "magnetometer"),
         )
 
     def state_snapshot(self) -> Any:

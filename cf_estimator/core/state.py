@@ -95,12 +95,24 @@ HEADING: tuple[Field, ...] = (
     _f("mag_ref_norm", "any", "field norm reference (the magnetometer's unit)"),
     _f("mag_ref_dip", "rad", "field dip reference"),
     _f("mag_ref_count", "1", "samples in the reference"),
-    _f("mag_disturbed", "", "last sample off the reference (rejected)", "bool"),
-    _f("mag_reject_timer_s", "s", "how long samples have been rejected"),
+    _f("mag_disturbed", "", "last sample rejected: off the reference, or not yet settled "
+       "back (latched)", "bool"),
     _f("mag_last_time_s", "s", "time of the last used sample (< 0: none)"),
     _f("heading_initialized", "", "a heading has been taken from the magnetometer", "bool"),
     _f("mag_clip_timer_s", "s", "how long the heading error has been saturated"),
     _f("mag_recovering", "", "heading recovery in progress", "bool"),
+    *_vec("mv", "1", "field direction the gyro predicts: used samples, low-passed and turned by "
+          "the gyro, sensor frame"),
+    *_vec("mc", "1", "candidate field direction: the rejected field's when the candidate began, "
+          "turned by the gyro, sensor frame"),
+    *_vec("mm", "1", "measured field direction: every sample, low-passed and turned by the "
+          "gyro, sensor frame"),
+    _f("mag_cand_norm", "any", "candidate field norm: the rejected field's when it began"),
+    _f("mag_seen_time_s", "s", "time of the last magnetometer sample, used or not (< 0: none)"),
+    _f("mag_ok_timer_s", "s", "how long the field has agreed with the reference without a break"),
+    _f("mag_cand_timer_s", "s", "how long a rejected field has been steady and as the gyro "
+       "predicts (re-learning)"),
+    _f("mag_ref_time_s", "s", "time the field reference was (re-)learned"),
 )
 
 SIGNALS: tuple[Field, ...] = (
@@ -148,6 +160,7 @@ class StepState:
             setattr(self, name, false & True)
         self.qw = zero + 1.0
         self.mag_last_time_s = zero - 1.0
+        self.mag_seen_time_s = zero - 1.0
         self.bias_var = zero - 1.0  # < 0: not yet set from the parameters (first step sets it)
 
     def copy(self) -> StepState:

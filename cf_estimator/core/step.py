@@ -80,7 +80,7 @@ PHASE_NAMES = {0: "uninitialized", 1: "startup", 2: "running", 3: "recovering"}
 
 MAG_NONE = 0  # no magnetometer sample at this step
 MAG_USED = 1  # used for heading
-MAG_REJECTED = 2  # norm or dip off the learned reference: disturbance, ignored
+MAG_REJECTED = 2  # disturbance (norm, dip or turn off the reference; settling): ignored
 MAG_DISABLED = 3  # use_mag is off
 MAG_STATUS_NAMES = {0: "none", 1: "used", 2: "rejected", 3: "disabled"}
 
@@ -99,8 +99,34 @@ ACCEL_DETECT_SIGMAS = 3.0
 QUICK_LAG_TIME_CONSTANT_S = 0.2
 #: Magnetometer samples averaged for the field reference (norm, dip) after start-up.
 MAG_REFERENCE_SAMPLES = 20
-#: A magnetic field rejected this long [s] is taken as the new normal and re-learned.
+#: A rejected field that has stayed steady and turned as the gyro says for as long as the
+#: current reference has been in use (at least MAG_SETTLE_S, at most this) [s] is taken as the
+#: new normal and re-learned: a compass wrong at power-on is replaced within seconds, a long-held
+#: reference only after this long; a magnet on the sensor, which turns with the body, never.
 MAG_RELEARN_AFTER_S = 20.0
+#: After a disturbance the field must agree with the reference this long without a break [s]
+#: before it is used again (a rotating disturbed field passes the tests by chance for moments).
+MAG_SETTLE_S = 3.0
+#: Time constant [s] of the low-passed reference field direction (used samples), which the gyro
+#: turns between samples: over this window a field must turn as the body turns.
+MAG_TURN_TIME_CONSTANT_S = 1.0
+#: Time constant [s] of the low-passed measured field direction (every sample, turned by the
+#: gyro) that the checks compare: sensor noise averages out, a disturbance does not.
+MAG_SMOOTH_TIME_CONSTANT_S = 0.25
+#: Angle [rad] (chord) between a sample's direction and the gyro-predicted one beyond which the
+#: field turned when the body did not: the noise floor ...
+MAG_TURN_TOLERANCE_RAD = 0.05
+#: ... plus this share of the angle the body turned over MAG_TURN_TIME_CONSTANT_S: a residual
+#: hard iron of this share of the field (a calibration's leftover) still passes; a magnet of
+#: 0.3-1x the Earth field on the sensor does not (BROAD's undisturbed trials are unchanged at
+#: 0.05 and 0.1; 0.2 let a 0.3x magnet through).
+MAG_TURN_FRACTION = 0.05
+#: Standard deviations of the bias estimate allowed as gyro drift of the predicted direction per
+#: second since the last used sample (a long disturbance: the field is recognised when it returns).
+MAG_DRIFT_SIGMAS = 3.0
+#: Relative norm change [1] of a rejected field, against the norm it had when the candidate
+#: began, that resets the re-learning (a magnet on a turning body changes the norm).
+MAG_CANDIDATE_NORM_TOLERANCE = 0.05
 #: Longest time [s] one magnetometer sample's correction may stand for (sparse magnetometers).
 MAG_MAX_DT_S = 1.0
 
@@ -181,6 +207,10 @@ def step(
     qw, qx, qy, qz = _mul(s.qw, s.qx, s.qy, s.qz, dw, dx, dy, dz)
     s.qw, s.qx, s.qy, s.qz = qw, qx, qy, qz
     _turn_heading(s, s.z_m * dt, o)
+    # the field directions the heading channel checks samples against turn with the body
+    s.mvx, s.mvy, s.mvz = _rotate(dw, -dx, -dy, -dz, s.mvx, s.mvy, s.mvz)
+    s.mcx, s.mcy, s.mcz = _rotate(dw, -dx, -dy, -dz, s.mcx, s.mcy, s.mcz)
+    s.mmx, s.mmy, s.mmz = _rotate(dw, -dx, -dy, -dz, s.mmx, s.mmy, s.mmz)
 
     s.clipped = s.clipped & False
     s.accel_used = accel is not None
@@ -280,7 +310,6 @@ def step(
 
     bias.clamp(s, p, o)
 
-    s.mag_reject_timer_s = o.where(s.mag_disturbed, s.mag_reject_timer_s + dt, 0.0)
     s.mag_status = o.where(p.use_mag, MAG_NONE, MAG_DISABLED)
     if mag is not None:
         _magnetometer(s, p, mag, fast, learn, o)
@@ -302,11 +331,22 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
         o.where(s.mag_last_time_s < 0.0, 0.0, s.time_s - s.mag_last_time_s), MAG_MAX_DT_S
     )
 
-    # field reference (norm, dip): learned at start and after a long rejection
-    learning = p.use_mag & (s.mag_ref_count < MAG_REFERENCE_SAMPLES)
-    relearn = s.mag_reject_timer_s > MAG_RELEARN_AFTER_S
+    dt_s = o.minimum(
+        o.where(s.mag_seen_time_s < 0.0, 0.0, s.time_s - s.mag_seen_time_s), MAG_MAX_DT_S
+    )
+    fresh = s.mag_seen_time_s < 0.0
+    s.mag_seen_time_s = s.time_s
+
+    # field reference (norm, dip, direction): learned at start, re-learned when a rejected field
+    # has been steady and turned as the gyro says for as long as the reference was in use
+    in_use = o.where(s.mag_last_time_s < 0.0, 0.0, s.mag_last_time_s - s.mag_ref_time_s)
+    relearn = s.mag_cand_timer_s > o.minimum(o.maximum(in_use, MAG_SETTLE_S), MAG_RELEARN_AFTER_S)
     s.mag_ref_count = o.where(relearn, 0, s.mag_ref_count)
-    s.mag_reject_timer_s = o.where(relearn, 0.0, s.mag_reject_timer_s)
+    s.mag_ref_time_s = o.where(relearn, s.time_s, s.mag_ref_time_s)
+    s.mag_cand_timer_s = o.where(relearn, 0.0, s.mag_cand_timer_s)
+    s.mvx, s.mvy, s.mvz = (o.where(relearn, s.mcx, s.mvx), o.where(relearn, s.mcy, s.mvy),
+                           o.where(relearn, s.mcz, s.mvz))
+    learning = p.use_mag & (s.mag_ref_count < MAG_REFERENCE_SAMPLES)
     n = s.mag_ref_count + 1
     s.mag_ref_norm = o.where(learning, s.mag_ref_norm + (mn - s.mag_ref_norm) / n, s.mag_ref_norm)
     s.mag_ref_dip = o.where(learning, s.mag_ref_dip + (dip - s.mag_ref_dip) / n, s.mag_ref_dip)
@@ -315,12 +355,48 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
         mn / o.maximum(s.mag_ref_norm, 1e-300) - 1.0, 1.0 - mn / o.maximum(s.mag_ref_norm, 1e-300)
     )
     off_dip = o.maximum(dip - s.mag_ref_dip, s.mag_ref_dip - dip)
+    # the measured direction, low-passed (every sample; turned by the gyro between samples)
+    a = o.where(fresh, 1.0, dt_s / (MAG_SMOOTH_TIME_CONSTANT_S + dt_s))
+    vx, vy, vz = s.mmx + a * (ux - s.mmx), s.mmy + a * (uy - s.mmy), s.mmz + a * (uz - s.mmz)
+    vn = o.maximum(o.sqrt(vx * vx + vy * vy + vz * vz), 1e-300)
+    mmx, mmy, mmz = vx / vn, vy / vn, vz / vn
+    s.mmx, s.mmy, s.mmz = mmx, mmy, mmz
+    # a field that turned when the body did not: the measured direction against the one the
+    # gyro predicts (tolerance: noise, a calibration's leftover times the angle turned, drift)
+    tol = MAG_TURN_TOLERANCE_RAD + MAG_TURN_FRACTION * MAG_TURN_TIME_CONSTANT_S * s.rate_lp
+    age = o.where(s.mag_last_time_s < 0.0, 0.0, s.time_s - s.mag_last_time_s)
+    drift = MAG_DRIFT_SIGMAS * o.sqrt(o.maximum(s.bias_var, 0.0)) * age
+    turned = o.sqrt((mmx - s.mvx) ** 2 + (mmy - s.mvy) ** 2 + (mmz - s.mvz) ** 2) > tol + drift
+    off = (off_norm > p.mag_norm_tolerance) | (off_dip > p.mag_dip_tolerance_rad) | turned
+    # latched: after the field turned, used again only once it agrees for MAG_SETTLE_S
+    # unbroken (a single sample off in norm or dip is noise: rejected alone)
+    s.mag_ok_timer_s = o.where(learning, MAG_SETTLE_S,
+                               o.where(turned, 0.0, s.mag_ok_timer_s + dt_s))
     disturbed = (
-        p.mag_rejection
-        & o.not_(learning)
-        & ((off_norm > p.mag_norm_tolerance) | (off_dip > p.mag_dip_tolerance_rad))
+        p.mag_rejection & o.not_(learning) & (off | (s.mag_ok_timer_s < MAG_SETTLE_S))
     )
     s.mag_disturbed = disturbed
+    # the candidate: a rejected field that keeps the norm and the direction (turned by the gyro)
+    # it had when the candidate began; over seconds a magnet on a turning body moves away from
+    # both, a world-fixed field does not
+    drift_c = MAG_DRIFT_SIGMAS * o.sqrt(o.maximum(s.bias_var, 0.0)) * s.mag_cand_timer_s
+    cand_moved = (
+        (o.sqrt((mmx - s.mcx) ** 2 + (mmy - s.mcy) ** 2 + (mmz - s.mcz) ** 2)
+         > 2.0 * MAG_TURN_TOLERANCE_RAD + drift_c)
+        | (o.maximum(mn - s.mag_cand_norm, s.mag_cand_norm - mn)
+           > MAG_CANDIDATE_NORM_TOLERANCE * s.mag_cand_norm)
+    )
+    keep = disturbed & o.not_(cand_moved)
+    s.mag_cand_timer_s = o.where(keep, s.mag_cand_timer_s + dt_s, 0.0)
+    s.mcx, s.mcy, s.mcz = (o.where(keep, s.mcx, mmx), o.where(keep, s.mcy, mmy),
+                           o.where(keep, s.mcz, mmz))
+    s.mag_cand_norm = o.where(keep, s.mag_cand_norm, mn)
+    a = o.where(fresh, 1.0, dt_s / (MAG_TURN_TIME_CONSTANT_S + dt_s))
+    ar = o.where(disturbed, 0.0, a)
+    vx, vy, vz = s.mvx + ar * (ux - s.mvx), s.mvy + ar * (uy - s.mvy), s.mvz + ar * (uz - s.mvz)
+    vn = o.maximum(o.sqrt(vx * vx + vy * vy + vz * vz), 1e-300)
+    s.mvx, s.mvy, s.mvz = vx / vn, vy / vn, vz / vn
+
     usable = p.use_mag & o.not_(disturbed) & (horizontal > 1e-3)
     s.mag_status = o.where(p.use_mag, o.where(disturbed, MAG_REJECTED, MAG_USED), MAG_DISABLED)
     s.mag_last_time_s = o.where(usable, s.time_s, s.mag_last_time_s)
@@ -334,7 +410,7 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
     big = o.maximum(yaw_error, -yaw_error) > p.mag_saturation_limit_rad
     s.mag_clip_timer_s = o.where(usable, o.where(big & learn & o.not_(first),
                                                  s.mag_clip_timer_s + dt_m, 0.0),
-                                 s.mag_clip_timer_s)
+                                 o.where(disturbed, 0.0, s.mag_clip_timer_s))
     enter = (p.recovery_trigger_s > 0.0) & (s.mag_clip_timer_s >= p.recovery_trigger_s)
     leave = usable & (o.maximum(yaw_error, -yaw_error) < 0.1 * p.mag_saturation_limit_rad)
     s.mag_recovering = o.where(s.mag_recovering, o.not_(leave), enter)

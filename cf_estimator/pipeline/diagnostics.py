@@ -154,6 +154,9 @@ def compose_report(
                 f"no usable magnetometer sample {age} (stale {counters['mag_stale']}, invalid "
                 f"{counters['mag_invalid']}, rejected {counters['mag_rejected']}): yaw drifts"
             )
+        if initialized and status.heading_source == "gyro":
+            warns.append("heading on the gyro alone: the magnetic field is disturbed (off the "
+                         "reference or turning when the body does not)")
         seen = d_mag["mag_used"] + d_mag["mag_rejected"]
         if seen and d_mag["mag_rejected"] > MAG_REJECTED_WARN_FRACTION * seen:
             warns.append(
@@ -212,6 +215,7 @@ def compose_report(
         ("heading_rate_unverified",
          str(bool(initialized and status.heading_rate_unverified)).lower()),
         ("heading_recovering", str(bool(initialized and status.heading_recovering)).lower()),
+        ("heading_source", status.heading_source if initialized else "none"),
         ("recovery_count", str(status.recovery_count if initialized else 0)),
     ]
     r = rpy_rad if rpy_rad is not None else (None, None, None)
