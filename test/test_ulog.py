@@ -321,3 +321,20 @@ def test_fast_parse_gives_what_pyulog_gives(name):
 
 def test_appended_data_is_left_to_pyulog():
     assert ulog._fast_parse(_require(BOARD).read_bytes()) is None
+
+
+@pytest.mark.parametrize("world", ["ned", "enu", "nwu"])
+def test_vehicle_attitude_in_the_output_frames_rotates_vectors_alike(world):
+    from cf_estimator.core import quaternion as quat
+
+    rng = np.random.default_rng(3)
+    q = rng.normal(size=(20, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    v_frd = rng.normal(size=(20, 3))
+    v_ned = quat.rotate(q, v_frd)
+    body = px4.output_body("frd", world)
+    v_body = v_frd if body == "frd" else v_frd * [1, -1, -1]
+    expect = {"ned": v_ned, "enu": v_ned[:, [1, 0, 2]] * [1, 1, -1],
+              "nwu": v_ned * [1, -1, -1]}[world]
+    got = quat.rotate(px4.attitude_in_output_frames(q, world, body), v_body)
+    assert np.allclose(got, expect)

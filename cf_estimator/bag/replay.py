@@ -853,6 +853,9 @@ class _Px4Input:
         qo = px4.attitude_in_output_frames(q[keep], world,
                                            px4.output_body(r.pparams.body_frame, world))
         if qo is None:
+            text = f"vehicle_attitude is not compared: no conversion into world frame {world}"
+            if text not in r.warnings:
+                r.warnings.append(text)
             return [], []
         return t[keep].tolist(), [tuple(x) for x in qo.tolist()]
 

@@ -95,11 +95,13 @@ def _mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def attitude_in_output_frames(q_ned_frd: np.ndarray, world_frame: str,
                               body: str) -> np.ndarray | None:
     """PX4's ``vehicle_attitude.q`` (FRD → NED, (N, 4) w x y z) in the estimator's output
-    conventions: world ``ned``/``enu``, body ``frd``/``flu`` (:func:`output_body`). None for a
-    world frame this module does not know (the comparison is then left out)."""
+    conventions: world ``ned``/``enu``/``nwu``, body ``frd``/``flu`` (:func:`output_body`).
+    None for a world frame this module does not know (the comparison is then left out)."""
     q = np.asarray(q_ned_frd, dtype=float).reshape(-1, 4)
     if world_frame == "enu":
         q = _mul(_Q_ENU_FROM_NED, q)
+    elif world_frame == "nwu":  # north, west, up: NED turned half a turn about north
+        q = _mul(_Q_FRD_FROM_FLU, q)
     elif world_frame != "ned":
         return None
     if body == "flu":
