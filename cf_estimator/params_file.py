@@ -247,6 +247,16 @@ def load_params_file(
     return fp, pp, warnings
 
 
+def explicit_names(path: str | Path | None, node_name: str = DEFAULT_NODE_NAME) -> frozenset[str]:
+    """The parameter names the file ``path`` sets for ``node_name`` (empty without a file):
+    PX4 input applies its conventions to the others only (``cf_estimator.pipeline.px4``)."""
+    if path is None:
+        return frozenset()
+    path = Path(path)
+    values, _ = _applicable_values(path, _read_doc(path), node_name)
+    return frozenset(values)
+
+
 def format_value(spec: ParamSpec, value: Any) -> str:
     """A YAML scalar for ``value``: floats always with a '.', strings quoted, bools lower case."""
     if spec.kind == "bool":

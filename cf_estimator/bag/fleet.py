@@ -57,7 +57,7 @@ def find_bags(inputs: Sequence[str | os.PathLike[str]]) -> list[Path]:
                 dirs[:] = []
                 continue
             here_found.extend(here / f for f in files
-                              if f.endswith(".bag") and not f.startswith("."))
+                              if f.endswith((".bag", ".ulg")) and not f.startswith("."))
             if here == p and _storage_dir(here):
                 here_found.append(here)
         found.extend(sorted(here_found, key=lambda b: b.relative_to(p).as_posix()))
@@ -67,7 +67,7 @@ def find_bags(inputs: Sequence[str | os.PathLike[str]]) -> list[Path]:
 def output_names(bags: Sequence[Path]) -> list[str]:
     """One unique output name per bag: its name without ``.bag``; on a clash, its path
     below the common directory with ``/`` as ``_``."""
-    stems = [b.name[:-4] if b.name.endswith(".bag") else b.name for b in bags]
+    stems = [b.name[:-4] if b.name.endswith((".bag", ".ulg")) else b.name for b in bags]
     if len(set(stems)) == len(stems):
         return stems
     absolute = [b.resolve() for b in bags]
@@ -75,7 +75,7 @@ def output_names(bags: Sequence[Path]) -> list[str]:
     names = []
     for a in absolute:
         rel = a.relative_to(root).as_posix()
-        names.append((rel[:-4] if rel.endswith(".bag") else rel).replace("/", "_"))
+        names.append((rel[:-4] if rel.endswith((".bag", ".ulg")) else rel).replace("/", "_"))
     return names
 
 

@@ -31,13 +31,13 @@ from typing import Any
 import numpy as np
 
 from cf_estimator import __version__, metrics
-from cf_estimator.bag import cdr, io
+from cf_estimator.bag import cdr, io, ulog
 from cf_estimator.core import quaternion as quat
 from cf_estimator.core.filter import ComplementaryFilter, bias_sigma
 from cf_estimator.core.kernel import resolve_backend
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import BIAS_CONVERGED_SIGMA_RAD_S
-from cf_estimator.pipeline import ImuPipeline, PipelineParams, bulk
+from cf_estimator.pipeline import ImuPipeline, PipelineParams, bulk, px4
 from cf_estimator.schema import as_dict
 
 OUT_IMU_TOPIC = "/imu/data"
@@ -71,6 +71,11 @@ class ReplayOptions:
     bulk_pipeline: bool = True
     #: called with the number of messages read since the last call (a fleet's progress bar)
     on_messages: Callable[[int], None] | None = None
+    #: PX4 ulog: the multi_id to use where a topic has several (None: the lowest, said)
+    instance: int | None = None
+    #: names of the parameters the user set (a parameter file): PX4 input changes only the
+    #: others to PX4's conventions (None: those that differ from the default count as set)
+    explicit_params: frozenset[str] | None = None
 
 
 @dataclass
@@ -611,7 +616,10 @@ def replay_variants(
         if v.output_path is not None:
             io.check_output_path(Path(v.output_path), overwrite=opts.overwrite, inputs=[in_path])
 
-    with io.open_bag(in_path) as bag:
+    with io.open_bag(in_path, ulog_instance=opts.instance) as bag:
+        px4_in = _px4_input(bag, opts, variants)
+        if px4_in is not None:
+            variants = px4_in.variants
         imu_topic = bag.select_topic("IMU", opts.imu_topic, [io.IMU_TYPE], required=True,
                                      option="--imu-topic")
         assert imu_topic is not None
@@ -621,7 +629,9 @@ def replay_variants(
             mag_topic = bag.select_topic("magnetometer", opts.mag_topic, [io.MAG_TYPE],
                                          required=False, option="--mag-topic")
         ref_topic = None
-        if opts.reference_topic is not None:
+        if px4_in is not None and px4_in.reference:
+            ref_topic = ulog.ATTITUDE_TOPIC  # the autopilot's own estimate, beside ours
+        elif opts.reference_topic is not None and opts.reference_topic.lower() != "none":
             ref_topic = bag.select_topic("reference", opts.reference_topic,
                                          (*io.REFERENCE_TYPES, io.IMU_TYPE), required=True,
                                          option="--reference-topic")
@@ -668,7 +678,10 @@ def replay_variants(
                     bulk_run.events(bulk.Events(
                         kinds, chunk.log_ns, chunk.row, chunk.blocks.get(io.IMU_TYPE),
                         chunk.blocks.get(io.MAG_TYPE), chunk.msg))
-                    if ref_topic is not None:
+                    fast_ref = getattr(chunk, "references", None)  # a ulog's, as arrays
+                    if ref_topic is not None and fast_ref is not None and ref_topic != imu_topic:
+                        n_ref += fast_ref(ref_topic, ref_t, ref_q)
+                    elif ref_topic is not None:
                         for i, t in enumerate(chunk.topic):
                             if t == ref_topic:
                                 if t != imu_topic:
@@ -735,7 +748,11 @@ def replay_variants(
     wall = time.perf_counter() - t_wall
     results = []
     for r in runs:
-        series = _series(r, ref_t, ref_q)
+        if px4_in is not None:
+            r.warnings[:0] = px4_in.notes
+        r_ref_t, r_ref_q = (ref_t, ref_q) if px4_in is None or ref_topic != ulog.ATTITUDE_TOPIC \
+            else px4_in.reference_in_output(r, ref_t, ref_q)
+        series = _series(r, r_ref_t, r_ref_q)
         counters = _jsonable(dict(r.pipe.counters))
         stamps = series.t_s
         duration = float(stamps[-1] - stamps[0]) if stamps.size > 1 else 0.0
@@ -797,10 +814,81 @@ def replay_variants(
             stats, scored = error_statistics(series.t_s, series.q_wxyz, series.ref_t_s,
                                              series.ref_q_wxyz, align)
             stats["topic"] = ref_topic
+            if px4_in is not None and ref_topic == ulog.ATTITUDE_TOPIC:
+                stats["kind"] = "autopilot"
+                stats["label"] = AUTOPILOT_LABEL
             summary["reference"] = stats
             summary["rmse_deg"] = stats.get("rmse_deg")
+        if px4_in is not None:
+            summary["px4"] = px4_in.summary(r)
         results.append(ReplayResult(_jsonable(summary), series, r.out_path, scored))
     return results
+
+
+AUTOPILOT_LABEL = ("agreement with the autopilot's estimate (vehicle_attitude, itself an "
+                   "estimate), not ground truth")
+#: Below this share of the log's duration covered by the IMU, the replay says so.
+IMU_COVERAGE_WARN_FRACTION = 0.5
+
+
+@dataclass
+class _Px4Input:
+    """What a PX4 ulog changes in a replay: the conventions, the autopilot comparison, notes."""
+
+    bag: Any
+    variants: list[ReplayVariant]
+    changed: list[str]
+    reference: bool  #: compare with the log's vehicle_attitude
+    notes: list[str]
+    span: tuple[float, float, float]  #: first, last IMU stamp, log duration [s]
+
+    def reference_in_output(self, r: _Run, ref_t: Sequence[float], ref_q: Sequence[Any]
+                            ) -> tuple[list[float], list[Any]]:
+        """vehicle_attitude (FRD → NED) in the run's output frames, within the IMU's span."""
+        t = np.asarray(ref_t, dtype=float)
+        q = np.asarray(ref_q, dtype=float).reshape(-1, 4)
+        lo, hi, _dur = self.span
+        keep = (t >= lo - MAX_INTERPOLATION_GAP_S) & (t <= hi + MAX_INTERPOLATION_GAP_S)
+        world = r.fparams.world_frame
+        qo = px4.attitude_in_output_frames(q[keep], world,
+                                           px4.output_body(r.pparams.body_frame, world))
+        if qo is None:
+            text = f"vehicle_attitude is not compared: no conversion into world frame {world}"
+            if text not in r.warnings:
+                r.warnings.append(text)
+            return [], []
+        return t[keep].tolist(), [tuple(x) for x in qo.tolist()]
+
+    def summary(self, r: _Run) -> dict[str, Any]:
+        lo, hi, dur = self.span
+        return {"conventions_applied": self.changed, "instances": dict(self.bag.instances),
+                "truncated": bool(self.bag.truncated), "imu_first_s": lo, "imu_last_s": hi,
+                "log_duration_s": dur,
+                "output_frames": f"{px4.output_body(r.pparams.body_frame, r.fparams.world_frame)}"
+                                 f" body -> {r.fparams.world_frame} world"}
+
+
+def _px4_input(bag: Any, opts: ReplayOptions, variants: Sequence[ReplayVariant]
+               ) -> _Px4Input | None:
+    """PX4 input (a ulog): PX4's conventions for every parameter the user did not set, the
+    log's vehicle_attitude as the comparison (unless another reference was asked for), and
+    the reader's notes; None for a bag."""
+    if not isinstance(bag, ulog.UlogBag):
+        return None
+    out, changed = [], []
+    for v in variants:
+        fp, pp, changed = px4.apply_px4_conventions(
+            v.filter_params or FilterParams(), v.pipeline_params or PipelineParams(),
+            opts.explicit_params)
+        out.append(dataclasses.replace(v, filter_params=fp, pipeline_params=pp))
+    notes = list(bag.notes)
+    lo, hi, dur = bag.imu_coverage()
+    if dur > 0 and (hi - lo) < IMU_COVERAGE_WARN_FRACTION * dur:
+        notes.append(f"{ulog.IMU_TOPIC} covers only {hi - lo:.1f} s ({lo:.1f} s to {hi:.1f} s "
+                     f"since boot) of the {dur:.1f} s log: the estimate and the comparison "
+                     "cover that span only")
+    want_ref = opts.reference_topic is None and bag.count([ulog.ATTITUDE_TOPIC]) > 0
+    return _Px4Input(bag, out, changed, want_ref, notes, (lo, hi, dur))
 
 
 def _velocity_summary(pipe: Any, n_vel: int) -> dict[str, Any]:

@@ -34,18 +34,22 @@ def register(subparsers: Any) -> None:
     """Add the ``replay`` sub-command to ``subparsers``."""
     p = subparsers.add_parser(
         "replay",
-        help="replay a ROS 1/ROS 2 bag through the estimator (no ROS needed)",
+        help="replay a ROS 1/ROS 2 bag or a PX4 ulog through the estimator (no ROS needed)",
         description=(
             "Replay a recorded bag (ROS 1 .bag, or ROS 2 bag directory with sqlite3 or mcap "
             "storage) through exactly the node's processing and write a ROS 2 bag with its "
             "output topics /imu/data, /imu/rpy and /diagnostics (same types and stamps as the "
             "live node), a JSON summary and plots. IMU and magnetometer topics are detected by "
-            "message type when there is exactly one of each."
+            "message type when there is exactly one of each. A PX4 ulog (.ulg) is read like a "
+            "bag: sensor_combined, vehicle_magnetometer (or sensor_combined's magnetometer), "
+            "vehicle_local_position for --velocity-topic; the output follows PX4's conventions "
+            "(FRD body -> NED, stamps = log time since boot) and is compared with the log's "
+            "vehicle_attitude (agreement with the autopilot, not ground truth)."
         ),
     )
     p.add_argument("bag", metavar="BAG", nargs="+",
-                   help="input bag: ROS 1 .bag file or ROS 2 bag directory; several, or a "
-                   "directory of bags (searched recursively, ROS 1 and ROS 2 mixed), replay a "
+                   help="input bag: ROS 1 .bag file, ROS 2 bag directory or PX4 .ulg log; "
+                   "several, or a directory of them (searched recursively, mixed), replay a "
                    "fleet: one output per bag, a summary table and one JSON")
     p.add_argument("-o", "--output", metavar="OUT",
                    help="output ROS 2 bag directory (written atomically; see --overwrite); for "
@@ -62,6 +66,9 @@ def register(subparsers: Any) -> None:
                    help="orientation reference (geometry_msgs/PoseStamped, QuaternionStamped, "
                         "nav_msgs/Odometry, or a sensor_msgs/Imu's orientation): adds error "
                         "statistics")
+    p.add_argument("--instance", type=int, metavar="N",
+                   help="PX4 ulog: the instance (multi_id) to use of a topic logged several "
+                        "times, e.g. a second magnetometer (default: the lowest, said)")
     p.add_argument("--heading-alignment", choices=HEADING_ALIGNMENTS, default="auto",
                    help="unknown constant heading offset of the reference: none, first (match the "
                         "first scored sample), mean (circular mean); auto = none with a "
@@ -152,6 +159,20 @@ def heading_warning(s: dict[str, Any]) -> str | None:
             "follows the gyro (see mag_rejection, mag_norm_tolerance, mag_dip_tolerance_rad)")
 
 
+def autopilot_line(ref: dict[str, Any]) -> str:
+    """``px4 vs vehicle_attitude``: roll, pitch, yaw, inclination RMS / max [deg], labelled as
+    agreement with the autopilot's estimate (not ground truth)."""
+    if not ref.get("rmse_deg"):
+        return (f"autopilot vs {ref['topic']}: no sample of the autopilot's estimate overlaps "
+                "ours")
+    rms, mx = ref["rpy_rmse_deg"], ref["rpy_max_deg"]
+    parts = [f"{k} {rms[k]:.3f}/{mx[k]:.3f}" for k in ("roll", "pitch", "yaw")]
+    parts.append(f"inclination {ref['rmse_deg']['inclination']:.3f}/"
+                 f"{ref['max_deg']['inclination']:.3f}")
+    return (f"autopilot {ref['label']}, {ref['samples_scored']} samples of {ref['topic']}: "
+            f"RMS/max [deg] {', '.join(parts)}")
+
+
 def print_summary(s: dict[str, Any], out: Any = None) -> None:
     """The human summary of one replay (to ``out``, default stdout)."""
     out = sys.stdout if out is None else out
@@ -163,6 +184,11 @@ def print_summary(s: dict[str, Any], out: Any = None) -> None:
     print(f"input   {s['input']} ({s['input_format']}): {s['messages_in']} IMU on "
           f"{topics['imu']}, {s['mag_messages_in']} mag on {topics['mag'] or '-'}, "
           f"{s['duration_s']:.1f} s of stamps, {rate_text}", file=out)
+    if s.get("px4"):
+        x = s["px4"]
+        print(f"px4     output {x['output_frames']} (PX4 conventions: "
+              f"{', '.join(x['conventions_applied']) or 'as set'}); stamps: log time since "
+              "boot", file=out)
     rej = s["messages_rejected"]
     print(f"pipeline processed {s['messages_processed']}, rejected "
           f"{sum(rej.values())} ({_format_counts(rej)}), gaps {s.get('gaps')}, resets "
@@ -184,7 +210,9 @@ def print_summary(s: dict[str, Any], out: Any = None) -> None:
         print(f"output  {s['output']} ({s['storage']}): {_format_counts(s['outputs_written'])}",
               file=out)
     ref = s.get("reference")
-    if ref:
+    if ref and ref.get("kind") == "autopilot":
+        print(autopilot_line(ref), file=out)
+    elif ref:
         rmse = ref.get("rmse_deg")
         if rmse:
             print(f"error   vs {ref['topic']} ({ref['samples_scored']} samples, heading "
@@ -211,7 +239,11 @@ def _is_fleet(args: argparse.Namespace) -> bool:
 
 
 def _options(args: argparse.Namespace) -> ReplayOptions:
+    from cf_estimator.params_file import explicit_names
+
     return ReplayOptions(
+        instance=args.instance,
+        explicit_params=explicit_names(args.params, args.node_name),
         imu_topic=args.imu_topic, mag_topic=args.mag_topic, reference_topic=args.reference_topic,
         storage=args.storage, copy_inputs=args.copy_inputs, overwrite=args.overwrite,
         heading_alignment=args.heading_alignment, progress=args.progress,

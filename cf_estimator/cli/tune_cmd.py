@@ -229,6 +229,7 @@ class _BagLoad:
     imu_topic: str | None
     mag_topic: str | None
     score_after: float
+    world_frame: str = "enu"  #: the frame a PX4 log's vehicle_attitude is compared in
 
 
 def _load_bag(task: _BagLoad) -> tuple[Any, str | None, int]:
@@ -240,7 +241,8 @@ def _load_bag(task: _BagLoad) -> tuple[Any, str | None, int]:
     try:
         trial = bagtrial.load_bag_trial(task.path, task.reference, imu_topic=task.imu_topic,
                                         mag_topic=task.mag_topic,
-                                        score_after_s=task.score_after)
+                                        score_after_s=task.score_after,
+                                        world_frame=task.world_frame)
     except BagError as exc:
         return None, str(exc).splitlines()[0], exc.code
     except Exception as exc:  # noqa: BLE001 - anything else a broken bag raises: one line
@@ -248,7 +250,7 @@ def _load_bag(task: _BagLoad) -> tuple[Any, str | None, int]:
     return dataclasses.replace(trial, name=task.name), None, 0
 
 
-def _bag_source(args: Any, engine: Any) -> _Source:
+def _bag_source(args: Any, engine: Any, world_frame: str = "enu") -> _Source:
     from pathlib import Path
 
     from cf_estimator.bag.fleet import find_bags, output_names
@@ -263,7 +265,8 @@ def _bag_source(args: Any, engine: Any) -> _Source:
     reference = args.reference_topic or bagtrial.DEFAULT_REFERENCE_TOPIC
     score_after = bagtrial.DEFAULT_SCORE_AFTER_S if args.score_after is None else args.score_after
     loads = [_BagLoad(str(Path(b).absolute()), n, reference, args.imu_topic, args.mag_topic,
-                      score_after) for b, n in zip(bags, output_names(bags), strict=True)]
+                      score_after, world_frame)
+             for b, n in zip(bags, output_names(bags), strict=True)]
     loaded = engine.map(_load_bag, loads)
     trials = [t for t, _e, _c in loaded if t is not None]
     errors = [e for _t, e, _c in loaded if e is not None]
@@ -417,7 +420,8 @@ def run(args: Any) -> int:
 def _run(args: Any, engine: Any, space: Any, limits: dict[str, float], base: Any) -> int:
     from cf_estimator.bench import tuning
 
-    source = _bag_source(args, engine) if args.bag is not None else _broad_source(args, engine)
+    source = (_bag_source(args, engine, base.world_frame) if args.bag is not None
+              else _broad_source(args, engine))
     objective = _objective(args, source)
     space, dropped = tuning.for_objective(space, objective)
     if dropped:

@@ -138,15 +138,17 @@ class CfEstimatorNode(Node):
         super().__init__(node_name, **kwargs)
         log = self.get_logger()
         self._names = {s.name for s in all_specs()}
-        values = {spec.name: self._declare(spec) for spec in all_specs()}
+        values = self._declare_all()
         filter_params, pipeline_params = build_params(values)  # ParameterError: main() reports
         unknown = unknown_names(getattr(self, "_parameter_overrides", {}))  # this node's overrides
         if unknown:  # once, at start-up: a misspelt key would otherwise be silently ignored
             log.warning(f"unknown parameter(s), ignored: {describe_unknown(unknown)}")
         ns = self.get_namespace().rstrip("/")
+        px4_in = pipeline_params.input_type == "px4"
+        imu_in = (f"{pipeline_params.px4_topic_prefix}/sensor_combined" if px4_in else IMU_IN)
         self._pipe = ImuPipeline(
             filter_params, pipeline_params, diagnostics_name=f"{ns}/{self.get_name()}: attitude",
-            imu_topic=self.resolve_topic_name(IMU_IN),
+            imu_topic=self.resolve_topic_name(imu_in),
         )
         self._last_level: int | None = None
         self._converts_axes = self._pipe.converts_axes
@@ -176,13 +178,20 @@ class CfEstimatorNode(Node):
                 ) from None
             self._pub_tf = self.create_publisher(TFMessage, TF_OUT, QoSProfile(depth=TF_DEPTH))
             self._tf_msg = TFMessage(transforms=[TransformStamped()])
-        self._sub_imu = self.create_subscription(
-            Imu, IMU_IN, self._on_imu, _sensor_qos(IMU_QUEUE_DEPTH),
-            qos_overriding_options=overrides,
-        )
-        self._sub_mag = self.create_subscription(
-            MagneticField, MAG_IN, self._on_mag, _sensor_qos(), qos_overriding_options=overrides
-        )
+        self._px4 = None
+        if px4_in:  # px4_msgs from PX4's bridge, PX4's QoS (node/px4_input.py)
+            from cf_estimator.node.px4_input import Px4Input
+
+            self._px4 = Px4Input(self, pipeline_params, IMU_QUEUE_DEPTH, overrides)
+        else:
+            self._sub_imu = self.create_subscription(
+                Imu, IMU_IN, self._on_imu, _sensor_qos(IMU_QUEUE_DEPTH),
+                qos_overriding_options=overrides,
+            )
+            self._sub_mag = self.create_subscription(
+                MagneticField, MAG_IN, self._on_mag, _sensor_qos(),
+                qos_overriding_options=overrides,
+            )
         self._sub_vel = None
         if pipeline_params.velocity_topic:
             vel_type = self._velocity_type(pipeline_params)
@@ -206,8 +215,9 @@ class CfEstimatorNode(Node):
         if self._post_set:
             self.add_post_set_parameters_callback(self._apply_parameters)
 
+        ins = self._px4.topics if self._px4 else [IMU_IN, MAG_IN]
         topics = {
-            "in": [self.resolve_topic_name(IMU_IN), self.resolve_topic_name(MAG_IN)]
+            "in": [self.resolve_topic_name(t) for t in ins]
             + ([f"{self.resolve_topic_name(pipeline_params.velocity_topic)} (velocity aiding, "
                 f"{self._sub_vel.msg_type.__name__})"] if self._sub_vel else []),
             "out": [self.resolve_topic_name(IMU_OUT)]
@@ -217,7 +227,8 @@ class CfEstimatorNode(Node):
         }
         backend = self._pipe.filter.backend
         log.info(
-            f"subscribed (sensor-data QoS) to {', '.join(topics['in'])}; publishing "
+            f"subscribed ({'PX4 QoS: best effort, transient local' if px4_in else 'sensor-data'}"
+            f" QoS) to {', '.join(topics['in'])}; publishing "
             f"{', '.join(topics['out'])}; world frame {filter_params.world_frame}, body frame "
             f"{pipeline_params.body_frame}; filter step: "
             + ("compiled kernel" if backend == "compiled"
@@ -235,6 +246,19 @@ class CfEstimatorNode(Node):
         for text in texts:
             self.get_logger().warning(text)
         return texts
+
+    def _declare_all(self) -> dict[str, Any]:
+        """Declare every schema parameter; input_type first: PX4 input declares body_frame,
+        world_frame and velocity_frame with PX4's defaults (overrides still win)."""
+        specs = {s.name: s for s in all_specs()}
+        values = {"input_type": self._declare(specs["input_type"])}
+        px4_in = values["input_type"] == "px4"
+        if px4_in:
+            from cf_estimator.node.px4_input import px4_spec
+        for name, spec in specs.items():
+            if name not in values:
+                values[name] = self._declare(px4_spec(spec) if px4_in else spec)
+        return values
 
     def _declare(self, spec: ParamSpec) -> Any:
         """Declare one schema parameter; a value of the wrong type → ParameterError, one line."""

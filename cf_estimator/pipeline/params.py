@@ -125,6 +125,27 @@ class PipelineParams:
         1.0, "s", "Period of the /diagnostics report (the node's timer; steady clock).",
         minimum=0.05, maximum=60.0, read_only=True, group="diagnostics",
     )
+    input_type: str = param(
+        "sensor_msgs", "", "What the node subscribes to: 'sensor_msgs' (imu/data_raw, imu/mag) "
+        "or 'px4' (px4_msgs from PX4's uXRCE-DDS bridge: <px4_topic_prefix>/sensor_combined, "
+        "vehicle_magnetometer, optionally vehicle_local_position, with PX4's QoS; needs the "
+        "px4_msgs package). PX4 input defaults to body_frame frd, world_frame ned and "
+        "velocity_frame ned (PX4's vehicle_attitude conventions) unless those are set. Offline "
+        "tools read PX4 .ulg logs as PX4 input whatever this says.",
+        choices=("sensor_msgs", "px4"), read_only=True, group="px4",
+    )
+    px4_topic_prefix: str = param(
+        "/fmu/out", "", "Namespace of PX4's output topics with input_type px4, e.g. "
+        "/px4_1/fmu/out for the second vehicle of a multi-vehicle setup (relative: under the "
+        "node's namespace).",
+        read_only=True, group="px4",
+    )
+    px4_local_position: bool = param(
+        False, "", "With input_type px4: also subscribe to <px4_topic_prefix>/"
+        "vehicle_local_position and use its velocity (vx, vy, vz NED, while v_xy_valid and "
+        "v_z_valid) for the velocity aiding.",
+        read_only=True, group="px4",
+    )
 
     def __post_init__(self) -> None:
         validate_fields(self)
@@ -133,6 +154,12 @@ class PipelineParams:
             raise ParameterError(
                 f"tf_parent_frame: {frame!r} is not a frame id (non-empty, no spaces around it, "
                 "no leading '/')"
+            )
+        prefix = self.px4_topic_prefix
+        if not prefix or prefix != prefix.strip() or prefix.endswith("/") or "//" in prefix:
+            raise ParameterError(
+                f"px4_topic_prefix: {prefix!r} is not a topic namespace (e.g. /fmu/out or "
+                "/px4_1/fmu/out: no trailing '/', no spaces)"
             )
         if 0.0 < self.reset_after_gap_s < self.max_dt_s:
             raise ParameterError(
