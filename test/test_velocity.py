@@ -357,3 +357,22 @@ def test_an_aided_accelerometer_is_followed_without_the_slow_lag():
     err_aided, _ = _tilt_after(3.0, aided=True)
     err_unaided, _ = _tilt_after(3.0)
     assert err_aided < 0.5 * err_unaided
+
+
+def test_time_to_hold_counts_from_the_first_velocity_sample_until_it_stays_below_2_deg():
+    from types import SimpleNamespace
+
+    from cf_estimator.bench.euroc_eval import time_to_hold_s
+    from cf_estimator.core import quaternion as quat
+
+    t = np.arange(0.0, 30.0, 0.1)
+    ref = np.tile([1.0, 0.0, 0.0, 0.0], (t.size, 1))
+    tilt = np.radians(np.where(t < 12.0, 5.0, 0.5))  # 5 deg until 12 s, then 0.5 deg
+    tilt[(t > 15.0) & (t < 15.5)] = np.radians(3.0)  # one more excursion, until 15.5 s
+    est = quat.from_euler(tilt, np.zeros_like(t), np.zeros_like(t))
+    flight = SimpleNamespace(t_s=t, q_ref=ref, has_reference=np.ones(t.size, bool),
+                             velocity_t_s=np.array([4.0, 4.1]))
+    assert time_to_hold_s(flight, est) == pytest.approx(15.5 - 4.0, abs=0.11)
+    assert math.isnan(time_to_hold_s(flight, quat.from_euler(np.radians(5.0) + 0 * t, 0 * t,
+                                                              0 * t)))
+    assert time_to_hold_s(SimpleNamespace(**{**vars(flight), "velocity_t_s": None}), est) != 0.0

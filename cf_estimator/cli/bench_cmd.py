@@ -395,6 +395,14 @@ def run_euroc(args: Any) -> int:
             print(f"  note: {name}: {line}")
     print()
     print(ev.format_table(result), end="")
+    if velocity is not None:
+        print()
+        print(f"time from the first velocity sample until the inclination error stays below "
+              f"{ev.HOLD_THRESHOLD_DEG:g} deg [s] (median over the flights that get there):")
+        for algo in result.algorithms():
+            med, ok, n = ev.median_hold_s(result, algo)
+            text = f"{med:.1f}" if math.isfinite(med) else "never"
+            print(f"  {algo:<28} {text:>6}  ({ok} of {n} flights; per flight in --json)")
     midair = {}
     for start in starts:
         mid = ev.run_midair(flights, params, start, peers, jobs=args.jobs, velocity=velocity)
