@@ -23,9 +23,9 @@ from cf_estimator.core.kernel import resolve_backend
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import BIAS_CONVERGED_SIGMA_RAD_S
 from cf_estimator.core.velocity import (
-    AIDING_TAKE_HOLD_S,
     VelocityAiding,
     VelocityStatus,
+    apply_aiding,
     filter_bias,
 )
 
@@ -182,10 +182,7 @@ def run_aided(f: ComplementaryFilter, aiding: VelocityAiding, gyro: np.ndarray, 
         else:
             a_in = aiding.aided_accel(ts[i], g_rows[i], a_rows[i], dts[i],
                                       f.orientation_tuple(), filter_bias(f))
-            if aiding.started:
-                f.take_hold(AIDING_TAKE_HOLD_S, reopen_bias=aiding.first_start)
-            f.set_aided(aiding.active)
-            f.correct_heading(aiding.take_heading_correction())
+            apply_aiding(f, aiding)
             f.update(g_rows[i], a_in, dts[i], m)
         q_out[i] = f.orientation_tuple()
         aided_out[i] = aiding.active

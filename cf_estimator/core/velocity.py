@@ -440,6 +440,17 @@ class VelocityAiding:
             age_s=now - self._m_t if self._m is not None else math.inf)
 
 
+def apply_aiding(f: Any, aiding: VelocityAiding) -> None:
+    """What the aiding tells the filter before its update (after
+    :meth:`VelocityAiding.aided_accel`): take hold when aiding began, whether the sample is
+    aided, the heading correction due. One place for the per-message pipeline and
+    :func:`~cf_estimator.core.batch.estimate`."""
+    if aiding.started:
+        f.take_hold(AIDING_TAKE_HOLD_S, reopen_bias=aiding.first_start)
+    f.set_aided(aiding.active)
+    f.correct_heading(aiding.take_heading_correction())
+
+
 def filter_bias(f: Any) -> tuple[float, float, float]:
     """The regulator's integral (bias) state b of a ComplementaryFilter [rad/s], cheaply."""
     s = f._state  # noqa: SLF001 - read-only access to the state fields

@@ -41,7 +41,7 @@ from typing import Any
 from cf_estimator.core.filter import ComplementaryFilter
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import MAG_DISABLED, MAG_REJECTED, MAG_USED
-from cf_estimator.core.velocity import AIDING_TAKE_HOLD_S, VelocityAiding, filter_bias
+from cf_estimator.core.velocity import VelocityAiding, apply_aiding, filter_bias
 from cf_estimator.pipeline import checks
 from cf_estimator.pipeline.covariance import OrientationCovariance
 from cf_estimator.pipeline.diagnostics import (
@@ -479,10 +479,7 @@ class ImuPipeline:
             if self._aiding is not None:
                 acc = self._aiding.aided_accel(t_ns * 1e-9, (gx, gy, gz), acc, dt,
                                                f.orientation_tuple(), filter_bias(f))
-                if self._aiding.started:
-                    f.take_hold(AIDING_TAKE_HOLD_S, reopen_bias=self._aiding.first_start)
-                f.set_aided(self._aiding.active)
-                f.correct_heading(self._aiding.take_heading_correction())
+                apply_aiding(f, self._aiding)
             q = f.update((gx, gy, gz), acc, dt, mag)
             s = f._state  # noqa: SLF001 - per-sample flags without building FilterStatus (20 us)
             if mag is not None:
