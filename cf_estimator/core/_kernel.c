@@ -154,6 +154,17 @@ static void turn_heading(cf_state *s, double angle)
     s->ly = ly;
 }
 
+/* _toward_unit() of step.py: v <- normalise(v + a (u - v)) */
+static void toward_unit(double *vx, double *vy, double *vz, double ux, double uy, double uz,
+                        double a)
+{
+    double x = *vx + a * (ux - *vx), y = *vy + a * (uy - *vy), z = *vz + a * (uz - *vz);
+    double n = maxd(sqrt(x * x + y * y + z * z), 1e-300);
+    *vx = x / n;
+    *vy = y / n;
+    *vz = z / n;
+}
+
 static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int fast, int learn)
 {
     double mx = mag[0], my = mag[1], mz = mag[2];
@@ -163,8 +174,8 @@ static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int
     rotate(s->qw, s->qx, s->qy, s->qz, ux, uy, uz, w);
     double horizontal = sqrt(w[0] * w[0] + w[1] * w[1]);
     double dip = atan2(-w[2], horizontal);
-    double dt_m = mind(s->mag_last_time_s < 0.0 ? 0.0 : s->time_s - s->mag_last_time_s,
-                       MAG_MAX_DT_S);
+    double age = s->mag_last_time_s < 0.0 ? 0.0 : s->time_s - s->mag_last_time_s;
+    double dt_m = mind(age, MAG_MAX_DT_S);
 
     double dt_s = mind(s->mag_seen_time_s < 0.0 ? 0.0 : s->time_s - s->mag_seen_time_s,
                        MAG_MAX_DT_S);
@@ -192,16 +203,10 @@ static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int
                            1.0 - mn / maxd(s->mag_ref_norm, 1e-300));
     double off_dip = maxd(dip - s->mag_ref_dip, s->mag_ref_dip - dip);
     double a = fresh ? 1.0 : dt_s / (MAG_SMOOTH_TIME_CONSTANT_S + dt_s);
-    double vx = s->mmx + a * (ux - s->mmx), vy = s->mmy + a * (uy - s->mmy),
-           vz = s->mmz + a * (uz - s->mmz);
-    double vn = maxd(sqrt(vx * vx + vy * vy + vz * vz), 1e-300);
-    double mmx = vx / vn, mmy = vy / vn, mmz = vz / vn;
-    s->mmx = mmx;
-    s->mmy = mmy;
-    s->mmz = mmz;
+    toward_unit(&s->mmx, &s->mmy, &s->mmz, ux, uy, uz, a);
+    double mmx = s->mmx, mmy = s->mmy, mmz = s->mmz;
     double tol = MAG_TURN_TOLERANCE_RAD +
                  MAG_TURN_FRACTION * MAG_TURN_TIME_CONSTANT_S * s->rate_lp;
-    double age = s->mag_last_time_s < 0.0 ? 0.0 : s->time_s - s->mag_last_time_s;
     double drift = MAG_DRIFT_SIGMAS * sqrt(maxd(s->bias_var, 0.0)) * age;
     int turned =
         sqrt(pow(mmx - s->mvx, 2.0) + pow(mmy - s->mvy, 2.0) + pow(mmz - s->mvz, 2.0)) > tol + drift;
@@ -224,14 +229,7 @@ static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int
         s->mag_cand_norm = mn;
     }
     a = fresh ? 1.0 : dt_s / (MAG_TURN_TIME_CONSTANT_S + dt_s);
-    double ar = disturbed ? 0.0 : a;
-    vx = s->mvx + ar * (ux - s->mvx);
-    vy = s->mvy + ar * (uy - s->mvy);
-    vz = s->mvz + ar * (uz - s->mvz);
-    vn = maxd(sqrt(vx * vx + vy * vy + vz * vz), 1e-300);
-    s->mvx = vx / vn;
-    s->mvy = vy / vn;
-    s->mvz = vz / vn;
+    toward_unit(&s->mvx, &s->mvy, &s->mvz, ux, uy, uz, disturbed ? 0.0 : a);
 
     int usable = p->use_mag && !disturbed && (horizontal > 1e-3);
     s->mag_status = p->use_mag ? (disturbed ? MAG_REJECTED : MAG_USED) : MAG_DISABLED;

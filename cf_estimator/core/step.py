@@ -178,6 +178,13 @@ def turn_heading(s: StepState, angle: Any, o: Any) -> None:
     s.lx, s.ly = c * s.lx - sn * s.ly, sn * s.lx + c * s.ly
 
 
+def _toward_unit(v: tuple, u: tuple, a: Any, o: Any) -> tuple:
+    """A unit vector low-pass: v + a·(u − v), renormalised (weight ``a`` in [0, 1])."""
+    x, y, z = v[0] + a * (u[0] - v[0]), v[1] + a * (u[1] - v[1]), v[2] + a * (u[2] - v[2])
+    n = o.maximum(o.sqrt(x * x + y * y + z * z), 1e-300)
+    return x / n, y / n, z / n
+
+
 def _normalize(s: StepState, o: Any) -> None:
     n = o.sqrt(s.qw * s.qw + s.qx * s.qx + s.qy * s.qy + s.qz * s.qz)
     s.qw, s.qx, s.qy, s.qz = s.qw / n, s.qx / n, s.qy / n, s.qz / n
@@ -334,9 +341,10 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
     wx, wy, wz = _rotate(s.qw, s.qx, s.qy, s.qz, ux, uy, uz)
     horizontal = o.sqrt(wx * wx + wy * wy)
     dip = o.atan2(-wz, horizontal)
-    dt_m = o.minimum(
-        o.where(s.mag_last_time_s < 0.0, 0.0, s.time_s - s.mag_last_time_s), MAG_MAX_DT_S
-    )
+    # time since the last used sample: the drift allowed to the predicted direction, and
+    # (capped) how long one correction stands for
+    age = o.where(s.mag_last_time_s < 0.0, 0.0, s.time_s - s.mag_last_time_s)
+    dt_m = o.minimum(age, MAG_MAX_DT_S)
 
     dt_s = o.minimum(
         o.where(s.mag_seen_time_s < 0.0, 0.0, s.time_s - s.mag_seen_time_s), MAG_MAX_DT_S
@@ -364,14 +372,11 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
     off_dip = o.maximum(dip - s.mag_ref_dip, s.mag_ref_dip - dip)
     # the measured direction, low-passed (every sample; turned by the gyro between samples)
     a = o.where(fresh, 1.0, dt_s / (MAG_SMOOTH_TIME_CONSTANT_S + dt_s))
-    vx, vy, vz = s.mmx + a * (ux - s.mmx), s.mmy + a * (uy - s.mmy), s.mmz + a * (uz - s.mmz)
-    vn = o.maximum(o.sqrt(vx * vx + vy * vy + vz * vz), 1e-300)
-    mmx, mmy, mmz = vx / vn, vy / vn, vz / vn
+    mmx, mmy, mmz = _toward_unit((s.mmx, s.mmy, s.mmz), (ux, uy, uz), a, o)
     s.mmx, s.mmy, s.mmz = mmx, mmy, mmz
     # a field that turned when the body did not: the measured direction against the one the
     # gyro predicts (tolerance: noise, a calibration's leftover times the angle turned, drift)
     tol = MAG_TURN_TOLERANCE_RAD + MAG_TURN_FRACTION * MAG_TURN_TIME_CONSTANT_S * s.rate_lp
-    age = o.where(s.mag_last_time_s < 0.0, 0.0, s.time_s - s.mag_last_time_s)
     drift = MAG_DRIFT_SIGMAS * o.sqrt(o.maximum(s.bias_var, 0.0)) * age
     turned = o.sqrt((mmx - s.mvx) ** 2 + (mmy - s.mvy) ** 2 + (mmz - s.mvz) ** 2) > tol + drift
     off = (off_norm > p.mag_norm_tolerance) | (off_dip > p.mag_dip_tolerance_rad) | turned
@@ -399,10 +404,8 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
                            o.where(keep, s.mcz, mmz))
     s.mag_cand_norm = o.where(keep, s.mag_cand_norm, mn)
     a = o.where(fresh, 1.0, dt_s / (MAG_TURN_TIME_CONSTANT_S + dt_s))
-    ar = o.where(disturbed, 0.0, a)
-    vx, vy, vz = s.mvx + ar * (ux - s.mvx), s.mvy + ar * (uy - s.mvy), s.mvz + ar * (uz - s.mvz)
-    vn = o.maximum(o.sqrt(vx * vx + vy * vy + vz * vz), 1e-300)
-    s.mvx, s.mvy, s.mvz = vx / vn, vy / vn, vz / vn
+    s.mvx, s.mvy, s.mvz = _toward_unit((s.mvx, s.mvy, s.mvz), (ux, uy, uz),
+                                       o.where(disturbed, 0.0, a), o)
 
     usable = p.use_mag & o.not_(disturbed) & (horizontal > 1e-3)
     s.mag_status = o.where(p.use_mag, o.where(disturbed, MAG_REJECTED, MAG_USED), MAG_DISABLED)
