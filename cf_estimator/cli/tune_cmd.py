@@ -11,7 +11,7 @@ the peak tilt error; prints before/after and writes a ROS 2 parameter YAML that 
 Data: ``--data DIR`` (BROAD ``*.hdf5`` trials) or ``--bag PATH...`` (IMU, optional magnetometer
 and a reference topic: :mod:`cf_estimator.bench.bagtrial` says how it is read and scored); several
 bags, or directories of them, are tuned together (the mean objective over the recordings). A bag
-that cannot be read is reported on one line and left out; the exit status is how many were.
+that cannot be read is reported on one line and left out; the exit status is then 1.
 ``--cluster`` scores the candidates on Dask (docs/cluster.md).
 """
 
@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from cf_estimator.cli.base import CliError, finite_float
+from cf_estimator.cli.base import EXIT_OK, EXIT_SOME_FAILED, CliError, finite_float
 from cf_estimator.cli.common import (
     add_params_options,
     check_input_path,
@@ -399,7 +399,7 @@ def _write(path: str, best: Any, header: str) -> None:
 
 
 def run(args: Any) -> int:
-    """``tune``: exit 0, or the number of bags left out because they could not be read."""
+    """``tune``: exit 0, or 1 when bags were left out because they could not be read."""
     from cf_estimator.cluster import ClusterError, make_engine
 
     _check_args(args)
@@ -480,5 +480,5 @@ def _run(args: Any, engine: Any, space: Any, limits: dict[str, float], base: Any
                f"scenario limits: {limit_text}\n" + loss_text)
     if source.failed:
         print(f"{source.failed} bag(s) could not be read and were left out (exit status "
-              f"{min(source.failed, 100)})")
-    return min(source.failed, 100)
+              f"{EXIT_SOME_FAILED})")
+    return EXIT_SOME_FAILED if source.failed else EXIT_OK

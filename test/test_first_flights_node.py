@@ -1,0 +1,62 @@
+"""Issue 25, a team's first flights with the node: the live-node items, on real Jazzy rclpy.
+
+Isolated test graphs (7), loud resets (2), frames that say what they are (3), strict parameter
+files (4), the imu_filter_madgwick drop-in (5), wrong message types on the inputs (6). Each
+graph is the tests' own (test/live_graph.py, test/node_harness.py).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+from live_graph import (
+    DEFAULT_DOMAIN_ID_GAIN,
+    DEFAULT_PORT_BASE,
+    DOMAIN_ID_GAIN,
+    PORT_BASE,
+    PROFILE,
+    require,
+    udp_ports_of_this_process,
+)
+
+rclpy = require("rclpy")
+
+from node_harness import Harness  # noqa: E402,I001
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture
+def harness():
+    h = Harness()
+    yield h
+    h.close()
+
+
+# -- item 7: a test graph never reaches a live graph -------------------------------------------
+def test_the_test_graph_is_isolated_by_its_ports(harness):
+    """The test participants listen only on the profile's ports, never on the default ones
+    that every other participant (any vendor, any domain id) uses: they cannot meet."""
+    assert os.environ["RMW_IMPLEMENTATION"] == "rmw_fastrtps_cpp"
+    assert os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] == str(PROFILE)
+    assert os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+    d = harness.domain_id
+    ports = udp_ports_of_this_process()
+    ours = range(PORT_BASE + DOMAIN_ID_GAIN * d, PORT_BASE + DOMAIN_ID_GAIN * (d + 1))
+    default = range(DEFAULT_PORT_BASE + DEFAULT_DOMAIN_ID_GAIN * d,
+                    DEFAULT_PORT_BASE + DEFAULT_DOMAIN_ID_GAIN * (d + 1))
+    assert any(p in ours for p in ports), ports  # the profile is in force
+    assert DEFAULT_PORT_BASE - 400 not in ports, ports  # the default's domain-free port
+    ephemeral = [int(x) for x in Path("/proc/sys/net/ipv4/ip_local_port_range")
+                 .read_text().split()]
+    if default.stop <= ephemeral[0]:  # (above it, a sending socket's port could fall there)
+        assert not any(p in default for p in ports), ports
+    assert max(PORT_BASE + DOMAIN_ID_GAIN * 102, PORT_BASE) < DEFAULT_PORT_BASE - 400
+    assert PORT_BASE - 400 >= 1024  # no privileged port
+
+
+def test_the_isolation_is_documented():
+    text = (REPO / "docs" / "ros_interface.md").read_text()
+    assert "fastdds_test_graph.xml" in text and "isolated by construction" in text
