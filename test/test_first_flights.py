@@ -178,3 +178,22 @@ def test_json_summary_of_a_good_bag_is_complete(tmp_path):
     assert main(["replay", str(path), "--json", str(tmp_path / "j.json")]) == 0
     s = json.loads((tmp_path / "j.json").read_text())
     assert checks.unusable_reason(s) is None
+
+
+# -- item 2 (the helper; the node's use: test_first_flights_node.py) ---------------------------
+def test_rate_limited_warnings_one_line_per_reset_and_per_new_rejection_kind():
+    from cf_estimator.pipeline.log_events import RateLimitedWarnings
+
+    w = RateLimitedWarnings(period_s=5.0)
+    assert w.update({}, {"nonfinite_gyro": 1}, 0.0) == [
+        "IMU message rejected: nonfinite_gyro (first of its kind; 1 so far, counted in "
+        "/diagnostics)"]
+    assert w.update({}, {"nonfinite_gyro": 9}, 1.0) == []  # same kind, within the period
+    lines = w.update({"time_jump_back": 1}, {"nonfinite_gyro": 9, "out_of_order": 1}, 2.0)
+    assert len(lines) == 2 and lines[0].startswith("filter reset (time_jump_back)")
+    assert "out_of_order (first of its kind" in lines[1]
+    assert w.update({"time_jump_back": 2}, {}, 3.0) == []  # held back ...
+    assert w.flush(4.0) == []
+    late = w.flush(7.5)  # ... and said once due, with what was held back
+    assert any("8 more (9 so far)" in t for t in late)
+    assert any("2 reset(s) time_jump_back so far" in t for t in late)

@@ -17,6 +17,7 @@ from live_graph import (
     DOMAIN_ID_GAIN,
     PORT_BASE,
     PROFILE,
+    T0_S,
     require,
     udp_ports_of_this_process,
 )
@@ -60,3 +61,44 @@ def test_the_test_graph_is_isolated_by_its_ports(harness):
 def test_the_isolation_is_documented():
     text = (REPO / "docs" / "ros_interface.md").read_text()
     assert "fastdds_test_graph.xml" in text and "isolated by construction" in text
+
+
+class _Recorder:
+    """Stands in for the node's rclpy logger: keeps (level, text)."""
+
+    def __init__(self) -> None:
+        self.lines: list[tuple[str, str]] = []
+
+    def _add(self, level: str):
+        def log(text: str, **_kwargs) -> bool:
+            self.lines.append((level, text))
+            return True
+        return log
+
+    def __getattr__(self, level: str):
+        return self._add(level)
+
+
+# -- item 2: resets are loud ------------------------------------------------------------------
+def test_every_reset_and_each_new_kind_of_rejection_is_a_warn(harness, monkeypatch):
+    rec = _Recorder()
+    monkeypatch.setattr(harness.node, "get_logger", lambda: rec)
+    assert harness.wait_connected()
+    for _ in range(5):
+        assert harness.publish_one(harness.imu())
+    nan = harness.imu(gyro=(float("nan"), 0.0, 0.0))
+    for _ in range(3):
+        assert harness.publish_one(nan)
+    t_back = T0_S * 10**9 + (harness.k - 300) * 10_000_000  # 3 s before the last stamp
+    assert harness.publish_one(harness.imu(stamp_ns=t_back))
+    assert harness.publish_one(harness.imu(stamp_ns=t_back + 10_000_000))
+    assert harness.publish_one(harness.imu(stamp_ns=t_back - 4 * 10**9))  # a second reset
+    warns = [t for level, t in rec.lines if level in ("warning", "warn")]
+    assert sum("nonfinite_gyro" in t for t in warns) == 1, warns  # once per kind
+    resets = [t for t in warns if t.startswith("filter reset (time_jump_back)")]
+    assert len(resets) == 1, warns  # the second one within the rate limit: held back ...
+    assert harness.pipe.counters["resets"]["time_jump_back"] == 2
+    harness.node._events.period_s = 0.0  # noqa: SLF001 - ... and said with the next report
+    harness.node._on_diagnostics()  # noqa: SLF001
+    warns = [t for level, t in rec.lines if level in ("warning", "warn")]
+    assert any("2 reset(s) time_jump_back so far" in t for t in warns), warns

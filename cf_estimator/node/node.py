@@ -51,6 +51,7 @@ from cf_estimator.params_file import (
 from cf_estimator.pipeline import ImuPipeline
 from cf_estimator.pipeline.checks import RESET_CLOCK_JUMP
 from cf_estimator.pipeline.diagnostics import LEVEL_NAMES
+from cf_estimator.pipeline.log_events import RateLimitedWarnings
 from cf_estimator.schema import ParameterError, ParamSpec, as_dict
 
 NODE_NAME = "cf_estimator"
@@ -149,6 +150,9 @@ class CfEstimatorNode(Node):
             imu_topic=self.resolve_topic_name(IMU_IN),
         )
         self._last_level: int | None = None
+        self._events = RateLimitedWarnings(LOG_THROTTLE_S)
+        self._resets_logged = 0
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._converts_axes = self._pipe.converts_axes
 
         overrides = QoSOverridingOptions.with_default_policies()
@@ -245,14 +249,23 @@ class CfEstimatorNode(Node):
             raise ParameterError(f"{text}{_type_hint(spec, text)}") from None
 
     # -- messages ---------------------------------------------------------------------------
+    def _log_events(self, flush: bool = False) -> None:
+        """One WARN per reset and per new kind of rejection, rate-limited per reason
+        (:class:`cf_estimator.pipeline.log_events.RateLimitedWarnings`, steady clock)."""
+        now_s = self._steady.now().nanoseconds * 1e-9
+        pipe = self._pipe
+        lines = (self._events.flush(now_s) if flush else
+                 self._events.update(pipe.reset_counts, pipe.rejected_counts, now_s))
+        self._resets_logged = pipe.reset_total
+        for text in lines:
+            self.get_logger().warning(text)
+
     def _on_imu(self, msg: Imu) -> None:
         out = self._pipe.on_imu(msg)
         log = self.get_logger()
+        if out is None or self._pipe.reset_total != self._resets_logged:
+            self._log_events()
         if out is None:
-            log.warning(
-                f"IMU message rejected: {self._pipe.last_reject_reason} (counted in /diagnostics)",
-                throttle_duration_sec=LOG_THROTTLE_S,
-            )
             return
         for text in out.warnings:
             log.warning(text)
@@ -350,6 +363,7 @@ class CfEstimatorNode(Node):
         array.header.stamp = now.to_msg()
         array.status = [status]
         self._pub_diag.publish(array)
+        self._log_events(flush=True)  # what the rate limit held back, now due
         if report.level != self._last_level:
             text = f"status {LEVEL_NAMES.get(report.level, report.level)}: {report.message}"
             if report.level == 0:
@@ -363,6 +377,10 @@ class CfEstimatorNode(Node):
         if back_s >= self._pipe.pipeline_params.time_jump_back_threshold_s:
             self._pipe.reset(RESET_CLOCK_JUMP)
             self.get_logger().warning(f"clock jumped back by {back_s:.3f} s: filter reset")
+            # said just now: mark it reported (its line would repeat it)
+            self._events.update(self._pipe.reset_counts, {},
+                                self._steady.now().nanoseconds * 1e-9)
+            self._resets_logged = self._pipe.reset_total
 
     # -- parameters -------------------------------------------------------------------------------
     def _changes(self, params: list[Any]) -> dict[str, Any]:

@@ -113,6 +113,7 @@ class ImuPipeline:
         self._processed = 0
         self._rejected: dict[str, int] = {}
         self._resets: dict[str, int] = {}
+        self.reset_total = 0  #: resets of every reason (a cheap "did it reset?" for the node)
         self._gaps = 0
         self._received_mag = 0
         self._mag_used = 0
@@ -245,6 +246,7 @@ class ImuPipeline:
         self._cov_model.reset()
         self._clear_time_state()
         self._resets[reason] = self._resets.get(reason, 0) + 1
+        self.reset_total += 1
         if self._pending_mag is not None:
             self._pending_mag = None
             self._mag_dropped += 1
@@ -279,6 +281,16 @@ class ImuPipeline:
             "mag_disabled": self._mag_disabled,
             "mag_pending": 0 if self._pending_mag is None else 1,
         }
+
+    @property
+    def rejected_counts(self) -> Mapping[str, int]:
+        """IMU rejections by reason (the live dict: read, do not modify)."""
+        return self._rejected
+
+    @property
+    def reset_counts(self) -> Mapping[str, int]:
+        """Resets by reason (the live dict: read, do not modify)."""
+        return self._resets
 
     @property
     def input_warnings(self) -> dict[str, str]:
