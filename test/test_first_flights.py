@@ -197,3 +197,101 @@ def test_rate_limited_warnings_one_line_per_reset_and_per_new_rejection_kind():
     late = w.flush(7.5)  # ... and said once due, with what was held back
     assert any("8 more (9 so far)" in t for t in late)
     assert any("2 reset(s) time_jump_back so far" in t for t in late)
+
+
+# -- items 3 and 5: frames that say what they are; nwu, true north --------------------------
+def _pipe_output(world_frame: str, body_frame: str = "sensor", frame: str = "base_link",
+                 n: int = 50, **pipeline: object):
+    """The last output of a still, level FLU IMU (and a field pointing north-and-down, ENU
+    magnetic north along y) through a fresh pipeline."""
+    import numpy as np
+
+    from cf_estimator.core.params import FilterParams
+    from cf_estimator.pipeline import ImuPipeline, PipelineParams
+
+    v3 = TS.types["geometry_msgs/msg/Vector3"]
+    Header = TS.types["std_msgs/msg/Header"]
+    Time = TS.types["builtin_interfaces/msg/Time"]
+    Mag = TS.types["sensor_msgs/msg/MagneticField"]
+    # FLU level body, x pointing magnetic north: the field is (B_n, 0, -B_d) in FLU
+    mag = (20e-6, 0.0, -40e-6)
+    accel = (0.0, 0.0, G)
+    if body_frame == "frd":
+        mag, accel = (mag[0], -mag[1], -mag[2]), (0.0, 0.0, -G)
+    pipe = ImuPipeline(FilterParams(world_frame=world_frame),
+                       PipelineParams(body_frame=body_frame, **pipeline))
+    out = None
+    for i in range(n):
+        t = T0_NS + i * 10_000_000
+        h = Header(stamp=Time(sec=t // 10**9, nanosec=t % 10**9), frame_id=frame)
+        pipe.on_mag(Mag(header=h, magnetic_field=v3(x=mag[0], y=mag[1], z=mag[2]),
+                        magnetic_field_covariance=np.zeros(9)))
+        msg = _imu(t, frame)
+        msg.linear_acceleration = v3(x=accel[0], y=accel[1], z=accel[2])
+        msg.angular_velocity = v3(x=0.0, y=0.0, z=0.0)
+        out = pipe.on_imu(msg)
+    assert out is not None and out.initialized
+    return out
+
+
+def test_frame_ids_name_the_published_body_convention():
+    assert _pipe_output("ned", "flu").frame_id == "base_link_frd"
+    assert _pipe_output("enu", "frd", frame="imu_frd").frame_id == "imu_flu"
+    assert _pipe_output("enu", "flu").frame_id == "base_link"  # REP-103 as it came
+    assert _pipe_output("ned", "frd", frame="base_link_frd").frame_id == "base_link_frd"
+    assert _pipe_output("ned", "flu", output_frame_id="fcu").frame_id == "fcu"
+
+
+def test_tf_that_would_be_misread_is_refused():
+    from cf_estimator.pipeline.frames import check_tf_frames
+
+    refusal, _ = check_tf_frames("ned", "flu", "map", "auto")
+    assert refusal and "map_ned" in refusal
+    assert check_tf_frames("ned", "flu", "map_ned", "auto") == (None, None)
+    assert check_tf_frames("enu", "flu", "map", "auto") == (None, None)
+    refusal, _ = check_tf_frames("ned", "flu", "odom_ned", "base_link")
+    assert refusal and "base_link_frd" in refusal
+    assert check_tf_frames("nwu", "sensor", "world_nwu", "auto")[1]  # a warning
+
+
+def test_nwu_is_a_world_frame_with_yaw_from_north():
+    enu = _pipe_output("enu", "flu").rpy_rad
+    nwu = _pipe_output("nwu", "flu").rpy_rad
+    assert enu[2] == pytest.approx(math.pi / 2, abs=1e-3)  # x to magnetic north: 90 deg in ENU
+    assert nwu[2] == pytest.approx(0.0, abs=1e-3)  # ... and 0 in NWU
+    assert nwu[0] == pytest.approx(0.0, abs=1e-3) and nwu[1] == pytest.approx(0.0, abs=1e-3)
+    frd_in_nwu = _pipe_output("nwu", "frd")  # the FRD input turned to FLU, paired with NWU
+    assert frd_in_nwu.frame_id == "base_link_flu" and abs(frd_in_nwu.rpy_rad[0]) < 1e-3
+
+
+def test_declination_makes_yaw_true_north_in_every_world_frame():
+    d = math.radians(10.0)  # magnetic north 10 deg east of true north: true heading +10 deg
+    enu = _pipe_output("enu", "flu", magnetic_declination_rad=d).rpy_rad[2]
+    ned = _pipe_output("ned", "flu", magnetic_declination_rad=d).rpy_rad[2]
+    nwu = _pipe_output("nwu", "flu", magnetic_declination_rad=d).rpy_rad[2]
+    assert math.degrees(enu) == pytest.approx(80.0, abs=0.1)  # CCW from east
+    assert math.degrees(ned) == pytest.approx(10.0, abs=0.1)  # heading, CW from north
+    assert math.degrees(nwu) == pytest.approx(-10.0, abs=0.1)  # CCW from north
+    off = _pipe_output("ned", "flu", magnetic_declination_rad=d,
+                       yaw_offset_rad=math.radians(5.0)).rpy_rad[2]
+    assert math.degrees(off) == pytest.approx(15.0, abs=0.1)
+
+
+def test_nwu_and_declination_replay_as_online(tmp_path):
+    """The bag replay (bulk path and offline) publishes the same world frame as the node."""
+    from cf_estimator.bag.replay import ReplayOptions, replay_bag
+    from cf_estimator.core.params import FilterParams
+    from cf_estimator.pipeline import PipelineParams
+
+    src = tmp_path / "f"
+    write_scenario_bag(make_scenario("flight", rate_hz=50.0, duration_s=20.0, seed=4), src)
+    pp = PipelineParams(magnetic_declination_rad=0.2)
+    yaw = {}
+    for wf in ("enu", "nwu"):
+        for offline in (False, True):
+            r = replay_bag(src, None, FilterParams(world_frame=wf), pp,
+                           ReplayOptions(progress=False, offline=offline))
+            yaw[wf, offline] = r.series.rpy_rad[-1, 2]
+    for offline in (False, True):
+        d = (yaw["nwu", offline] - yaw["enu", offline] + math.pi / 2 + math.pi) % (2 * math.pi)
+        assert d - math.pi == pytest.approx(0.0, abs=1e-6)

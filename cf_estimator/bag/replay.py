@@ -37,7 +37,7 @@ from cf_estimator.core.filter import ComplementaryFilter, bias_sigma
 from cf_estimator.core.kernel import resolve_backend
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import BIAS_CONVERGED_SIGMA_RAD_S
-from cf_estimator.pipeline import ImuPipeline, PipelineParams, bulk, checks
+from cf_estimator.pipeline import ImuPipeline, PipelineParams, bulk, checks, frames
 from cf_estimator.schema import as_dict
 
 OUT_IMU_TOPIC = "/imu/data"
@@ -405,7 +405,7 @@ class _Run:
         self.outputs: list[tuple[int, Any]] = []
         self.offline_segments = 0
         if self.offline:
-            self.recorder = _RecordingFilter(self.fparams)
+            self.recorder = _RecordingFilter(frames.core_params(self.fparams))
             self.pipe._filter = self.recorder  # noqa: SLF001 - same filter, recording its input
         if self.out_path is not None:
             self.bag = io.OutputBag(self.out_path, storage=opts.storage, overwrite=opts.overwrite)
@@ -539,8 +539,10 @@ class _Run:
         """Offline: replace every output's orientation by the offline estimate, then write the
         held outputs and diagnostics in log-time order."""
         t = np.asarray(self.t, dtype=float)
-        q, self.offline_segments = _offline_orientations(t, self.recorder, self.fparams,
+        q, self.offline_segments = _offline_orientations(t, self.recorder,
+                                                         frames.core_params(self.fparams),
                                                          self.pparams.max_dt_s)
+        q = self.pipe.output_frame.apply_array(q)  # published world frame, as online
         self.online_rpy = list(self.rpy)  # what the online filter said, for the plots
         self.q = [tuple(r) if np.all(np.isfinite(r)) else None for r in q.tolist()]
         rpy = quat.to_euler(q)

@@ -51,6 +51,7 @@ from cf_estimator.params_file import (
 from cf_estimator.pipeline import ImuPipeline
 from cf_estimator.pipeline.checks import RESET_CLOCK_JUMP
 from cf_estimator.pipeline.diagnostics import LEVEL_NAMES
+from cf_estimator.pipeline.frames import check_tf_frames
 from cf_estimator.pipeline.log_events import RateLimitedWarnings
 from cf_estimator.schema import ParameterError, ParamSpec, as_dict
 
@@ -171,6 +172,13 @@ class CfEstimatorNode(Node):
         )
         self._pub_tf = None
         if pipeline_params.publish_tf:
+            refusal, tf_warning = check_tf_frames(
+                filter_params.world_frame, pipeline_params.body_frame,
+                pipeline_params.tf_parent_frame, pipeline_params.output_frame_id)
+            if refusal:  # a transform every ROS consumer would misread: not published
+                raise StartError(refusal)
+            if tf_warning:
+                log.warning(tf_warning)
             try:
                 from tf2_msgs.msg import TFMessage
             except ImportError:
@@ -273,6 +281,8 @@ class CfEstimatorNode(Node):
             # imu/data is the input message itself: header, vectors and covariances as received.
             q = msg.orientation
             q.x, q.y, q.z, q.w = out.orientation_xyzw
+            if out.frame_id != msg.header.frame_id:  # output_frame_id: the body published
+                msg.header.frame_id = out.frame_id
             msg.orientation_covariance = out.orientation_covariance
             if self._converts_axes:  # body_frame: the vectors in the output's convention too
                 v = msg.angular_velocity

@@ -42,7 +42,7 @@ from cf_estimator.core.filter import ComplementaryFilter
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import MAG_DISABLED, MAG_REJECTED, MAG_USED
 from cf_estimator.core.velocity import VelocityAiding, filter_bias
-from cf_estimator.pipeline import checks
+from cf_estimator.pipeline import checks, frames
 from cf_estimator.pipeline.covariance import OrientationCovariance
 from cf_estimator.pipeline.diagnostics import (
     DiagnosticsReport,
@@ -105,7 +105,7 @@ class ImuPipeline:
     ) -> None:
         self._fp = filter_params if filter_params is not None else FilterParams()
         self._pp = pipeline_params if pipeline_params is not None else PipelineParams()
-        self._filter = ComplementaryFilter(self._fp)
+        self._filter = ComplementaryFilter(frames.core_params(self._fp))
         self.diagnostics_name = diagnostics_name
         self.imu_topic = imu_topic  #: named in the "no IMU messages" diagnostics (the node's)
         # cumulative counters (plain ints: the hot path increments attributes)
@@ -198,10 +198,10 @@ class ImuPipeline:
         except Exception as exc:  # noqa: BLE001
             return False, str(exc)
         if fp is not self._fp:
-            self._filter.set_params(fp)
+            self._filter.set_params(frames.core_params(fp))
             self._fp = fp
             if self._aiding is not None:
-                self._aiding.set_params(fp)
+                self._aiding.set_params(frames.core_params(fp))
         self._pp = pp
         self._apply_derived()
         return True, ""
@@ -221,6 +221,10 @@ class ImuPipeline:
         self._mag_timeout_ns = int(round(pp.mag_timeout_s * 1e9))
         self._use_mag = self._fp.use_mag
         self._ned = self._fp.world_frame == "ned"
+        # the published world frame, true north, yaw offset (identity: skipped, bit-identical)
+        self._out_frame = frames.OutputFrame(self._fp.world_frame, pp.magnetic_declination_rad,
+                                             pp.yaw_offset_rad)
+        self._out_frame_ids: dict[str, str] = {}  # input frame_id -> output frame_id
         # FLU <-> FRD: (x, y, z) -> (x, -y, -z), a half turn about x. Applied to the input
         # vectors when their convention is not the one paired with the world frame (FLU-ENU,
         # FRD-NED), so the core estimates q_world_from_body in that paired convention.
@@ -250,6 +254,20 @@ class ImuPipeline:
         if self._pending_mag is not None:
             self._pending_mag = None
             self._mag_dropped += 1
+
+    def output_frame_id(self, input_frame_id: str) -> str:
+        """The frame id published for an input ``frame_id`` (:func:`frames.output_frame_id`)."""
+        out = self._out_frame_ids.get(input_frame_id)
+        if out is None:
+            out = frames.output_frame_id(input_frame_id, self._pp.output_frame_id,
+                                         self._fp.world_frame, self._pp.body_frame)
+            self._out_frame_ids[input_frame_id] = out
+        return out
+
+    @property
+    def output_frame(self) -> frames.OutputFrame:
+        """The rotation from the core's world frame to the published one."""
+        return self._out_frame
 
     @property
     def converts_axes(self) -> bool:
@@ -351,9 +369,10 @@ class ImuPipeline:
         :mod:`cf_estimator.pipeline.velocity_input`); returns None, or the rejection reason
         (counted)."""
         if self._aiding is None:
-            self._aiding = VelocityAiding(self._fp)
+            self._aiding = VelocityAiding(frames.core_params(self._fp))
         pp = self._pp
-        got = velocity_from_message(msg, pp.velocity_frame, self._fp.world_frame,
+        got = velocity_from_message(msg, pp.velocity_frame,
+                                    frames.core_world_frame(self._fp.world_frame),
                                     pp.velocity_frame_id)
         if isinstance(got, str):
             self._aiding.reject(got)
@@ -529,6 +548,8 @@ class ImuPipeline:
             rpy = None
             initialized = False
         else:
+            if not self._out_frame.identity:  # core world -> published (nwu, true north)
+                q = self._out_frame.apply(q)
             qw, qx, qy, qz = q
             xyzw = (qx, qy, qz, qw)
             last_mag = self._last_mag_used_ns
@@ -554,8 +575,8 @@ class ImuPipeline:
         else:
             warnings = []
         out = PipelineOutput(
-            sec, nsec, str(frame), xyzw, cov, (gx, gy, gz), av_cov, (ax, ay, az), la_cov,
-            rpy, initialized, warnings,
+            sec, nsec, self.output_frame_id(str(frame)), xyzw, cov, (gx, gy, gz), av_cov,
+            (ax, ay, az), la_cov, rpy, initialized, warnings,
         )
         # -- statistics (incremental) -----------------------------------------------------------
         if w.n == 0:
