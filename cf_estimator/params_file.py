@@ -209,6 +209,24 @@ def unknown_keys(path: str | Path, node_name: str = DEFAULT_NODE_NAME) -> list[s
     return unknown_names(values)
 
 
+def check_names(path: str | Path, node_name: str = DEFAULT_NODE_NAME
+                ) -> tuple[dict[str, Any], list[str]]:
+    """The names a parameter file gives the node ``node_name``: ``(flat name → value of the
+    sections that apply, warnings about the others)``.
+
+    Raises :class:`ParameterError` with the one line that ``replay --params`` and the node with
+    ``strict_parameters`` both give: not a parameter file, no section for this node (e.g. an
+    imu_filter_madgwick file's ``imu_filter:``), unknown or misspelt names (the nearest valid
+    name suggested).
+    """
+    path = Path(path)
+    values, warnings = _applicable_values(path, _read_doc(path), node_name)
+    unknown = unknown_names(values)
+    if unknown:
+        raise ParameterError(f"{path}: unknown parameter {describe_unknown(unknown)}")
+    return values, warnings
+
+
 def load_params_file(
     path: str | Path, node_name: str = DEFAULT_NODE_NAME
 ) -> tuple[FilterParams, PipelineParams, list[str]]:
@@ -224,10 +242,7 @@ def load_params_file(
     written for float parameters (ROS 2 rejects them).
     """
     path = Path(path)
-    values, warnings = _applicable_values(path, _read_doc(path), node_name)
-    unknown = unknown_names(values)
-    if unknown:
-        raise ParameterError(f"{path}: unknown parameter {describe_unknown(unknown)}")
+    values, warnings = check_names(path, node_name)
     specs = {s.name: s for s in all_specs()}
     known: dict[str, Any] = {}
     for name, value in values.items():

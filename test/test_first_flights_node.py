@@ -18,6 +18,7 @@ from live_graph import (
     PORT_BASE,
     PROFILE,
     T0_S,
+    next_domain_id,
     require,
     udp_ports_of_this_process,
 )
@@ -102,3 +103,89 @@ def test_every_reset_and_each_new_kind_of_rejection_is_a_warn(harness, monkeypat
     harness.node._on_diagnostics()  # noqa: SLF001
     warns = [t for level, t in rec.lines if level in ("warning", "warn")]
     assert any("2 reset(s) time_jump_back so far" in t for t in warns), warns
+
+
+# -- item 3: frames that say what they are ----------------------------------------------------
+def test_node_publishes_an_frd_output_under_an_frd_frame_id():
+    from rclpy.parameter import Parameter
+
+    h = Harness(parameter_overrides=[Parameter("world_frame", value="ned"),
+                                     Parameter("body_frame", value="flu"),
+                                     Parameter("use_mag", value=False)])
+    try:
+        got = h.spin_until(lambda: len(h.received["imu"]) >= 3 and h.received["rpy"],
+                           publish=lambda: h.imu_pub.publish(h.imu(frame_id="base_link")))
+        assert got, "no output"
+        assert h.received["imu"][-1].header.frame_id == "base_link_frd"
+        assert h.received["rpy"][-1].header.frame_id == "base_link_frd"
+    finally:
+        h.close()
+
+
+def test_node_refuses_tf_that_would_be_misread():
+    from rclpy.parameter import Parameter
+
+    from cf_estimator.node.node import CfEstimatorNode, StartError
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=next_domain_id())
+    try:
+        with pytest.raises(StartError, match="map_ned"):
+            CfEstimatorNode(context=context, parameter_overrides=[
+                Parameter("world_frame", value="ned"), Parameter("body_frame", value="flu"),
+                Parameter("publish_tf", value=True), Parameter("tf_parent_frame", value="map")])
+    finally:
+        rclpy.shutdown(context=context)
+
+
+# -- item 4: strict parameter files for flight --------------------------------------------------
+@pytest.mark.parametrize(("text", "words"), [
+    ("/**:\n  ros__parameters:\n    k_1: 0.5\n", "unknown parameter 'k_1' (did you mean 'k1'?)"),
+    ("imu_filter:\n  ros__parameters:\n    gain: 0.1\n    world_frame: enu\n",
+     "no section applies to node '/cf_estimator' (sections: imu_filter)"),
+])
+def test_strict_parameters_refuses_what_replay_refuses(tmp_path, text, words):
+    from live_graph import node_process
+
+    from cf_estimator.cli.base import CliError
+    from cf_estimator.cli.common import load_params
+
+    path = tmp_path / "p.yaml"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(CliError) as refused:  # what replay --params says, exit 2
+        load_params(str(path))
+    replay_line = str(refused.value)
+    assert refused.value.code == 2 and words in replay_line
+    proc = node_process(["--ros-args", "--params-file", str(path), "-p",
+                         "strict_parameters:=true"], next_domain_id())
+    try:
+        _out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 2, err
+    fatal = [line for line in err.splitlines() if "FATAL" in line]
+    assert len(fatal) == 1 and replay_line in fatal[0], err
+
+
+def test_strict_parameters_refuses_an_unknown_override():
+    from rclpy.parameter import Parameter
+
+    from cf_estimator.node.node import CfEstimatorNode
+    from cf_estimator.schema import ParameterError
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=next_domain_id())
+    try:
+        with pytest.raises(ParameterError, match="'k_1' \\(did you mean 'k1'\\?\\)"):
+            CfEstimatorNode(context=context, parameter_overrides=[
+                Parameter("strict_parameters", value=True), Parameter("k_1", value=0.5)])
+    finally:
+        rclpy.shutdown(context=context)
+
+
+def test_the_shipped_launch_file_is_strict_and_exposes_frames_velocity_and_params():
+    text = (REPO / "launch_scripts" / "cf_estimator.launch.py").read_text()
+    assert '("strict_parameters", "true"' in text
+    for arg in ("velocity_topic", "world_frame", "body_frame", "params_file"):
+        assert f'("{arg}",' in text

@@ -44,6 +44,7 @@ from sensor_msgs.msg import Imu, MagneticField
 from cf_estimator.params_file import (
     all_specs,
     build_params,
+    check_names,
     describe_unknown,
     unapplied_file_warning,
     unknown_names,
@@ -143,7 +144,13 @@ class CfEstimatorNode(Node):
         values = {spec.name: self._declare(spec) for spec in all_specs()}
         filter_params, pipeline_params = build_params(values)  # ParameterError: main() reports
         unknown = unknown_names(getattr(self, "_parameter_overrides", {}))  # this node's overrides
-        if unknown:  # once, at start-up: a misspelt key would otherwise be silently ignored
+        if pipeline_params.strict_parameters:  # flight: refuse, with replay --params' lines
+            for path in params_files:
+                check_names(path, self.get_fully_qualified_name())  # ParameterError: main()
+            if unknown:
+                raise ParameterError(f"unknown parameter {describe_unknown(unknown)} "
+                                     "(strict_parameters)")
+        elif unknown:  # once, at start-up: a misspelt key would otherwise be silently ignored
             log.warning(f"unknown parameter(s), ignored: {describe_unknown(unknown)}")
         ns = self.get_namespace().rstrip("/")
         self._pipe = ImuPipeline(
