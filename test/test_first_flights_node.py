@@ -189,3 +189,48 @@ def test_the_shipped_launch_file_is_strict_and_exposes_frames_velocity_and_param
     assert '("strict_parameters", "true"' in text
     for arg in ("velocity_topic", "world_frame", "body_frame", "params_file"):
         assert f'("{arg}",' in text
+
+
+# -- item 6: a wrong message type on an input topic ------------------------------------------
+def _diag_values(h) -> dict[str, str]:
+    if not h.received["diag"]:
+        return {}
+    status = h.received["diag"][-1].status[0]
+    return {kv.key: kv.value for kv in status.values} | {"_message": status.message}
+
+
+def test_a_wrong_type_on_the_imu_topic_is_named_once(monkeypatch):
+    from geometry_msgs.msg import Vector3Stamped
+    from nav_msgs.msg import Odometry
+    from rclpy.parameter import Parameter
+    from rclpy.qos import qos_profile_sensor_data
+
+    h = Harness(imu_topic="unused_imu", parameter_overrides=[
+        Parameter("velocity_topic", value="vel"), Parameter("velocity_topic_type", value="twist"),
+        Parameter("diagnostics_period_s", value=0.2)])
+    # another participant on the same test graph (one participant cannot hold two types of
+    # one topic: the node's subscription already gave imu/data_raw its type there)
+    other_context = rclpy.Context()
+    rclpy.init(context=other_context, domain_id=h.domain_id)
+    other = rclpy.create_node("wrong_types", context=other_context)
+    try:
+        rec = _Recorder()
+        monkeypatch.setattr(h.node, "get_logger", lambda: rec)
+        other.create_publisher(Vector3Stamped, "imu/data_raw", qos_profile_sensor_data)
+        other.create_publisher(Odometry, "vel", qos_profile_sensor_data)
+        assert h.spin_until(lambda: {"input_type.imu", "input_type.velocity"}
+                            <= set(_diag_values(h))), _diag_values(h)
+        values = _diag_values(h)
+        assert "geometry_msgs/msg/Vector3Stamped" in values["input_type.imu"]
+        assert "sensor_msgs/msg/Imu" in values["input_type.imu"]
+        assert "nav_msgs/msg/Odometry" in values["input_type.velocity"]
+        assert "geometry_msgs/msg/TwistStamped" in values["input_type.velocity"]
+        assert "Vector3Stamped" in values["_message"]
+        n = len(h.received["diag"])
+        assert h.spin_until(lambda: len(h.received["diag"]) >= n + 3)  # more reports ...
+        warns = [t for level, t in rec.lines if level == "warning" and "advertised as" in t]
+        assert len(warns) == 2, warns  # ... one WARN per input, not one per report
+    finally:
+        other.destroy_node()
+        rclpy.shutdown(context=other_context)
+        h.close()

@@ -50,7 +50,7 @@ from cf_estimator.params_file import (
     unknown_names,
 )
 from cf_estimator.pipeline import ImuPipeline
-from cf_estimator.pipeline.checks import RESET_CLOCK_JUMP
+from cf_estimator.pipeline.checks import RESET_CLOCK_JUMP, input_type_problem
 from cf_estimator.pipeline.diagnostics import LEVEL_NAMES
 from cf_estimator.pipeline.frames import check_tf_frames
 from cf_estimator.pipeline.log_events import RateLimitedWarnings
@@ -158,6 +158,8 @@ class CfEstimatorNode(Node):
             imu_topic=self.resolve_topic_name(IMU_IN),
         )
         self._last_level: int | None = None
+        self._type_problems: dict[str, str] = {}  # input role -> the line warned
+        self._velocity_count = 0
         self._events = RateLimitedWarnings(LOG_THROTTLE_S)
         self._resets_logged = 0
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -352,6 +354,7 @@ class CfEstimatorNode(Node):
         return TwistStamped
 
     def _on_velocity(self, msg: Any) -> None:
+        self._velocity_count += 1
         reason = self._pipe.on_velocity(msg)
         if reason is not None and reason != "too_old":
             self.get_logger().warning(
@@ -367,15 +370,45 @@ class CfEstimatorNode(Node):
                 f"diagnostics failed: {exc}", throttle_duration_sec=LOG_THROTTLE_S
             )
 
+    def _input_type_problems(self) -> dict[str, str]:
+        """``role → one line`` for each input topic that has received nothing and that the
+        graph advertises only with another type (WARN once per topic and type)."""
+        c = self._pipe.counters
+        waiting = [(role, sub) for role, sub, n in (
+            ("IMU", self._sub_imu, c["received_imu"]),
+            ("magnetometer", self._sub_mag, c["received_mag"]),
+            ("velocity", self._sub_vel, self._velocity_count)) if sub is not None and n == 0]
+        if not waiting:
+            self._type_problems = {}
+            return {}
+        problems = {}
+        for role, sub in waiting:
+            cls = sub.msg_type
+            expected = f"{cls.__module__.split('.')[0]}/msg/{cls.__name__}"
+            # the publishers' types (the topic's own list holds this node's subscription too)
+            advertised = sorted({i.topic_type for i in
+                                 self.get_publishers_info_by_topic(sub.topic_name)})
+            text = input_type_problem(role, sub.topic_name, expected, advertised)
+            if text:
+                problems[role] = text
+                if self._type_problems.get(role) != text:
+                    self.get_logger().warning(text)
+        self._type_problems = problems
+        return problems
+
     def _publish_diagnostics(self) -> None:
         now = self.get_clock().now()
         report = self._pipe.diagnostics(now.nanoseconds * 1e-9)
+        problems = self._input_type_problems()
         status = DiagnosticStatus()
-        status.level = bytes([report.level])  # 'byte' field: bytes of length 1 in rclpy
+        level = max(report.level, 1) if problems and report.level < 2 else report.level
+        status.level = bytes([level])  # 'byte' field: bytes of length 1 in rclpy
         status.name = report.name
-        status.message = report.message
+        status.message = report.message + "".join(f"; {t}" for t in problems.values())
         status.hardware_id = report.hardware_id
-        status.values = [KeyValue(key=k, value=v) for k, v in report.values]
+        status.values = [KeyValue(key=k, value=v) for k, v in report.values] + [
+            KeyValue(key=f"input_type.{role.lower()}", value=text)
+            for role, text in problems.items()]
         array = DiagnosticArray()
         array.header.stamp = now.to_msg()
         array.status = [status]

@@ -185,3 +185,16 @@ def unusable_reason(summary: dict) -> str | None:
     if _bad_number(duration):
         return f"no stamp span: duration {duration!r} with {processed} messages processed"
     return None
+
+
+def input_type_problem(role: str, topic: str, expected: str,
+                       advertised: list[str]) -> str | None:
+    """One line when ``topic`` is advertised on the ROS graph only with types other than
+    ``expected`` (e.g. a Vector3Stamped on the IMU input: the subscription never matches, and
+    the node would only say "no IMU messages"); None when it matches or nobody advertises it.
+    """
+    if not advertised or expected in advertised:
+        return None
+    return (f"{role} input {topic} is advertised as {', '.join(sorted(advertised))}, but the "
+            f"node subscribes {expected}: no message can arrive (remap the right topic, or "
+            + ("set velocity_topic_type)" if role == "velocity" else "fix the publisher)"))
