@@ -299,26 +299,41 @@ def render_params_yaml(
     pipeline_params: PipelineParams | None = None,
     *,
     node_key: str = "/**",
+    only: Sequence[str] | None = None,
+    notes: Mapping[str, str] | None = None,
 ) -> str:
-    """The parameter file for these values (defaults when None), every parameter commented."""
+    """The parameter file for these values (defaults when None), every parameter commented.
+
+    ``only``: write just these parameters (e.g. the ones a tuner changed: a file that resets
+    nothing else when it follows another ``--params-file``); ``notes``: name → one more comment
+    line above that parameter (e.g. "ended on its search bound").
+    """
     fp = filter_params if filter_params is not None else FilterParams()
     pp = pipeline_params if pipeline_params is not None else PipelineParams()
     values = {**as_dict(fp), **as_dict(pp)}
+    notes = notes or {}
     lines = [
         "# cf_estimator parameters (ROS 2 parameter file).",
         "# Generated from the parameter schema by cf_estimator.params_file.render_params_yaml;",
-        "# every parameter is listed with [unit], range and meaning. '/**' applies to any node",
+        ("# every parameter is listed with [unit], range and meaning." if only is None else
+         "# only the parameters named below, each with [unit], range and meaning; the node's"
+         "\n# defaults (or an earlier --params-file) hold for every other one.")
+        + " '/**' applies to any node",
         "# name, so --params-file is never silently ignored after a rename or a namespace.",
         f"{node_key}:",
         "  ros__parameters:",
     ]
     group = None
     for spec in all_specs():
+        if only is not None and spec.name not in only:
+            continue
         if spec.group != group:
             group = spec.group
             lines.append("")
             lines.append(f"    # ---- {group or 'general'} ----")
         lines += ["    " + c for c in _comment(spec)]
+        if spec.name in notes:
+            lines += ["    # NOTE: " + line for line in textwrap.wrap(notes[spec.name], 86)]
         lines.append(f"    {spec.name}: {format_value(spec, values[spec.name])}")
     return "\n".join(lines) + "\n"
 

@@ -295,3 +295,58 @@ def test_nwu_and_declination_replay_as_online(tmp_path):
     for offline in (False, True):
         d = (yaw["nwu", offline] - yaw["enu", offline] + math.pi / 2 + math.pi) % (2 * math.pi)
         assert d - math.pi == pytest.approx(0.0, abs=1e-6)
+
+
+# -- item 8: tune writes what it tuned --------------------------------------------------------
+@pytest.fixture(scope="module")
+def flight_bag(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("tune") / "flight"
+    write_scenario_bag(make_scenario("flight", rate_hz=50.0, duration_s=20.0, seed=5), path)
+    return path
+
+
+def _tune(flight_bag: Path, out: Path, *extra: str) -> dict:
+    import yaml
+
+    rc = main(["tune", "--bag", str(flight_bag), "--search", "k1,k2", "--candidates", "4",
+               "--passes", "1", "--jobs", "1", "--scenario-limit", "none", "--force",
+               "--out", str(out), *extra])
+    assert rc == 0
+    return yaml.safe_load(out.read_text())["/**"]["ros__parameters"]
+
+
+def test_tune_writes_only_the_tuned_parameters(flight_bag, tmp_path, capsys):
+    doc = _tune(flight_bag, tmp_path / "t.yaml")
+    assert sorted(doc) == ["k1", "k2"]  # nothing else reset to its default
+    text = (tmp_path / "t.yaml").read_text()
+    assert "# only the tuned parameters (k1, k2)" in text
+    capsys.readouterr()
+
+
+def test_tune_with_params_writes_the_merged_set_and_says_so(flight_bag, tmp_path, capsys):
+    mine = tmp_path / "mine.yaml"
+    mine.write_text("/**:\n  ros__parameters:\n    world_frame: ned\n    body_frame: flu\n"
+                    "    velocity_topic: /mavros/global_position/raw/gps_vel\n"
+                    "    publish_tf: true\n    r1: 0.2\n")
+    doc = _tune(flight_bag, tmp_path / "t.yaml", "--params", str(mine))
+    assert doc["world_frame"] == "ned" and doc["body_frame"] == "flu" and doc["r1"] == 0.2
+    assert doc["velocity_topic"] == "/mavros/global_position/raw/gps_vel" and doc["publish_tf"]
+    assert f"those of --params {mine}" in (tmp_path / "t.yaml").read_text()
+    capsys.readouterr()
+
+
+def test_a_tuned_value_on_a_bound_gets_a_note():
+    from cf_estimator.bench import tuning
+    from cf_estimator.cli.tune_cmd import bound_notes
+    from cf_estimator.core.params import FilterParams
+    from cf_estimator.params_file import render_params_yaml
+
+    space = tuning.space_from_names(["k1", "k2"])
+    best = FilterParams(k1=0.1, k2=0.01)  # k1 on its lower (safety) bound, k2 inside
+    notes = bound_notes(space, best)
+    assert list(notes) == ["k1"] and "lower search bound" in notes["k1"]
+    assert "safety bound" in notes["k1"]
+    space = tuning.with_bounds(space, {"k2": (0.001, 0.01)})
+    assert "--bounds k2=LO:HI" in bound_notes(space, best)["k2"]
+    text = render_params_yaml(best, only=["k1", "k2"], notes=notes)
+    assert "# NOTE: k1 = 0.1 ended on its lower search bound" in text
