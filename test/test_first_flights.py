@@ -350,3 +350,45 @@ def test_a_tuned_value_on_a_bound_gets_a_note():
     assert "--bounds k2=LO:HI" in bound_notes(space, best)["k2"]
     text = render_params_yaml(best, only=["k1", "k2"], notes=notes)
     assert "# NOTE: k1 = 0.1 ended on its lower search bound" in text
+
+
+def test_covariance_docs_agree_with_behaviour():
+    """The first output already has an attitude: no published message carries the -1 marker,
+    and the README says so instead of promising it."""
+    first = _pipe_output("enu", "flu", n=1)
+    assert first.orientation_covariance[0] > 0.0
+    readme = (REPO / "README.md").read_text()
+    assert "−1 until initialised" not in readme and "-1 until initialised" not in readme
+
+
+# -- item 5: the migration doc ----------------------------------------------------------------
+MADGWICK_PARAMETERS = (  # imu_filter_madgwick (imu_tools, ROS 2 Jazzy) declares these
+    "gain", "zeta", "use_mag", "world_frame", "declination", "yaw_offset", "publish_tf",
+    "reverse_tf", "fixed_frame", "orientation_stddev", "constant_dt", "stateless",
+    "remove_gravity_vector", "publish_debug_topics", "mag_bias_x", "mag_bias_y", "mag_bias_z",
+)
+
+
+def test_migration_doc_maps_every_madgwick_parameter_to_ours_or_says_why_not():
+    import ast
+
+    from cf_estimator.params_file import all_specs
+
+    ours = {s.name for s in all_specs()}
+    text = (REPO / "docs" / "migrating_from_madgwick.md").read_text()
+    rows = [line.split("|")[1:-1] for line in text.splitlines() if line.startswith("| `")]
+    mapped = {}
+    for cells in rows:
+        for name in re.findall(r"`(\w+)`", cells[0]):
+            mapped[name] = cells[2]
+    assert set(MADGWICK_PARAMETERS) <= set(mapped), set(MADGWICK_PARAMETERS) - set(mapped)
+    for name, target in mapped.items():
+        names = re.findall(r"`(\w+)`", target)
+        assert names or "not needed" in target or "no equivalent" in target, name
+        assert all(n in ours for n in names), (name, names)
+    # the launch example after the swap uses our parameter names only, and is Python
+    blocks = re.findall(r"```python\n(.*?)```", text, re.S)
+    after = ast.parse(blocks[1])
+    keys = [k.value for d in ast.walk(after) if isinstance(d, ast.Dict) for k in d.keys]
+    assert keys and all(k in ours for k in keys), keys
+    assert "cf_estimator_node" in blocks[1] and "/mavros/imu/data_raw" in blocks[1]
