@@ -11,6 +11,15 @@ site-packages. On a ROS install, use ``apt install ros-jazzy-tf2-msgs`` instead 
 
     python3 scripts/build_tf2_msgs.py            # build unless tf2_msgs already imports
     python3 scripts/build_tf2_msgs.py --force    # rebuild
+    python3 scripts/build_tf2_msgs.py --prefix DIR   # into DIR, the environment untouched
+
+``--prefix DIR`` is for a shared ROS environment that must not be modified: the libraries go to
+``DIR/lib``, the Python package to ``DIR/lib/pythonX.Y/site-packages`` (pip's ``--prefix``
+layout), and the script prints the two variables that make them visible::
+
+    export PYTHONPATH=DIR/lib/pythonX.Y/site-packages:$PYTHONPATH
+    export LD_LIBRARY_PATH=DIR/lib:$LD_LIBRARY_PATH
+
 Exit codes: 0 built or already present, 2 cannot build (one line why).
 """
 
@@ -81,12 +90,30 @@ def _generate(src: Path, gen: Path, share: Path) -> None:
             raise BuildError(f"rosidl {sub} generator: {exc}".splitlines()[0]) from None
 
 
-def build(force: bool = False) -> str:
-    """Build and install; returns what was done (one line)."""
-    if not force and importlib.util.find_spec(PACKAGE) is not None:
+def site_dir(prefix: Path) -> Path:
+    """Where ``--prefix`` puts the Python package (pip's ``--prefix`` layout)."""
+    return prefix / "lib" / f"python{sys.version_info[0]}.{sys.version_info[1]}" / "site-packages"
+
+
+def usage_lines(target: Path) -> str:
+    """The two exports that make a ``--prefix`` build visible to Python and the loader."""
+    return (f"export PYTHONPATH={site_dir(target)}:$PYTHONPATH\n"
+            f"export LD_LIBRARY_PATH={target / 'lib'}:$LD_LIBRARY_PATH")
+
+
+def build(force: bool = False, target: Path | None = None) -> str:
+    """Build and install (into the running environment, or under ``target`` when given);
+    returns what was done."""
+    if target is not None:
+        target = target.absolute()
+        if not force and (site_dir(target) / PACKAGE / "msg").is_dir():
+            return (f"{PACKAGE} already built under {target}: nothing to do (--force rebuilds)"
+                    f"\n{usage_lines(target)}")
+    elif not force and importlib.util.find_spec(PACKAGE) is not None:
         return f"{PACKAGE} already importable: nothing to do"
     prefix = Path(sys.prefix)
     lib, share, include = prefix / "lib", prefix / "share", prefix / "include"
+    dest_lib = lib if target is None else target / "lib"
     if not (share / "geometry_msgs" / "msg" / "TransformStamped.idl").is_file():
         raise BuildError(f"no geometry_msgs interface files under {share}: install the ROS 2 "
                          "wheels first (pip install 'cf_estimator[ros]')")
@@ -98,7 +125,7 @@ def build(force: bool = False) -> str:
             raise BuildError(f"no compiler '{tool}' (set CC/CXX or install gcc and g++)")
     import numpy
 
-    site = Path(sysconfig.get_paths()["purelib"])
+    site = Path(sysconfig.get_paths()["purelib"]) if target is None else site_dir(target)
     with tempfile.TemporaryDirectory(prefix="tf2_msgs_build_") as tmp:
         work = Path(tmp)
         src, gen, out = work / "src", work / "gen", work / "out"
@@ -112,7 +139,7 @@ def build(force: bool = False) -> str:
         incs += [f"-I{d}" for d in sorted(include.iterdir()) if d.is_dir()] + [f"-I{include}"]
         incs += [f"-I{sysconfig.get_paths()['include']}", f"-I{numpy.get_include()}"]
         common = ["-shared", "-fPIC", "-O2", *incs, f"-L{out}", f"-L{lib}",
-                  f"-Wl,-rpath,{lib}"]
+                  f"-Wl,-rpath,{lib}", *([f"-Wl,-rpath,{dest_lib}"] if target else [])]
         name = f"lib{PACKAGE}__rosidl_"
         detail = gen / "c" / PACKAGE / "msg" / "detail"
         steps = [
@@ -147,19 +174,26 @@ def build(force: bool = False) -> str:
             _run([cc, *common, str(ep), f"-l{PACKAGE}__rosidl_generator_py",
                   f"-l{PACKAGE}__rosidl_typesupport_{ts}", f"-l{PACKAGE}__rosidl_generator_c",
                   "-lrosidl_runtime_c", "-o", str(module)])
+        dest_lib.mkdir(parents=True, exist_ok=True)
+        site.mkdir(parents=True, exist_ok=True)
         for so in out.glob("*.so"):
-            shutil.copy2(so, lib / so.name)
+            shutil.copy2(so, dest_lib / so.name)
         shutil.rmtree(site / PACKAGE, ignore_errors=True)
         shutil.copytree(pkg, site / PACKAGE)
-    return f"built {PACKAGE} (TFMessage) into {site / PACKAGE} and {lib}"
+    done = f"built {PACKAGE} (TFMessage) into {site / PACKAGE} and {dest_lib}"
+    return done if target is None else f"{done}; to use it:\n{usage_lines(target)}"
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--force", action="store_true", help="rebuild even if it imports")
+    parser.add_argument("--prefix", metavar="DIR", type=Path,
+                        help="install under DIR (DIR/lib, DIR/lib/pythonX.Y/site-packages) "
+                        "instead of the running environment, e.g. for a shared ROS venv; "
+                        "prints the PYTHONPATH and LD_LIBRARY_PATH to set")
     args = parser.parse_args(argv)
     try:
-        print(build(force=args.force))
+        print(build(force=args.force, target=args.prefix))
     except (BuildError, ImportError, OSError) as exc:
         print(f"build_tf2_msgs: cannot build {PACKAGE}: {exc}", file=sys.stderr)
         return 2

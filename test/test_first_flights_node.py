@@ -234,3 +234,58 @@ def test_a_wrong_type_on_the_imu_topic_is_named_once(monkeypatch):
         other.destroy_node()
         rclpy.shutdown(context=other_context)
         h.close()
+
+
+# -- item 9: tf2_msgs for the wheels ------------------------------------------------------------
+def test_build_tf2_msgs_into_a_prefix_leaves_the_environment_alone(tmp_path):
+    import importlib.util
+    import shutil
+    import subprocess
+    import sys
+
+    if shutil.which("cc") is None or shutil.which("c++") is None:
+        pytest.skip("no C/C++ compiler")
+    if importlib.util.find_spec("rosidl_generator_py") is None:
+        pytest.skip("no rosidl generators (a ROS install: apt install ros-jazzy-tf2-msgs)")
+    import sysconfig
+
+    site = Path(sysconfig.get_paths()["purelib"])
+    before = (site / "tf2_msgs").exists()
+    prefix = tmp_path / "tf2"
+    proc = subprocess.run([sys.executable, str(REPO / "scripts" / "build_tf2_msgs.py"),
+                           "--prefix", str(prefix), "--force"],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    exports = dict(line.removeprefix("export ").split("=", 1)[0:2]
+                   for line in proc.stdout.splitlines() if line.startswith("export "))
+    assert set(exports) == {"PYTHONPATH", "LD_LIBRARY_PATH"}
+    assert (site / "tf2_msgs").exists() == before  # the running environment is untouched
+    env = dict(os.environ)
+    for name, value in exports.items():
+        env[name] = value.replace(f"${name}", os.environ.get(name, ""))
+    check = ("import rclpy; from tf2_msgs.msg import TFMessage; c = rclpy.Context(); "
+             f"rclpy.init(context=c, domain_id={next_domain_id()}); "
+             "n = rclpy.create_node('tf2_check', context=c); "
+             "n.create_publisher(TFMessage, '/tf', 10); print('published type ok')")
+    run = subprocess.run([sys.executable, "-c", check], env=env, capture_output=True,
+                         text=True, timeout=120)
+    assert "published type ok" in run.stdout, run.stderr
+
+
+def test_missing_tf2_msgs_says_how_to_build_it_for_a_shared_environment():
+    import importlib.util
+
+    from rclpy.parameter import Parameter
+
+    from cf_estimator.node.node import CfEstimatorNode, StartError
+
+    if importlib.util.find_spec("tf2_msgs") is not None:
+        pytest.skip("tf2_msgs is importable here")
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=next_domain_id())
+    try:
+        with pytest.raises(StartError, match="build_tf2_msgs.py --prefix DIR"):
+            CfEstimatorNode(context=context,
+                            parameter_overrides=[Parameter("publish_tf", value=True)])
+    finally:
+        rclpy.shutdown(context=context)

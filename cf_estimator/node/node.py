@@ -193,7 +193,9 @@ class CfEstimatorNode(Node):
             except ImportError:
                 raise StartError(
                     "publish_tf needs the tf2_msgs package (ROS: apt install ros-jazzy-tf2-msgs; "
-                    "PyPI wheels: python3 scripts/build_tf2_msgs.py)"
+                    "PyPI wheels: python3 scripts/build_tf2_msgs.py into this environment, or "
+                    "python3 scripts/build_tf2_msgs.py --prefix DIR for a shared one that must "
+                    "stay unmodified, then the PYTHONPATH and LD_LIBRARY_PATH it prints)"
                 ) from None
             self._pub_tf = self.create_publisher(TFMessage, TF_OUT, QoSProfile(depth=TF_DEPTH))
             self._tf_msg = TFMessage(transforms=[TransformStamped()])
