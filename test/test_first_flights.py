@@ -392,3 +392,26 @@ def test_migration_doc_maps_every_madgwick_parameter_to_ours_or_says_why_not():
     keys = [k.value for d in ast.walk(after) if isinstance(d, ast.Dict) for k in d.keys]
     assert keys and all(k in ours for k in keys), keys
     assert "cf_estimator_node" in blocks[1] and "/mavros/imu/data_raw" in blocks[1]
+
+
+def test_velocity_aiding_gets_the_velocity_in_the_magnetic_world_of_the_core():
+    """GNSS velocity is true-north; with a declination the core's world is magnetic north:
+    the pipeline turns the velocity back by the declination before the aiding."""
+    from cf_estimator.core.params import FilterParams
+    from cf_estimator.pipeline import ImuPipeline, PipelineParams
+
+    Twist = TS.types["geometry_msgs/msg/TwistStamped"]
+    h = TS.types["std_msgs/msg/Header"](
+        stamp=TS.types["builtin_interfaces/msg/Time"](sec=1_700_000_000, nanosec=0),
+        frame_id="")
+    v3 = TS.types["geometry_msgs/msg/Vector3"]
+    msg = Twist(header=h, twist=TS.types["geometry_msgs/msg/Twist"](
+        linear=v3(x=0.0, y=10.0, z=0.0), angular=v3(x=0.0, y=0.0, z=0.0)))  # 10 m/s true north
+    d = math.radians(10.0)
+    for wf, expected in (("enu", (-10 * math.sin(d), 10 * math.cos(d))),
+                         ("ned", (10 * math.cos(d), -10 * math.sin(d)))):  # D west of it
+        pipe = ImuPipeline(FilterParams(world_frame=wf),
+                           PipelineParams(magnetic_declination_rad=d))
+        assert pipe.on_velocity(msg) is None
+        v = pipe.velocity_aiding._pending[-1][1]  # noqa: SLF001 - what the aiding was given
+        assert v[:2] == pytest.approx(expected), wf

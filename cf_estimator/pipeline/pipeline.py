@@ -225,6 +225,11 @@ class ImuPipeline:
         self._out_frame = frames.OutputFrame(self._fp.world_frame, pp.magnetic_declination_rad,
                                              pp.yaw_offset_rad)
         self._out_frame_ids: dict[str, str] = {}  # input frame_id -> output frame_id
+        # velocity (GNSS: true north) into the core's magnetic-north world: the inverse of the
+        # declination turn, about ENU's up (+D) or NED's down (-D) axis
+        d = pp.magnetic_declination_rad
+        d = -d if frames.core_world_frame(self._fp.world_frame) == "ned" else d
+        self._vel_turn = (math.cos(d), math.sin(d)) if d else None
         # FLU <-> FRD: (x, y, z) -> (x, -y, -z), a half turn about x. Applied to the input
         # vectors when their convention is not the one paired with the world frame (FLU-ENU,
         # FRD-NED), so the core estimates q_world_from_body in that paired convention.
@@ -378,6 +383,9 @@ class ImuPipeline:
             self._aiding.reject(got)
             return got
         t_ns, v = got
+        if self._vel_turn is not None:  # true-north velocity into the core's magnetic world
+            c, s_ = self._vel_turn
+            v = (c * v[0] - s_ * v[1], s_ * v[0] + c * v[1], v[2])
         return self._aiding.add_velocity(t_ns * 1e-9, v)
 
     @property
