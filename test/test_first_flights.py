@@ -156,7 +156,8 @@ def test_fleet_table_says_offline(tmp_path, capsys):
     assert main(["replay", str(d), "--offline", "--json", str(tmp_path / "j.json"),
                  "--no-progress"]) == 0
     table = capsys.readouterr().out
-    assert "offline" in table.splitlines()[-1]
+    totals = [line for line in table.splitlines() if line.startswith("fleet   ")]
+    assert len(totals) == 1 and "(offline: acausal estimates, --offline)" in totals[0], table
 
 
 def test_mag_range_agrees_between_warning_and_docs():
@@ -415,3 +416,18 @@ def test_velocity_aiding_gets_the_velocity_in_the_magnetic_world_of_the_core():
         assert pipe.on_velocity(msg) is None
         v = pipe.velocity_aiding._pending[-1][1]  # noqa: SLF001 - what the aiding was given
         assert v[:2] == pytest.approx(expected), wf
+
+
+def test_a_summary_that_cannot_be_written_takes_the_output_bag_with_it(tmp_path, monkeypatch):
+    from cf_estimator.cli import replay_cmd
+
+    path = write_imu_bag(tmp_path / "g", [T0_NS + k * 10_000_000 for k in range(300)])
+
+    def broken(target, data):
+        raise ValueError("Out of range float values are not JSON compliant")
+
+    monkeypatch.setattr(replay_cmd, "write_json", broken)
+    with pytest.raises(ValueError):
+        main(["replay", str(path), "-o", str(tmp_path / "out"), "--json",
+              str(tmp_path / "s.json")])
+    assert not (tmp_path / "out").exists()

@@ -321,13 +321,20 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(str(exc), 2) from None
     summary = result.summary
     _finish_summary(summary, args)
-    if args.plot is not None:
-        from cf_estimator.bag.plots import plot_replay
+    try:
+        if args.plot is not None:
+            from cf_estimator.bag.plots import plot_replay
 
-        paths = plot_replay(result, args.plot, title=Path(args.bag).name)
-        summary["plots"] = [str(p) for p in paths]
-    if args.json is not None:
-        write_json(args.json, summary)
+            paths = plot_replay(result, args.plot, title=Path(args.bag).name)
+            summary["plots"] = [str(p) for p in paths]
+        if args.json is not None:
+            write_json(args.json, summary)
+    except BaseException:  # no output bag without its summary: it would look complete
+        if result.output is not None:
+            import shutil
+
+            shutil.rmtree(result.output, ignore_errors=True)
+        raise
     if args.json != "-":
         print_summary(summary)
         if summary.get("plots"):
