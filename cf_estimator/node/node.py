@@ -443,6 +443,12 @@ class CfEstimatorNode(Node):
         if not changes:  # use_sim_time, qos_overrides...: not ours to judge
             return SetParametersResult(successful=True)
         ok, reason = self._pipe.validate_changes(changes)
+        if ok and self._pub_tf is not None and "tf_parent_frame" in changes:
+            pp, fp = self._pipe.pipeline_params, self._pipe.filter_params
+            refusal, _ = check_tf_frames(fp.world_frame, pp.body_frame,
+                                         str(changes["tf_parent_frame"]), pp.output_frame_id)
+            if refusal:  # the start-up refusal holds at run time too
+                ok, reason = False, refusal
         if ok and not self._post_set:  # rclpy without post-set callbacks: apply now
             self._apply_parameters(params)
         return SetParametersResult(successful=ok, reason=reason)

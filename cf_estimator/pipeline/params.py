@@ -47,7 +47,7 @@ class PipelineParams:
         "published body axes differ from the input's (base_link -> base_link_frd in NED, "
         "MAVROS' naming), so no reader takes an FRD orientation for a REP-103 FLU frame; any "
         "other value is used as given.",
-        group="frames",
+        read_only=True, group="frames",
     )
     orientation_covariance_rad2: float = param(
         0.0003, "rad^2", "Floor of the variance reported for roll and pitch (diagonal "
