@@ -90,18 +90,38 @@ def _msg_to_idl(package_dir: Path, package: str, dest: Path) -> list[str]:
     return [f"msg/{m.stem}.idl" for m in msgs]
 
 
+def site_dir(prefix: Path) -> Path:
+    """Where ``--prefix`` puts the Python package (pip's ``--prefix`` layout)."""
+    return prefix / "lib" / f"python{sys.version_info[0]}.{sys.version_info[1]}" / "site-packages"
+
+
+def usage_lines(target: Path) -> str:
+    """The two exports that make a ``--prefix`` build visible to Python and the loader."""
+    return (f"export PYTHONPATH={site_dir(target)}:$PYTHONPATH\n"
+            f"export LD_LIBRARY_PATH={target / 'lib'}:$LD_LIBRARY_PATH")
+
+
 def build(package: str, *, idl: Mapping[str, str] | None = None,
           package_dir: Path | None = None, deps: Sequence[str] = (),
-          force: bool = False) -> str:
-    """Build and install ``package``; returns what was done (one line).
+          force: bool = False, target: Path | None = None) -> str:
+    """Build and install ``package``; returns what was done.
 
     Messages from ``idl`` (``{"msg/X.idl": text}``) or from ``package_dir``'s ``msg/*.msg``;
     ``deps``: the interface packages its messages use (their libraries are linked).
+    ``target``: install under this prefix (``lib``, ``lib/pythonX.Y/site-packages``) instead
+    of the running environment (a shared ROS environment stays untouched); the result then
+    says the PYTHONPATH and LD_LIBRARY_PATH to set.
     """
-    if not force and importlib.util.find_spec(package) is not None:
+    if target is not None:
+        target = target.absolute()
+        if not force and (site_dir(target) / package / "msg").is_dir():
+            return (f"{package} already built under {target}: nothing to do (--force rebuilds)"
+                    f"\n{usage_lines(target)}")
+    elif not force and importlib.util.find_spec(package) is not None:
         return f"{package} already importable: nothing to do"
     prefix = Path(sys.prefix)
     lib, share, include = prefix / "lib", prefix / "share", prefix / "include"
+    dest_lib = lib if target is None else target / "lib"
     if not (share / "builtin_interfaces").is_dir():
         raise BuildError(f"no ROS 2 interface files under {share}: install the ROS 2 wheels "
                          "first (pip install 'cf_estimator[ros]')")
@@ -121,7 +141,7 @@ def build(package: str, *, idl: Mapping[str, str] | None = None,
         names = [f"{d}__rosidl_{kind}" for d in deps]
         return [n for n in names if (lib / f"lib{n}.so").is_file()]
 
-    site = Path(sysconfig.get_paths()["purelib"])
+    site = Path(sysconfig.get_paths()["purelib"]) if target is None else site_dir(target)
     with tempfile.TemporaryDirectory(prefix=f"{package}_build_") as tmp:
         work = Path(tmp)
         src, gen, out = work / "src", work / "gen", work / "out"
@@ -143,7 +163,7 @@ def build(package: str, *, idl: Mapping[str, str] | None = None,
         incs += [f"-I{d}" for d in sorted(include.iterdir()) if d.is_dir()] + [f"-I{include}"]
         incs += [f"-I{sysconfig.get_paths()['include']}", f"-I{numpy.get_include()}"]
         common = ["-shared", "-fPIC", "-O2", *incs, f"-L{out}", f"-L{lib}",
-                  f"-Wl,-rpath,{lib}"]
+                  f"-Wl,-rpath,{lib}", *([f"-Wl,-rpath,{dest_lib}"] if target else [])]
         name = f"lib{package}__rosidl_"
         detail = gen / "c" / package / "msg" / "detail"
         gen_c = dep_libs("generator_c")
@@ -180,12 +200,15 @@ def build(package: str, *, idl: Mapping[str, str] | None = None,
             _run([cc, *common, str(ep), f"-l{package}__rosidl_generator_py",
                   f"-l{package}__rosidl_typesupport_{ts}", f"-l{package}__rosidl_generator_c",
                   "-lrosidl_runtime_c", "-o", str(module)])
+        dest_lib.mkdir(parents=True, exist_ok=True)
+        site.mkdir(parents=True, exist_ok=True)
         for so in out.glob("*.so"):
-            shutil.copy2(so, lib / so.name)
+            shutil.copy2(so, dest_lib / so.name)
         shutil.rmtree(site / package, ignore_errors=True)
         shutil.copytree(pkg, site / package)
     what = ", ".join(Path(i).stem for i in idls)
-    return f"built {package} ({what}) into {site / package} and {lib}"
+    done = f"built {package} ({what}) into {site / package} and {dest_lib}"
+    return done if target is None else f"{done}; to use it:\n{usage_lines(target)}"
 
 
 def package_name(package_dir: Path) -> str:
@@ -202,12 +225,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--depends", nargs="*", default=[], metavar="PKG",
                         help="interface packages its messages use (e.g. std_msgs)")
     parser.add_argument("--force", action="store_true", help="rebuild even if it imports")
+    parser.add_argument("--prefix", metavar="DIR", type=Path,
+                        help="install under DIR (DIR/lib, DIR/lib/pythonX.Y/site-packages) "
+                        "instead of the running environment; prints the exports to set")
     args = parser.parse_args(argv)
     name = args.package_dir.name
     try:
         name = package_name(args.package_dir) or name
         print(build(name, package_dir=args.package_dir.resolve(), deps=args.depends,
-                    force=args.force))
+                    force=args.force, target=args.prefix))
     except (BuildError, ImportError, OSError) as exc:
         print(f"build_msgs: cannot build {name}: {exc}", file=sys.stderr)
         return 2

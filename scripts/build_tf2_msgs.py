@@ -12,6 +12,15 @@ site-packages. On a ROS install, use ``apt install ros-jazzy-tf2-msgs`` instead 
 
     python3 scripts/build_tf2_msgs.py            # build unless tf2_msgs already imports
     python3 scripts/build_tf2_msgs.py --force    # rebuild
+    python3 scripts/build_tf2_msgs.py --prefix DIR   # into DIR, the environment untouched
+
+``--prefix DIR`` is for a shared ROS environment that must not be modified: the libraries go to
+``DIR/lib``, the Python package to ``DIR/lib/pythonX.Y/site-packages`` (pip's ``--prefix``
+layout), and the script prints the two variables that make them visible::
+
+    export PYTHONPATH=DIR/lib/pythonX.Y/site-packages:$PYTHONPATH
+    export LD_LIBRARY_PATH=DIR/lib:$LD_LIBRARY_PATH
+
 Exit codes: 0 built or already present, 2 cannot build (one line why).
 """
 
@@ -47,18 +56,23 @@ module tf2_msgs {
 DEPENDS = ("geometry_msgs", "builtin_interfaces", "std_msgs")
 
 
-def build(force: bool = False) -> str:
-    """Build and install; returns what was done (one line)."""
+def build(force: bool = False, target: Path | None = None) -> str:
+    """Build and install (into the running environment, or under ``target`` when given);
+    returns what was done."""
     return build_msgs.build(PACKAGE, idl={"msg/TFMessage.idl": TF_MESSAGE_IDL}, deps=DEPENDS,
-                            force=force)
+                            force=force, target=target)
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--force", action="store_true", help="rebuild even if it imports")
+    parser.add_argument("--prefix", metavar="DIR", type=Path,
+                        help="install under DIR (DIR/lib, DIR/lib/pythonX.Y/site-packages) "
+                        "instead of the running environment, e.g. for a shared ROS venv; "
+                        "prints the PYTHONPATH and LD_LIBRARY_PATH to set")
     args = parser.parse_args(argv)
     try:
-        print(build(force=args.force))
+        print(build(force=args.force, target=args.prefix))
     except (BuildError, ImportError, OSError) as exc:
         print(f"build_tf2_msgs: cannot build {PACKAGE}: {exc}", file=sys.stderr)
         return 2

@@ -263,6 +263,13 @@ def _shown(path: str | None) -> str:
     return path if rel.startswith("..") else rel
 
 
+def _num(value: Any, spec: str) -> str:
+    """A table figure: ``value`` with ``spec``, ``n/a`` when None/NaN (never a traceback)."""
+    if value is None or (isinstance(value, float) and value != value):
+        return "n/a"
+    return format(value, spec)
+
+
 def format_table(fleet: dict[str, Any]) -> str:
     """The console table: one line per bag (figures or the failure), then the totals."""
     rows = [("bag", "format", "IMU msgs", "stamps s", "rejected", "resets", "bias",
@@ -277,9 +284,10 @@ def format_table(fleet: dict[str, Any]) -> str:
             lines.append(f"FAILED  {s['error'].replace(s['input'], _shown(s['input']))}")
             continue
         rmse = s.get("rmse_deg")
-        rmse_text = f"{rmse['total']:.2f}/{rmse['inclination']:.2f}" if rmse else "-"
+        rmse_text = (f"{_num(rmse.get('total'), '.2f')}/{_num(rmse.get('inclination'), '.2f')}"
+                     if rmse else "-")
         rows.append((
-            name, s["input_format"], str(s["messages_in"]), f"{s['duration_s']:.1f}",
+            name, s["input_format"], str(s["messages_in"]), _num(s.get("duration_s"), ".1f"),
             str(sum((s.get("messages_rejected") or {}).values())),
             str(sum((s.get("resets") or {}).values())),
             "converged" if s.get("gyro_bias_converged") else "no",
@@ -292,7 +300,10 @@ def format_table(fleet: dict[str, Any]) -> str:
     f = fleet["fleet"]
     rate = f["messages_per_s"]
     table.extend(lines)
-    table.append(f"fleet   {f['replayed']} of {f['bags']} bag(s) replayed, {f['failed']} "
-                 f"failed; {f['messages']} messages in {f['wall_time_s']:.2f} s"
+    modes = sorted({s.get("mode", "online") for s in fleet["bags"]})
+    mode = (" (offline: acausal estimates, --offline)" if modes == ["offline"]
+            else f" (modes: {', '.join(modes)})" if len(modes) > 1 else "")
+    table.append(f"fleet   {f['replayed']} of {f['bags']} bag(s) replayed{mode}, {f['failed']} "
+                 f"failed; {f['messages']} messages in {_num(f.get('wall_time_s'), '.2f')} s"
                  + (f" ({rate / 1e3:.1f} k messages/s)" if rate else "") + f" on {f['engine']}")
     return "\n".join(table) + "\n"

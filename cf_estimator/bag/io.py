@@ -185,7 +185,9 @@ class InputBag:
     def _listing(self) -> str:
         if not self.topics:
             return "the bag has no topics"
-        return "topics: " + ", ".join(f"{i.topic} [{i.msgtype}]" for i in self.topics)
+        return "topics: " + ", ".join(
+            f"{i.topic} [{i.msgtype}]: {i.count} message{'' if i.count == 1 else 's'}"
+            for i in self.topics)
 
     def select_topic(
         self, role: str, explicit: str | None, msgtypes: Sequence[str], *, required: bool,

@@ -37,7 +37,7 @@ from cf_estimator.core.filter import ComplementaryFilter, bias_sigma
 from cf_estimator.core.kernel import resolve_backend
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import BIAS_CONVERGED_SIGMA_RAD_S
-from cf_estimator.pipeline import ImuPipeline, PipelineParams, bulk, px4
+from cf_estimator.pipeline import ImuPipeline, PipelineParams, bulk, checks, frames, px4
 from cf_estimator.schema import as_dict
 
 OUT_IMU_TOPIC = "/imu/data"
@@ -107,6 +107,11 @@ class ReplayResult:
 
 class ReplayError(Exception):
     """A user-facing replay failure (bad bag, bad topic, bad output path)."""
+
+
+class UnusableInput(io.BagError):
+    """The bag was read but gives no usable estimate (:func:`checks.unusable_reason`): exit 1,
+    no output written."""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -405,7 +410,7 @@ class _Run:
         self.outputs: list[tuple[int, Any]] = []
         self.offline_segments = 0
         if self.offline:
-            self.recorder = _RecordingFilter(self.fparams)
+            self.recorder = _RecordingFilter(frames.core_params(self.fparams))
             self.pipe._filter = self.recorder  # noqa: SLF001 - same filter, recording its input
         if self.out_path is not None:
             self.bag = io.OutputBag(self.out_path, storage=opts.storage, overwrite=opts.overwrite)
@@ -539,8 +544,10 @@ class _Run:
         """Offline: replace every output's orientation by the offline estimate, then write the
         held outputs and diagnostics in log-time order."""
         t = np.asarray(self.t, dtype=float)
-        q, self.offline_segments = _offline_orientations(t, self.recorder, self.fparams,
+        q, self.offline_segments = _offline_orientations(t, self.recorder,
+                                                         frames.core_params(self.fparams),
                                                          self.pparams.max_dt_s)
+        q = self.pipe.output_frame.apply_array(q)  # published world frame, as online
         self.online_rpy = list(self.rpy)  # what the online filter said, for the plots
         self.q = [tuple(r) if np.all(np.isfinite(r)) else None for r in q.tolist()]
         rpy = quat.to_euler(q)
@@ -741,87 +748,100 @@ def replay_variants(
             for r in runs:
                 r.abort()
             raise
-        for r in runs:
-            if r.bag is not None:
-                r.bag.commit()
 
     wall = time.perf_counter() - t_wall
-    results = []
+    try:
+        results = []
+        for r in runs:
+            if px4_in is not None:
+                r.warnings[:0] = px4_in.notes
+            r_ref_t, r_ref_q = (ref_t, ref_q) if px4_in is None or ref_topic != ulog.ATTITUDE_TOPIC \
+                else px4_in.reference_in_output(r, ref_t, ref_q)
+            series = _series(r, r_ref_t, r_ref_q)
+            counters = _jsonable(dict(r.pipe.counters))
+            stamps = series.t_s
+            duration = float(stamps[-1] - stamps[0]) if stamps.size > 1 else 0.0
+            init = np.all(np.isfinite(series.q_wxyz), axis=1)
+            clip_frac = float(np.mean(series.clipped[init])) if init.any() else None
+            final_bias = (
+                [float(c) for c in r.pipe.filter.gyro_bias_rad_s] if r.pipe.initialized else None
+            )
+            status = r.pipe.filter.status() if r.pipe.initialized else None
+            converged = np.asarray(r.bias_sigma) < BIAS_CONVERGED_SIGMA_RAD_S
+            mag_in_use = mag_topic is not None and r.fparams.use_mag
+            summary: dict[str, Any] = {
+                "variant": r.variant.name,
+                "mode": "offline" if r.offline else "online",
+                "input": str(in_path),
+                "input_format": in_format,
+                "output": str(r.out_path) if r.out_path is not None else None,
+                "storage": opts.storage if r.out_path is not None else None,
+                "topics": {"imu": imu_topic, "mag": mag_topic, "reference": ref_topic,
+                           **({"velocity": vel_topic} if vel_topic else {})},
+                "messages_in": n_imu,
+                "mag_messages_in": n_mag,
+                "reference_messages_in": n_ref,
+                "messages_processed": int(counters.get("processed", len(r.t))),
+                "messages_rejected": counters.get("rejected", {}),
+                "gaps": counters.get("gaps"),
+                "resets": counters.get("resets"),
+                "outputs_written": dict(r.bag.counts) if r.bag is not None else {},
+                "diagnostics_reports": r.n_diag,
+                "duration_s": duration,
+                "bag_duration_s": (last_log - first_log) * 1e-9 if first_log is not None else 0.0,
+                "imu_rate_hz": (stamps.size - 1) / duration if duration > 0 else None,
+                "clipped_fraction": clip_frac,
+                "final_gyro_bias_rad_s": final_bias,
+                "final_gyro_bias_sigma_rad_s": status.gyro_bias_sigma_rad_s if status else None,
+                "gyro_bias_converged": status.gyro_bias_converged if status else False,
+                "gyro_bias_converged_after_s": (
+                    float(r.bias_t[int(np.argmax(converged))] - r.bias_t[0])
+                    if converged.any() else None),
+                "still_fraction": float(np.mean(series.at_rest[init])) if init.any() else None,
+                **({"velocity": _velocity_summary(r.pipe, n_vel)} if vel_topic else {}),
+                "counters": counters,
+                "warnings": r.warnings,
+                **({"offline": {"segments": r.offline_segments,
+                                "note": "orientations from cf_estimator.core.offline (acausal); "
+                                        "the pipeline's guards chose the samples; /diagnostics "
+                                        "and the bias report the online filter"}}
+                   if r.offline else {}),
+                # what reproduces the run: the effective parameters, the version, the backend
+                "parameters": {"filter": as_dict(r.fparams), "pipeline": as_dict(r.pparams)},
+                "version": __version__,
+                "filter_backend": resolve_backend(),
+                "wall_time_s": wall,
+                "messages_per_s": (n_imu + n_mag + n_ref) / wall if wall > 0 else None,
+            }
+            scored = None
+            if ref_topic is not None:
+                align = resolve_heading_alignment(opts.heading_alignment, mag_in_use)
+                stats, scored = error_statistics(series.t_s, series.q_wxyz, series.ref_t_s,
+                                                 series.ref_q_wxyz, align)
+                stats["topic"] = ref_topic
+                if px4_in is not None and ref_topic == ulog.ATTITUDE_TOPIC:
+                    stats["kind"] = "autopilot"
+                    stats["label"] = AUTOPILOT_LABEL
+                summary["reference"] = stats
+                summary["rmse_deg"] = stats.get("rmse_deg")
+            if px4_in is not None:
+                summary["px4"] = px4_in.summary(r)
+            results.append(ReplayResult(_jsonable(summary), series, r.out_path, scored))
+    except BaseException:
+        for r in runs:
+            r.abort()
+        raise
+    # nothing that looks like a good result is left behind: an unusable run writes no output
+    unusable = [(r, checks.unusable_reason(res.summary)) for r, res in zip(runs, results,
+                                                                          strict=True)]
+    reason = next((why for _, why in unusable if why), None)
+    if reason is not None:
+        for r in runs:
+            r.abort()
+        raise UnusableInput(f"{in_path}: {reason}")
     for r in runs:
-        if px4_in is not None:
-            r.warnings[:0] = px4_in.notes
-        r_ref_t, r_ref_q = (ref_t, ref_q) if px4_in is None or ref_topic != ulog.ATTITUDE_TOPIC \
-            else px4_in.reference_in_output(r, ref_t, ref_q)
-        series = _series(r, r_ref_t, r_ref_q)
-        counters = _jsonable(dict(r.pipe.counters))
-        stamps = series.t_s
-        duration = float(stamps[-1] - stamps[0]) if stamps.size > 1 else 0.0
-        init = np.all(np.isfinite(series.q_wxyz), axis=1)
-        clip_frac = float(np.mean(series.clipped[init])) if init.any() else None
-        final_bias = (
-            [float(c) for c in r.pipe.filter.gyro_bias_rad_s] if r.pipe.initialized else None
-        )
-        status = r.pipe.filter.status() if r.pipe.initialized else None
-        converged = np.asarray(r.bias_sigma) < BIAS_CONVERGED_SIGMA_RAD_S
-        mag_in_use = mag_topic is not None and r.fparams.use_mag
-        summary: dict[str, Any] = {
-            "variant": r.variant.name,
-            "mode": "offline" if r.offline else "online",
-            "input": str(in_path),
-            "input_format": in_format,
-            "output": str(r.out_path) if r.out_path is not None else None,
-            "storage": opts.storage if r.out_path is not None else None,
-            "topics": {"imu": imu_topic, "mag": mag_topic, "reference": ref_topic,
-                       **({"velocity": vel_topic} if vel_topic else {})},
-            "messages_in": n_imu,
-            "mag_messages_in": n_mag,
-            "reference_messages_in": n_ref,
-            "messages_processed": int(counters.get("processed", len(r.t))),
-            "messages_rejected": counters.get("rejected", {}),
-            "gaps": counters.get("gaps"),
-            "resets": counters.get("resets"),
-            "outputs_written": dict(r.bag.counts) if r.bag is not None else {},
-            "diagnostics_reports": r.n_diag,
-            "duration_s": duration,
-            "bag_duration_s": (last_log - first_log) * 1e-9 if first_log is not None else 0.0,
-            "imu_rate_hz": (stamps.size - 1) / duration if duration > 0 else None,
-            "clipped_fraction": clip_frac,
-            "final_gyro_bias_rad_s": final_bias,
-            "final_gyro_bias_sigma_rad_s": status.gyro_bias_sigma_rad_s if status else None,
-            "gyro_bias_converged": status.gyro_bias_converged if status else False,
-            "gyro_bias_converged_after_s": (
-                float(r.bias_t[int(np.argmax(converged))] - r.bias_t[0])
-                if converged.any() else None),
-            "still_fraction": float(np.mean(series.at_rest[init])) if init.any() else None,
-            **({"velocity": _velocity_summary(r.pipe, n_vel)} if vel_topic else {}),
-            "counters": counters,
-            "warnings": r.warnings,
-            **({"offline": {"segments": r.offline_segments,
-                            "note": "orientations from cf_estimator.core.offline (acausal); "
-                                    "the pipeline's guards chose the samples; /diagnostics "
-                                    "and the bias report the online filter"}}
-               if r.offline else {}),
-            # what reproduces the run: the effective parameters, the version, the backend
-            "parameters": {"filter": as_dict(r.fparams), "pipeline": as_dict(r.pparams)},
-            "version": __version__,
-            "filter_backend": resolve_backend(),
-            "wall_time_s": wall,
-            "messages_per_s": (n_imu + n_mag + n_ref) / wall if wall > 0 else None,
-        }
-        scored = None
-        if ref_topic is not None:
-            align = resolve_heading_alignment(opts.heading_alignment, mag_in_use)
-            stats, scored = error_statistics(series.t_s, series.q_wxyz, series.ref_t_s,
-                                             series.ref_q_wxyz, align)
-            stats["topic"] = ref_topic
-            if px4_in is not None and ref_topic == ulog.ATTITUDE_TOPIC:
-                stats["kind"] = "autopilot"
-                stats["label"] = AUTOPILOT_LABEL
-            summary["reference"] = stats
-            summary["rmse_deg"] = stats.get("rmse_deg")
-        if px4_in is not None:
-            summary["px4"] = px4_in.summary(r)
-        results.append(ReplayResult(_jsonable(summary), series, r.out_path, scored))
+        if r.bag is not None:
+            r.bag.commit()
     return results
 
 

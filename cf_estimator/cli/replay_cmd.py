@@ -19,7 +19,7 @@ from typing import Any
 
 from cf_estimator.bag import io
 from cf_estimator.bag.replay import HEADING_ALIGNMENTS, ReplayError, ReplayOptions, replay_bag
-from cf_estimator.cli.base import CliError
+from cf_estimator.cli.base import EXIT_ALL_FAILED, EXIT_OK, EXIT_SOME_FAILED, CliError
 from cf_estimator.cli.common import (
     add_params_options,
     check_input_path,
@@ -130,9 +130,9 @@ def velocity_line(s: dict[str, Any]) -> str:
     topic = s["topics"].get("velocity")
     if "used" not in v:
         return f"velocity {v['messages_in']} on {topic}: none usable (aiding off)"
-    heading = (f"heading offset {math.degrees(v['heading_offset_rad']):+.1f} deg ± "
-               f"{math.degrees(v['heading_sigma_rad']):.1f}" if v.get("heading_sigma_rad")
-               is not None else "heading offset not observed")
+    offset, sigma = v.get("heading_offset_rad"), v.get("heading_sigma_rad")
+    heading = (f"heading offset {math.degrees(offset):+.1f} deg ± {math.degrees(sigma):.1f}"
+               if sigma is not None and offset is not None else "heading offset not observed")
     return (f"velocity {v['messages_in']} on {topic}: used {v['used']}, stale {v['stale']}, "
             f"rejected {sum(v['rejected'].values())} ({_format_counts(v['rejected'])}); aided "
             f"{v['aided_samples']} IMU samples; {heading}"
@@ -173,17 +173,26 @@ def autopilot_line(ref: dict[str, Any]) -> str:
             f"RMS/max [deg] {', '.join(parts)}")
 
 
+def _fmt(value: Any, spec: str, missing: str = "n/a") -> str:
+    """``value`` formatted with ``spec``; ``missing`` for None, NaN or Inf (a summary figure
+    that could not be computed must not stop the summary)."""
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return missing
+    return format(value, spec)
+
+
 def print_summary(s: dict[str, Any], out: Any = None) -> None:
-    """The human summary of one replay (to ``out``, default stdout)."""
+    """The human summary of one replay (to ``out``, default stdout). Every figure that may be
+    None or NaN in the JSON prints as ``n/a``."""
     out = sys.stdout if out is None else out
     rate = s.get("imu_rate_hz")
-    rate_text = f"{rate:.1f} Hz" if rate else "n/a"
+    rate_text = f"{_fmt(rate, '.1f')} Hz" if rate else "n/a"
     topics = s["topics"]
     if s.get("mode") == "offline":
         print(f"mode    offline (acausal), {s['offline']['segments']} segment(s)", file=out)
     print(f"input   {s['input']} ({s['input_format']}): {s['messages_in']} IMU on "
           f"{topics['imu']}, {s['mag_messages_in']} mag on {topics['mag'] or '-'}, "
-          f"{s['duration_s']:.1f} s of stamps, {rate_text}", file=out)
+          f"{_fmt(s.get('duration_s'), '.1f')} s of stamps, {rate_text}", file=out)
     if s.get("px4"):
         x = s["px4"]
         print(f"px4     output {x['output_frames']} (PX4 conventions: "
@@ -200,11 +209,11 @@ def print_summary(s: dict[str, Any], out: Any = None) -> None:
     bias = s.get("final_gyro_bias_rad_s")
     if bias:
         after = s.get("gyro_bias_converged_after_s")
-        learned = (f"converged {after:.1f} s after start" if after is not None
+        learned = (f"converged {_fmt(after, '.1f')} s after start" if after is not None
                    else "not converged")
         print("bias    final gyro-bias estimate [rad/s]: "
-              + " ".join(f"{b:+.5f}" for b in bias)
-              + f" ± {s['final_gyro_bias_sigma_rad_s']:.5f} ({learned}); still "
+              + " ".join(_fmt(b, "+.5f") for b in bias)
+              + f" ± {_fmt(s.get('final_gyro_bias_sigma_rad_s'), '.5f')} ({learned}); still "
               f"{100.0 * (s.get('still_fraction') or 0.0):.0f}% of samples", file=out)
     if s.get("output"):
         print(f"output  {s['output']} ({s['storage']}): {_format_counts(s['outputs_written'])}",
@@ -216,13 +225,16 @@ def print_summary(s: dict[str, Any], out: Any = None) -> None:
         rmse = ref.get("rmse_deg")
         if rmse:
             print(f"error   vs {ref['topic']} ({ref['samples_scored']} samples, heading "
-                  f"alignment {ref['heading_alignment']}, offset {ref['heading_offset_deg']:.2f}"
-                  f" deg): RMSE total {rmse['total']:.3f}, inclination {rmse['inclination']:.3f},"
-                  f" heading {rmse['heading']:.3f} deg", file=out)
+                  f"alignment {ref['heading_alignment']}, offset "
+                  f"{_fmt(ref.get('heading_offset_deg'), '.2f')} deg): RMSE total "
+                  f"{_fmt(rmse.get('total'), '.3f')}, inclination "
+                  f"{_fmt(rmse.get('inclination'), '.3f')}, heading "
+                  f"{_fmt(rmse.get('heading'), '.3f')} deg", file=out)
         else:
             print(f"error   vs {ref['topic']}: no reference sample overlaps the estimate",
                   file=out)
-    print(f"speed   {s['messages_per_s']:.0f} messages/s ({s['wall_time_s']:.2f} s)", file=out)
+    print(f"speed   {_fmt(s.get('messages_per_s'), '.0f')} messages/s "
+          f"({_fmt(s.get('wall_time_s'), '.2f')} s)", file=out)
 
 
 def _is_fleet(args: argparse.Namespace) -> bool:
@@ -251,12 +263,11 @@ def _options(args: argparse.Namespace) -> ReplayOptions:
     )
 
 
-#: Exit status of a fleet replay is the number of bags that failed, at most this.
-MAX_FAILED_EXIT = 100
 
 
 def run_fleet(args: argparse.Namespace) -> int:
-    """Replay several bags: one output each, a table, one JSON; exit = number failed."""
+    """Replay several bags: one output each, a table, one JSON. Exit status
+    (:mod:`cf_estimator.cli.base`): 0 every bag replayed, 1 some failed, 3 all failed."""
     from cf_estimator.bag import fleet
     from cf_estimator.cluster import ClusterError, make_engine
 
@@ -301,7 +312,8 @@ def run_fleet(args: argparse.Namespace) -> int:
         print(fleet.format_table(result), end="")
         if args.json is not None:
             print(f"json    {args.json}")
-    return min(result["fleet"]["failed"], MAX_FAILED_EXIT)
+    failed, replayed = result["fleet"]["failed"], result["fleet"]["replayed"]
+    return EXIT_OK if not failed else (EXIT_SOME_FAILED if replayed else EXIT_ALL_FAILED)
 
 
 def _finish_summary(summary: dict, args: argparse.Namespace, prefix: str = "") -> None:
@@ -341,13 +353,20 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(str(exc), 2) from None
     summary = result.summary
     _finish_summary(summary, args)
-    if args.plot is not None:
-        from cf_estimator.bag.plots import plot_replay
+    try:
+        if args.plot is not None:
+            from cf_estimator.bag.plots import plot_replay
 
-        paths = plot_replay(result, args.plot, title=Path(args.bag).name)
-        summary["plots"] = [str(p) for p in paths]
-    if args.json is not None:
-        write_json(args.json, summary)
+            paths = plot_replay(result, args.plot, title=Path(args.bag).name)
+            summary["plots"] = [str(p) for p in paths]
+        if args.json is not None:
+            write_json(args.json, summary)
+    except BaseException:  # no output bag without its summary: it would look complete
+        if result.output is not None:
+            import shutil
+
+            shutil.rmtree(result.output, ignore_errors=True)
+        raise
     if args.json != "-":
         print_summary(summary)
         if summary.get("plots"):

@@ -42,6 +42,11 @@ _SQRT_HALF = math.sqrt(0.5)
 
 def step_params(params: FilterParams) -> SimpleNamespace:
     """The parameter view the step reads: FilterParams fields plus derived flags."""
+    if params.world_frame not in ("enu", "ned"):
+        raise ValueError(
+            f"world_frame {params.world_frame!r}: the core filters estimate in enu or ned; "
+            "the pipeline publishes nwu (cf_estimator.pipeline.frames.core_params)"
+        )
     view = SimpleNamespace(**as_dict(params))
     view.mag_full = params.mag_mode == "full"
     view.prefilter = params.aperiodic_prefilter

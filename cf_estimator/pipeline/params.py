@@ -7,6 +7,7 @@ parameters; ``read_only`` ones shape the node's wiring (publishers, timer) and n
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from cf_estimator.schema import ParameterError, param, validate_fields
@@ -28,6 +29,25 @@ class PipelineParams:
         "'sensor': no convention assumed, the orientation of the message axes as they are (as "
         "imu_filter_madgwick).",
         choices=BODY_FRAMES, read_only=True, group="frames",
+    )
+    magnetic_declination_rad: float = param(
+        0.0, "rad", "Magnetic declination at the flight site, east positive (the World Magnetic "
+        "Model's D; imu_filter_madgwick's declination): the published yaw refers to true north "
+        "instead of magnetic north, in every world_frame.",
+        minimum=-math.pi, maximum=math.pi, group="frames",
+    )
+    yaw_offset_rad: float = param(
+        0.0, "rad", "Added to the published yaw (a rotation about the world frame's z axis, "
+        "after the declination): e.g. a mounting offset of the magnetometer.",
+        minimum=-math.pi, maximum=math.pi, group="frames",
+    )
+    output_frame_id: str = param(
+        "auto", "", "header.frame_id of imu/data and imu/rpy, and the child frame of /tf. "
+        "'auto': the input's frame_id, with '_frd' (or '_flu') added when body_frame makes the "
+        "published body axes differ from the input's (base_link -> base_link_frd in NED, "
+        "MAVROS' naming), so no reader takes an FRD orientation for a REP-103 FLU frame; any "
+        "other value is used as given.",
+        read_only=True, group="frames",
     )
     orientation_covariance_rad2: float = param(
         0.0003, "rad^2", "Floor of the variance reported for roll and pitch (diagonal "
@@ -147,8 +167,21 @@ class PipelineParams:
         read_only=True, group="px4",
     )
 
+    strict_parameters: bool = param(
+        False, "", "Node start-up: refuse to start (exit 2, one line, as replay --params) on any "
+        "unknown or misspelt parameter and on a --params-file none of whose sections applies "
+        "to this node (false: warn and run). On in the shipped launch file.",
+        read_only=True, group="node",
+    )
+
     def __post_init__(self) -> None:
         validate_fields(self)
+        frame = self.output_frame_id
+        if not frame or frame != frame.strip() or frame.startswith("/"):
+            raise ParameterError(
+                f"output_frame_id: {frame!r} is not a frame id (non-empty, no spaces around it, "
+                "no leading '/'); 'auto' derives it from the input's"
+            )
         frame = self.tf_parent_frame
         if not frame or frame != frame.strip() or frame.startswith("/"):
             raise ParameterError(
