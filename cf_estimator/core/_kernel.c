@@ -54,7 +54,15 @@
 #define MAG_TURN_FRACTION 0.05
 #define MAG_DRIFT_SIGMAS 3.0
 #define MAG_CANDIDATE_NORM_TOLERANCE 0.05
-#define SMALL_ANGLE_RAD 1e-6
+#define SMALL_ANGLE_RAD 1e-6 /* ops.SMALL_ANGLE_RAD */
+#define TINY 1e-300 /* ops.TINY */
+#define RECOVERY_EXIT_FRACTION 0.5
+#define MAG_RECOVERY_EXIT_FRACTION 0.1
+#define MAG_QUICK_LIMIT_RAD 4.0
+#define MAG_MIN_HORIZONTAL 1e-3
+#define REST_MIN_VARIANCE 1e-12
+#define SQRT3 1.7320508075688772
+#define BIAS_LEARNING_MIN_K1 1e-3
 #define EXTRA_COLUMNS 11
 #define GYRO_LIMIT_RAD_S 1e9 /* filter.GYRO_LIMIT_RAD_S */
 /* extra columns: e(3), b(3), clipped, phase, at_rest, mag_status, bias sigma */
@@ -187,13 +195,13 @@ static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int
         s->mag_ref_dip = s->mag_ref_dip + (dip - s->mag_ref_dip) / n;
         s->mag_ref_count = n;
     }
-    double off_norm = maxd(mn / maxd(s->mag_ref_norm, 1e-300) - 1.0,
-                           1.0 - mn / maxd(s->mag_ref_norm, 1e-300));
+    double off_norm = maxd(mn / maxd(s->mag_ref_norm, TINY) - 1.0,
+                           1.0 - mn / maxd(s->mag_ref_norm, TINY));
     double off_dip = maxd(dip - s->mag_ref_dip, s->mag_ref_dip - dip);
     double a = fresh ? 1.0 : dt_s / (MAG_SMOOTH_TIME_CONSTANT_S + dt_s);
     double vx = s->mmx + a * (ux - s->mmx), vy = s->mmy + a * (uy - s->mmy),
            vz = s->mmz + a * (uz - s->mmz);
-    double vn = maxd(sqrt(vx * vx + vy * vy + vz * vz), 1e-300);
+    double vn = maxd(sqrt(vx * vx + vy * vy + vz * vz), TINY);
     double mmx = vx / vn, mmy = vy / vn, mmz = vz / vn;
     s->mmx = mmx;
     s->mmy = mmy;
@@ -227,12 +235,12 @@ static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int
     vx = s->mvx + ar * (ux - s->mvx);
     vy = s->mvy + ar * (uy - s->mvy);
     vz = s->mvz + ar * (uz - s->mvz);
-    vn = maxd(sqrt(vx * vx + vy * vy + vz * vz), 1e-300);
+    vn = maxd(sqrt(vx * vx + vy * vy + vz * vz), TINY);
     s->mvx = vx / vn;
     s->mvy = vy / vn;
     s->mvz = vz / vn;
 
-    int usable = p->use_mag && !disturbed && (horizontal > 1e-3);
+    int usable = p->use_mag && !disturbed && (horizontal > MAG_MIN_HORIZONTAL);
     s->mag_status = p->use_mag ? (disturbed ? MAG_REJECTED : MAG_USED) : MAG_DISABLED;
     if (usable) s->mag_last_time_s = s->time_s;
     int first = usable && !s->heading_initialized;
@@ -245,14 +253,15 @@ static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int
     else if (disturbed)
         s->mag_clip_timer_s = 0.0;
     int enter = (p->recovery_trigger_s > 0.0) && (s->mag_clip_timer_s >= p->recovery_trigger_s);
-    int leave = usable && (maxd(yaw_error, -yaw_error) < 0.1 * p->mag_saturation_limit_rad);
+    int leave = usable && (maxd(yaw_error, -yaw_error) <
+                           MAG_RECOVERY_EXIT_FRACTION * p->mag_saturation_limit_rad);
     s->mag_recovering = (char)(s->mag_recovering ? !leave : enter);
     if (enter) s->mag_clip_timer_s = 0.0;
     int quick = fast || s->mag_recovering;
     double r1 = quick ? maxd(p->r1, p->startup_k1) : p->r1;
     double gain = usable ? r1 * dt_m / (1.0 + r1 * dt_m) : 0.0;
     double ldt = (usable && learn) ? dt_m : 0.0;
-    double limit = quick ? 4.0 : p->mag_saturation_limit_rad;
+    double limit = quick ? MAG_QUICK_LIMIT_RAD : p->mag_saturation_limit_rad;
 
     s->yaw_error_rad = usable ? yaw_error : 0.0;
     double yaw_c = mind(maxd(yaw_error, -limit), limit);
@@ -268,7 +277,7 @@ static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int
            -sin(s->mag_ref_dip), pr);
     double ex = uy * pr[2] - uz * pr[1], ey = uz * pr[0] - ux * pr[2], ez = ux * pr[1] - uy * pr[0];
     double en = sqrt(ex * ex + ey * ey + ez * ez);
-    double scale = mind(1.0, limit / maxd(en, 1e-300));
+    double scale = mind(1.0, limit / maxd(en, TINY));
     ex = ex * scale;
     ey = ey * scale;
     ez = ez * scale;
@@ -341,15 +350,15 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
                                             REST_NOISE_CAP * p->rest_accel_threshold_m_s2);
     int mag_seen = (s->blk_mn > 0.0) && (s->pm_n > 0.0);
     double bm = maxd(sqrt(s->blk_mx * s->blk_mx + s->blk_my * s->blk_my + s->blk_mz * s->blk_mz),
-                     1e-300);
+                     TINY);
     double umx = s->blk_mx / bm, umy = s->blk_my / bm, umz = s->blk_mz / bm;
     double dm = sqrt(pow(umx - s->pmx, 2.0) + pow(umy - s->pmy, 2.0) + pow(umz - s->pmz, 2.0));
     int turned = mag_seen &&
                  (dm > REST_MAG_TOLERANCE_RAD + p->rest_gyro_threshold_rad_s * s->blk_t);
     int steady = has_prev && (dg < tol_g) && (da < tol_a) && !turned &&
                  (sqrt(mgx * mgx + mgy * mgy + mgz * mgz) <
-                  p->bias_limit_rad_s * 1.7320508075688772);
-    double r = maxd(noise_g2 / (3.0 * n), 1e-12);
+                  p->bias_limit_rad_s * SQRT3);
+    double r = maxd(noise_g2 / (3.0 * n), REST_MIN_VARIANCE);
     double gate = p->rest_gyro_threshold_rad_s + REST_GATE_SIGMAS * sqrt(s->bias_var + r);
     int consistent = (maxd(mgx - s->bx, s->bx - mgx) < gate) &&
                      (maxd(mgy - s->by, s->by - mgy) < gate) &&
@@ -472,7 +481,7 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
         int tight = accelerating && (s->rate_lp < p->rotation_threshold_rad_s);
         double limit = tight ? p->saturation_limit_rad : p->wide_saturation_limit_rad;
         int clipped = p->use_saturation && !quick && (en > limit);
-        double scale = clipped ? limit / maxd(en, 1e-300) : 1.0;
+        double scale = clipped ? limit / maxd(en, TINY) : 1.0;
         /* 4. aperiodic unit in the world frame */
         rotate(s->qw, s->qx, s->qy, s->qz, ex * scale, ey * scale, ez * scale, w);
         double weight =
@@ -501,7 +510,7 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
         s->bx = s->bx - ldt * (k2 * f[0] + s->cx);
         s->by = s->by - ldt * (k2 * f[1] + s->cy);
         s->bz = s->bz - ldt * (k2 * f[2] + s->cz);
-        s->bias_var = s->bias_var / (1.0 + ldt * k2 / maxd(k1, 1e-3));
+        s->bias_var = s->bias_var / (1.0 + ldt * k2 / maxd(k1, BIAS_LEARNING_MIN_K1));
         k1 = quick ? maxd(k1, p->startup_k1) : k1;
         double gain = k1 * dt / (1.0 + k1 * dt);
         expmap(gain * f[0], gain * f[1], gain * f[2], d);
@@ -514,7 +523,7 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
         s->clip_timer_s = clipped ? s->clip_timer_s + dt : 0.0;
         int enter = (p->recovery_trigger_s > 0.0) && (s->clip_timer_s >= p->recovery_trigger_s) &&
                     learn;
-        int leave = s->recovering && (en < 0.5 * limit);
+        int leave = s->recovering && (en < RECOVERY_EXIT_FRACTION * limit);
         if (enter) s->recovery_count = s->recovery_count + 1;
         s->recovering = (char)(s->recovering ? !leave : enter);
         if (enter) s->clip_timer_s = 0.0;

@@ -61,6 +61,7 @@ from cf_estimator.core.bias import (  # noqa: F401 - the constants of the whole 
     BIAS_LEARNING_MAX_ERROR_RAD,
     BIAS_RANDOM_WALK_RAD_S_SQRT_S,
 )
+from cf_estimator.core.ops import TINY
 from cf_estimator.core.state import StepState
 from cf_estimator.core.stillness import (  # noqa: F401
     GRAVITY_TIME_CONSTANT_S,
@@ -129,6 +130,16 @@ MAG_DRIFT_SIGMAS = 3.0
 MAG_CANDIDATE_NORM_TOLERANCE = 0.05
 #: Longest time [s] one magnetometer sample's correction may stand for (sparse magnetometers).
 MAG_MAX_DT_S = 1.0
+#: Recovery ends once the error is below this share of the clip level [1] (tilt).
+RECOVERY_EXIT_FRACTION = 0.5
+#: Heading recovery ends once the heading error is below this share of
+#: mag_saturation_limit_rad [1].
+MAG_RECOVERY_EXIT_FRACTION = 0.1
+#: Clip level of the heading error while the heading channel is quick (start-up, recovery) [rad]:
+#: above π, i.e. no clip.
+MAG_QUICK_LIMIT_RAD = 4.0
+#: A unit field whose horizontal component in the world frame is below this gives no heading [1].
+MAG_MIN_HORIZONTAL = 1e-3
 
 
 def _mul(aw: Any, ax: Any, ay: Any, az: Any, bw: Any, bx: Any, by: Any, bz: Any) -> tuple:
@@ -265,7 +276,7 @@ def step(
         tight = accelerating & (s.rate_lp < p.rotation_threshold_rad_s)
         limit = o.where(tight, p.saturation_limit_rad, p.wide_saturation_limit_rad)
         clipped = p.use_saturation & o.not_(quick) & (en > limit)
-        scale = o.where(clipped, limit / o.maximum(en, 1e-300), 1.0)
+        scale = o.where(clipped, limit / o.maximum(en, TINY), 1.0)
         # 4. aperiodic unit in the world frame (weight 1 = unit bypassed)
         wx, wy, wz = _rotate(s.qw, s.qx, s.qy, s.qz, ex * scale, ey * scale, ez * scale)
         weight = dt / (o.where(quick, QUICK_LAG_TIME_CONSTANT_S, p.aperiodic_time_constant_s) + dt)
@@ -302,7 +313,7 @@ def step(
         # recovery: a long unbroken clip is a real attitude error, not a disturbance
         s.clip_timer_s = o.where(clipped, s.clip_timer_s + dt, 0.0)
         enter = (p.recovery_trigger_s > 0.0) & (s.clip_timer_s >= p.recovery_trigger_s) & learn
-        leave = s.recovering & (en < 0.5 * limit)
+        leave = s.recovering & (en < RECOVERY_EXIT_FRACTION * limit)
         s.recovery_count = s.recovery_count + o.where(enter, 1, 0)
         s.recovering = o.where(s.recovering, o.not_(leave), enter)
         s.clip_timer_s = o.where(enter, 0.0, s.clip_timer_s)
@@ -352,13 +363,13 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
     s.mag_ref_dip = o.where(learning, s.mag_ref_dip + (dip - s.mag_ref_dip) / n, s.mag_ref_dip)
     s.mag_ref_count = o.where(learning, n, s.mag_ref_count)
     off_norm = o.maximum(
-        mn / o.maximum(s.mag_ref_norm, 1e-300) - 1.0, 1.0 - mn / o.maximum(s.mag_ref_norm, 1e-300)
+        mn / o.maximum(s.mag_ref_norm, TINY) - 1.0, 1.0 - mn / o.maximum(s.mag_ref_norm, TINY)
     )
     off_dip = o.maximum(dip - s.mag_ref_dip, s.mag_ref_dip - dip)
     # the measured direction, low-passed (every sample; turned by the gyro between samples)
     a = o.where(fresh, 1.0, dt_s / (MAG_SMOOTH_TIME_CONSTANT_S + dt_s))
     vx, vy, vz = s.mmx + a * (ux - s.mmx), s.mmy + a * (uy - s.mmy), s.mmz + a * (uz - s.mmz)
-    vn = o.maximum(o.sqrt(vx * vx + vy * vy + vz * vz), 1e-300)
+    vn = o.maximum(o.sqrt(vx * vx + vy * vy + vz * vz), TINY)
     mmx, mmy, mmz = vx / vn, vy / vn, vz / vn
     s.mmx, s.mmy, s.mmz = mmx, mmy, mmz
     # a field that turned when the body did not: the measured direction against the one the
@@ -394,10 +405,10 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
     a = o.where(fresh, 1.0, dt_s / (MAG_TURN_TIME_CONSTANT_S + dt_s))
     ar = o.where(disturbed, 0.0, a)
     vx, vy, vz = s.mvx + ar * (ux - s.mvx), s.mvy + ar * (uy - s.mvy), s.mvz + ar * (uz - s.mvz)
-    vn = o.maximum(o.sqrt(vx * vx + vy * vy + vz * vz), 1e-300)
+    vn = o.maximum(o.sqrt(vx * vx + vy * vy + vz * vz), TINY)
     s.mvx, s.mvy, s.mvz = vx / vn, vy / vn, vz / vn
 
-    usable = p.use_mag & o.not_(disturbed) & (horizontal > 1e-3)
+    usable = p.use_mag & o.not_(disturbed) & (horizontal > MAG_MIN_HORIZONTAL)
     s.mag_status = o.where(p.use_mag, o.where(disturbed, MAG_REJECTED, MAG_USED), MAG_DISABLED)
     s.mag_last_time_s = o.where(usable, s.time_s, s.mag_last_time_s)
     first = usable & o.not_(s.heading_initialized)
@@ -412,14 +423,15 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
                                                  s.mag_clip_timer_s + dt_m, 0.0),
                                  o.where(disturbed, 0.0, s.mag_clip_timer_s))
     enter = (p.recovery_trigger_s > 0.0) & (s.mag_clip_timer_s >= p.recovery_trigger_s)
-    leave = usable & (o.maximum(yaw_error, -yaw_error) < 0.1 * p.mag_saturation_limit_rad)
+    leave = usable & (o.maximum(yaw_error, -yaw_error)
+                      < MAG_RECOVERY_EXIT_FRACTION * p.mag_saturation_limit_rad)
     s.mag_recovering = o.where(s.mag_recovering, o.not_(leave), enter)
     s.mag_clip_timer_s = o.where(enter, 0.0, s.mag_clip_timer_s)
     quick = fast | s.mag_recovering
     r1 = o.where(quick, o.maximum(p.r1, p.startup_k1), p.r1)
     gain = o.where(usable, r1 * dt_m / (1.0 + r1 * dt_m), 0.0)
     ldt = o.where(usable & learn, dt_m, 0.0)
-    limit = o.where(quick, 4.0, p.mag_saturation_limit_rad)
+    limit = o.where(quick, MAG_QUICK_LIMIT_RAD, p.mag_saturation_limit_rad)
 
     # 'yaw' mode (and the first heading fix of either mode): rotate about the world vertical
     s.yaw_error_rad = o.where(usable, yaw_error, 0.0)
@@ -435,7 +447,7 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
     px, py, pz = _rotate(s.qw, -s.qx, -s.qy, -s.qz, rx, ry, rz)
     ex, ey, ez = uy * pz - uz * py, uz * px - ux * pz, ux * py - uy * px
     en = o.sqrt(ex * ex + ey * ey + ez * ez)
-    scale = o.where(full, o.minimum(1.0, limit / o.maximum(en, 1e-300)), 0.0)
+    scale = o.where(full, o.minimum(1.0, limit / o.maximum(en, TINY)), 0.0)
     ex, ey, ez = ex * scale, ey * scale, ez * scale
     s.bx, s.by, s.bz = s.bx - p.r2 * ldt * ex, s.by - p.r2 * ldt * ey, s.bz - p.r2 * ldt * ez
     dw, dx, dy, dz = _exp(gain * ex, gain * ey, gain * ez, o)
