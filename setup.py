@@ -87,6 +87,8 @@ setup(
         "h5py",
         "tqdm",
         "pyyaml",
+        # PX4 .ulg flight logs for the offline tools (replay, tune --bag); never the node's
+        "pyulog",
     ],
     extras_require={
         # vqf: the peer the bench tests run; dask[distributed]: the LocalCluster (loopback) tests

@@ -209,6 +209,24 @@ def unknown_keys(path: str | Path, node_name: str = DEFAULT_NODE_NAME) -> list[s
     return unknown_names(values)
 
 
+def check_names(path: str | Path, node_name: str = DEFAULT_NODE_NAME
+                ) -> tuple[dict[str, Any], list[str]]:
+    """The names a parameter file gives the node ``node_name``: ``(flat name → value of the
+    sections that apply, warnings about the others)``.
+
+    Raises :class:`ParameterError` with the one line that ``replay --params`` and the node with
+    ``strict_parameters`` both give: not a parameter file, no section for this node (e.g. an
+    imu_filter_madgwick file's ``imu_filter:``), unknown or misspelt names (the nearest valid
+    name suggested).
+    """
+    path = Path(path)
+    values, warnings = _applicable_values(path, _read_doc(path), node_name)
+    unknown = unknown_names(values)
+    if unknown:
+        raise ParameterError(f"{path}: unknown parameter {describe_unknown(unknown)}")
+    return values, warnings
+
+
 def load_params_file(
     path: str | Path, node_name: str = DEFAULT_NODE_NAME
 ) -> tuple[FilterParams, PipelineParams, list[str]]:
@@ -224,10 +242,7 @@ def load_params_file(
     written for float parameters (ROS 2 rejects them).
     """
     path = Path(path)
-    values, warnings = _applicable_values(path, _read_doc(path), node_name)
-    unknown = unknown_names(values)
-    if unknown:
-        raise ParameterError(f"{path}: unknown parameter {describe_unknown(unknown)}")
+    values, warnings = check_names(path, node_name)
     specs = {s.name: s for s in all_specs()}
     known: dict[str, Any] = {}
     for name, value in values.items():
@@ -245,6 +260,16 @@ def load_params_file(
     except ParameterError as exc:
         raise ParameterError(f"{path}: {exc}") from None
     return fp, pp, warnings
+
+
+def explicit_names(path: str | Path | None, node_name: str = DEFAULT_NODE_NAME) -> frozenset[str]:
+    """The parameter names the file ``path`` sets for ``node_name`` (empty without a file):
+    PX4 input applies its conventions to the others only (``cf_estimator.pipeline.px4``)."""
+    if path is None:
+        return frozenset()
+    path = Path(path)
+    values, _ = _applicable_values(path, _read_doc(path), node_name)
+    return frozenset(values)
 
 
 def format_value(spec: ParamSpec, value: Any) -> str:
@@ -284,26 +309,41 @@ def render_params_yaml(
     pipeline_params: PipelineParams | None = None,
     *,
     node_key: str = "/**",
+    only: Sequence[str] | None = None,
+    notes: Mapping[str, str] | None = None,
 ) -> str:
-    """The parameter file for these values (defaults when None), every parameter commented."""
+    """The parameter file for these values (defaults when None), every parameter commented.
+
+    ``only``: write just these parameters (e.g. the ones a tuner changed: a file that resets
+    nothing else when it follows another ``--params-file``); ``notes``: name → one more comment
+    line above that parameter (e.g. "ended on its search bound").
+    """
     fp = filter_params if filter_params is not None else FilterParams()
     pp = pipeline_params if pipeline_params is not None else PipelineParams()
     values = {**as_dict(fp), **as_dict(pp)}
+    notes = notes or {}
     lines = [
         "# cf_estimator parameters (ROS 2 parameter file).",
         "# Generated from the parameter schema by cf_estimator.params_file.render_params_yaml;",
-        "# every parameter is listed with [unit], range and meaning. '/**' applies to any node",
+        ("# every parameter is listed with [unit], range and meaning." if only is None else
+         "# only the parameters named below, each with [unit], range and meaning; the node's"
+         "\n# defaults (or an earlier --params-file) hold for every other one.")
+        + " '/**' applies to any node",
         "# name, so --params-file is never silently ignored after a rename or a namespace.",
         f"{node_key}:",
         "  ros__parameters:",
     ]
     group = None
     for spec in all_specs():
+        if only is not None and spec.name not in only:
+            continue
         if spec.group != group:
             group = spec.group
             lines.append("")
             lines.append(f"    # ---- {group or 'general'} ----")
         lines += ["    " + c for c in _comment(spec)]
+        if spec.name in notes:
+            lines += ["    # NOTE: " + line for line in textwrap.wrap(notes[spec.name], 86)]
         lines.append(f"    {spec.name}: {format_value(spec, values[spec.name])}")
     return "\n".join(lines) + "\n"
 

@@ -64,6 +64,14 @@ if [ "$ros_state" = wheels ]; then
     if command -v "${CXX:-c++}" >/dev/null 2>&1; then
         export CF_ESTIMATOR_REQUIRE_TF2_MSGS=${CF_ESTIMATOR_REQUIRE_TF2_MSGS:-1}
     fi
+    # PX4's message definitions beside the project (../shared/px4_msgs): the px4_msgs node
+    # tests run against the real types (about 40 s to build once; kept while it imports).
+    if [ -d ../shared/px4_msgs ]; then
+        "$PYTHON" scripts/build_msgs.py ../shared/px4_msgs || true
+        if command -v "${CXX:-c++}" >/dev/null 2>&1; then
+            export CF_ESTIMATOR_REQUIRE_PX4_MSGS=${CF_ESTIMATOR_REQUIRE_PX4_MSGS:-1}
+        fi
+    fi
 fi
 # rclpy here: the node tests must run (a broken ROS environment fails them instead of skipping).
 if [ -z "$ros_note" ]; then

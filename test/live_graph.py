@@ -1,9 +1,18 @@
 """Shared by the node tests: rclpy (skipped without it, unless required), isolated live graphs.
 
+Isolated by construction: importing this module (every node test does, before rclpy starts)
+makes the test process and the node processes it starts use Fast DDS (``rmw_fastrtps_cpp``)
+with the profile :data:`PROFILE` (test/fastdds_test_graph.xml): RTPS port base 1500, domain
+gain 50, so the test participants use ports 1100 and 1550-6599 while every participant with
+the default port parameters uses 7000 and 7400 + 250 * domain upwards; discovery is limited to
+this machine, and the variables that could connect a participant elsewhere (static peers, a
+discovery server, a Fast DDS environment file) are removed. A test graph therefore never meets
+a participant outside the tests, whatever its domain id (docs/ros_interface.md, Tests).
+
 Every graph gets its own rclpy Context on its own ROS domain id (shuffled per test process, so
-two test runs on one machine rarely meet) with discovery limited to this machine; waits are on
-conditions with generous timeouts, never fixed sleeps. ``CF_ESTIMATOR_REQUIRE_ROS=1`` (set by
-scripts/test.sh when rclpy is there) turns a missing rclpy into a failure instead of a skip.
+two test runs on one machine rarely meet); waits are on conditions with generous timeouts,
+never fixed sleeps. ``CF_ESTIMATOR_REQUIRE_ROS=1`` (set by scripts/test.sh when rclpy is there)
+turns a missing rclpy into a failure instead of a skip.
 """
 
 from __future__ import annotations
@@ -15,14 +24,27 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 from types import ModuleType
 from typing import Any
 
 import pytest
 
-# Read by the middleware when a context starts: DDS discovery stays on this machine.
-os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-os.environ.pop("ROS_LOCALHOST_ONLY", None)  # deprecated in Jazzy: it would override the range
+#: The Fast DDS profile of every test participant (see the module docstring).
+PROFILE = Path(__file__).resolve().with_name("fastdds_test_graph.xml")
+#: Its RTPS port parameters, and the defaults every other participant uses.
+PORT_BASE, DOMAIN_ID_GAIN = 1500, 50
+DEFAULT_PORT_BASE, DEFAULT_DOMAIN_ID_GAIN = 7400, 250
+
+# Read by the middleware when a context starts (forced, not defaults: isolation must not
+# depend on the caller's environment).
+os.environ["RMW_IMPLEMENTATION"] = "rmw_fastrtps_cpp"
+os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(PROFILE)  # Fast DDS 2.x
+os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] = str(PROFILE)  # its newer name
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+for _name in ("ROS_LOCALHOST_ONLY", "ROS_STATIC_PEERS", "ROS_DISCOVERY_SERVER",
+              "ROS_SUPER_CLIENT", "FASTDDS_ENVIRONMENT_FILE", "RMW_FASTRTPS_USE_QOS_FROM_XML"):
+    os.environ.pop(_name, None)  # each could widen discovery or replace the profile
 
 REQUIRE_ROS = os.environ.get("CF_ESTIMATOR_REQUIRE_ROS") == "1"
 REQUIRE_TF2_MSGS = os.environ.get("CF_ESTIMATOR_REQUIRE_TF2_MSGS") == "1"
@@ -47,6 +69,29 @@ def next_domain_id() -> int:
     domain = _DOMAINS.pop()
     _DOMAINS.insert(0, domain)
     return domain
+
+
+def udp_ports_of_this_process() -> list[int]:
+    """The local UDP ports of this process's sockets (Linux: /proc), sorted."""
+    inodes = set()
+    for fd in os.listdir("/proc/self/fd"):
+        try:
+            link = os.readlink(f"/proc/self/fd/{fd}")
+        except OSError:
+            continue
+        if link.startswith("socket:["):
+            inodes.add(link[8:-1])
+    ports = []
+    for table in ("/proc/net/udp", "/proc/net/udp6"):
+        try:
+            lines = Path(table).read_text().splitlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            cells = line.split()
+            if len(cells) > 9 and cells[9] in inodes:
+                ports.append(int(cells[1].rsplit(":", 1)[1], 16))
+    return sorted(ports)
 
 
 def wait_for(predicate: Callable[[], Any], spin: Callable[[], None], timeout: float = TIMEOUT_S,

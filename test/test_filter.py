@@ -301,7 +301,9 @@ def test_parameter_validation_names_the_parameter():
     with pytest.raises(ParameterError, match="saturation_limit_rad"):
         FilterParams(saturation_limit_rad=0.0)
     with pytest.raises(ParameterError, match="world_frame"):
-        FilterParams(world_frame="nwu")
+        FilterParams(world_frame="ecef")
+    with pytest.raises(ValueError, match="pipeline publishes nwu"):  # the core: enu or ned
+        ComplementaryFilter(FilterParams(world_frame="nwu"))
     with pytest.raises(ParameterError, match="T < k1/k2"):
         FilterParams(k1=0.03, k2=0.001, aperiodic_time_constant_s=40.0)
     with pytest.raises(ParameterError, match="k3"):

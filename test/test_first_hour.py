@@ -362,8 +362,9 @@ def test_estimate_warns_about_deg_s_and_g():
 
 def test_real_bags_report_the_magnetometer_and_warn_when_heading_was_unreferenced(
         tmp_path, capsys):
-    """ardrone: over half of the 4308 samples used, the rejected ones reported; SparkFun: most
-    rejected, and the console warns."""
+    """SparkFun and ardrone: most samples rejected, the rejected ones reported, and the console
+    warns. (ardrone: its field does not turn as its gyro says — uncalibrated, a gyro driven
+    beyond its range — so since issue 22 it is a disturbance: 95 % rejected, was 43 %.)"""
     bags = REPO.parent / "shared" / "data" / "bags"
     if not (bags / "sparkfun_razor.bag").is_file():
         pytest.skip(f"real recordings not available in {bags}")
@@ -378,5 +379,5 @@ def test_real_bags_report_the_magnetometer_and_warn_when_heading_was_unreference
                        "--no-progress")
     a = json.loads((tmp_path / "a.json").read_text())["counters"]
     assert rc == 0 and f"rejected {a['mag_rejected']} (disturbed field)" in out
-    assert a["mag_used"] > 0.5 * a["received_mag"] and a["mag_rejected"] > 1000
-    assert "mostly unreferenced" not in err
+    assert a["mag_rejected"] > 0.5 * a["received_mag"] and a["mag_used"] > 0
+    assert "mostly unreferenced" in err

@@ -711,14 +711,15 @@ def test_valid_parameter_changes_apply_at_the_next_sample_without_reset(changes,
     before_gaps = pipe.counters["gaps"]
     out = pipe.on_imu(imu_msg(t_next, gyro, accel))
     assert expected is None and out is not None
-    check_output(out, "imu_link")
+    check_output(out, pipe.output_frame_id("imu_link"))  # output_frame_id: 'auto' here
     if model.resets:
         assert pipe.counters["resets"] == model.resets
         return
     assert pipe.counters["gaps"] - before_gaps == model.gaps
     dt = next_dt_ns * 1e-9 if not model.gaps else None
     if dt is not None:
-        w, x, y, z = ref.update(gyro, accel, dt, None)
+        # the published frame: the core's, turned by declination and yaw offset (frames.py)
+        w, x, y, z = pipe.output_frame.apply(ref.update(gyro, accel, dt, None))
         assert out.orientation_xyzw == (x, y, z, w)
     # the covariance model (docs/ros_interface.md) with the new floors: tilt = floor + the
     # error norm squared while settling (+ the clipped drift while clipped)

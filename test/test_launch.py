@@ -10,6 +10,8 @@ REPO = Path(__file__).resolve().parents[1]
 LAUNCH = REPO / "launch_scripts" / "cf_estimator.launch.py"
 EXPECTED_ARGUMENTS = {
     "params_file", "use_sim_time", "namespace", "node_name", "imu_topic", "mag_topic", "log_level",
+    "velocity_topic", "world_frame", "body_frame", "output_frame_id", "tf_parent_frame",
+    "publish_tf", "strict_parameters",
 }
 
 

@@ -31,7 +31,7 @@ PY_MODULES = (step, stillness, bias)
 PY_EXTRA = (("ops.py", "FloatOps.sin_half_over"),)
 #: The C functions that repeat them; the first four are the rotation helpers.
 C_HELPERS = ("mul", "expmap", "rotate", "turn_heading")
-C_STEP = ("magnetometer", "stillness", "cf_step")
+C_STEP = ("toward_unit", "magnetometer", "stillness", "cf_step")
 #: Where a C constant's Python counterpart may live (the step's modules, then the checks').
 PY_HOMES = (step, stillness, bias, ops, filter)
 #: Bare numbers the algebra needs (zero, one, the 2 of rotations and sample differences, the
@@ -132,11 +132,12 @@ def test_every_python_constant_of_the_step_is_defined_in_c_with_the_same_value()
 def test_no_bare_tuning_literal_in_either_step(side):
     if side == "python":
         found = {name: _py_numbers(fn) for name, fn in _py_functions()}
-        helpers = {"cf_estimator.core.step._exp", "cf_estimator.core.step._turn_heading",
+        helpers = {"cf_estimator.core.step._exp", "cf_estimator.core.step.turn_heading",
                    "FloatOps.sin_half_over"}
     else:
         found = {name: _c_numbers(body) for name, body in _c_functions().items()}
         helpers = set(C_HELPERS)
+    assert helpers <= set(found), f"rotation helpers renamed: {sorted(helpers - set(found))}"
     for name, numbers in found.items():
         allowed = STRUCTURAL | (HELPER_ONLY if name in helpers else set())
         bare = sorted(set(numbers) - allowed)

@@ -124,6 +124,8 @@ def test_aiding_removes_most_of_the_manoeuvre_error_in_a_multirotor_flight(uav, 
     yaw_err = _yaw_offset(r.quaternion[-1], uav.truth.q_world_from_body[-1])
     d = math.remainder(r.velocity_status.heading_offset_rad - yaw_err, 2 * math.pi)
     assert abs(d) < 0.1
+    # ... and the 6-D filter was steered onto the velocity's frame (ENU): no heading drift
+    assert abs(yaw_err) < 0.05
 
 
 def _yaw_offset(q_est, q_true):
@@ -317,3 +319,60 @@ def test_ned_world_frame_with_ned_velocity_matches_enu(uav):
     assert r_ned.velocity_aided.mean() > 0.7
     d = quat.angle_between(quat.ned_to_enu(r_ned.quaternion), r_enu.quaternion)
     assert np.nanmax(d) < 1e-3
+
+
+# -- taking hold (issue 23 item 2) ------------------------------------------------------------
+def _tilt_after(seconds: float, take_hold: float = 0.0, aided: bool = False):
+    """A level filter, settled while turning steadily about its vertical (so never at rest,
+    where the loop runs fast anyway), then given a 10 deg tilted accelerometer: tilt error
+    [deg] after ``seconds`` and the bias change [rad/s]."""
+    from cf_estimator.core.filter import ComplementaryFilter
+
+    f = ComplementaryFilter(P6)
+    dt = 0.01
+    up = np.array([0.0, 0.0, 9.80665])
+    turn = np.array([0.0, 0.0, 0.5])
+    for _ in range(1000):
+        f.update(turn, up, dt)
+    b0 = np.array(f.status().gyro_bias_rad_s)
+    a = np.radians(10.0)
+    tilted = 9.80665 * np.array([0.0, np.sin(a), np.cos(a)])
+    if take_hold:
+        f.take_hold(take_hold)
+    for _ in range(int(seconds / dt)):
+        f.set_aided(aided)
+        w, x, y, z = f.update(turn, tilted, dt)
+    tilt = np.degrees(np.arccos(min(1.0, 1.0 - 2.0 * (x * x + y * y))))
+    return abs(10.0 - tilt), np.abs(np.array(f.status().gyro_bias_rad_s) - b0).max()
+
+
+def test_take_hold_removes_a_revealed_tilt_error_at_once_without_learning_bias():
+    err_hold, db_hold = _tilt_after(2.0, take_hold=2.0)
+    err_run, db_run = _tilt_after(2.0)
+    assert err_hold < 0.5 < 3.0 < err_run  # the running loop still carries most of it
+    assert db_hold < 1e-9 < db_run  # nothing learned from it while taking hold
+
+
+def test_an_aided_accelerometer_is_followed_without_the_slow_lag():
+    err_aided, _ = _tilt_after(3.0, aided=True)
+    err_unaided, _ = _tilt_after(3.0)
+    assert err_aided < 0.5 * err_unaided
+
+
+def test_time_to_hold_counts_from_the_first_velocity_sample_until_it_stays_below_2_deg():
+    from types import SimpleNamespace
+
+    from cf_estimator.bench.euroc_eval import time_to_hold_s
+    from cf_estimator.core import quaternion as quat
+
+    t = np.arange(0.0, 30.0, 0.1)
+    ref = np.tile([1.0, 0.0, 0.0, 0.0], (t.size, 1))
+    tilt = np.radians(np.where(t < 12.0, 5.0, 0.5))  # 5 deg until 12 s, then 0.5 deg
+    tilt[(t > 15.0) & (t < 15.5)] = np.radians(3.0)  # one more excursion, until 15.5 s
+    est = quat.from_euler(tilt, np.zeros_like(t), np.zeros_like(t))
+    flight = SimpleNamespace(t_s=t, q_ref=ref, has_reference=np.ones(t.size, bool),
+                             velocity_t_s=np.array([4.0, 4.1]))
+    assert time_to_hold_s(flight, est) == pytest.approx(15.5 - 4.0, abs=0.11)
+    assert math.isnan(time_to_hold_s(flight, quat.from_euler(np.radians(5.0) + 0 * t, 0 * t,
+                                                              0 * t)))
+    assert time_to_hold_s(SimpleNamespace(**{**vars(flight), "velocity_t_s": None}), est) != 0.0

@@ -57,7 +57,7 @@ def find_bags(inputs: Sequence[str | os.PathLike[str]]) -> list[Path]:
                 dirs[:] = []
                 continue
             here_found.extend(here / f for f in files
-                              if f.endswith(".bag") and not f.startswith("."))
+                              if f.endswith((".bag", ".ulg")) and not f.startswith("."))
             if here == p and _storage_dir(here):
                 here_found.append(here)
         found.extend(sorted(here_found, key=lambda b: b.relative_to(p).as_posix()))
@@ -67,7 +67,7 @@ def find_bags(inputs: Sequence[str | os.PathLike[str]]) -> list[Path]:
 def output_names(bags: Sequence[Path]) -> list[str]:
     """One unique output name per bag: its name without ``.bag``; on a clash, its path
     below the common directory with ``/`` as ``_``."""
-    stems = [b.name[:-4] if b.name.endswith(".bag") else b.name for b in bags]
+    stems = [b.name[:-4] if b.name.endswith((".bag", ".ulg")) else b.name for b in bags]
     if len(set(stems)) == len(stems):
         return stems
     absolute = [b.resolve() for b in bags]
@@ -75,7 +75,7 @@ def output_names(bags: Sequence[Path]) -> list[str]:
     names = []
     for a in absolute:
         rel = a.relative_to(root).as_posix()
-        names.append((rel[:-4] if rel.endswith(".bag") else rel).replace("/", "_"))
+        names.append((rel[:-4] if rel.endswith((".bag", ".ulg")) else rel).replace("/", "_"))
     return names
 
 
@@ -263,6 +263,13 @@ def _shown(path: str | None) -> str:
     return path if rel.startswith("..") else rel
 
 
+def _num(value: Any, spec: str) -> str:
+    """A table figure: ``value`` with ``spec``, ``n/a`` when None/NaN (never a traceback)."""
+    if value is None or (isinstance(value, float) and value != value):
+        return "n/a"
+    return format(value, spec)
+
+
 def format_table(fleet: dict[str, Any]) -> str:
     """The console table: one line per bag (figures or the failure), then the totals."""
     rows = [("bag", "format", "IMU msgs", "stamps s", "rejected", "resets", "bias",
@@ -277,9 +284,10 @@ def format_table(fleet: dict[str, Any]) -> str:
             lines.append(f"FAILED  {s['error'].replace(s['input'], _shown(s['input']))}")
             continue
         rmse = s.get("rmse_deg")
-        rmse_text = f"{rmse['total']:.2f}/{rmse['inclination']:.2f}" if rmse else "-"
+        rmse_text = (f"{_num(rmse.get('total'), '.2f')}/{_num(rmse.get('inclination'), '.2f')}"
+                     if rmse else "-")
         rows.append((
-            name, s["input_format"], str(s["messages_in"]), f"{s['duration_s']:.1f}",
+            name, s["input_format"], str(s["messages_in"]), _num(s.get("duration_s"), ".1f"),
             str(sum((s.get("messages_rejected") or {}).values())),
             str(sum((s.get("resets") or {}).values())),
             "converged" if s.get("gyro_bias_converged") else "no",
@@ -292,7 +300,10 @@ def format_table(fleet: dict[str, Any]) -> str:
     f = fleet["fleet"]
     rate = f["messages_per_s"]
     table.extend(lines)
-    table.append(f"fleet   {f['replayed']} of {f['bags']} bag(s) replayed, {f['failed']} "
-                 f"failed; {f['messages']} messages in {f['wall_time_s']:.2f} s"
+    modes = sorted({s.get("mode", "online") for s in fleet["bags"]})
+    mode = (" (offline: acausal estimates, --offline)" if modes == ["offline"]
+            else f" (modes: {', '.join(modes)})" if len(modes) > 1 else "")
+    table.append(f"fleet   {f['replayed']} of {f['bags']} bag(s) replayed{mode}, {f['failed']} "
+                 f"failed; {f['messages']} messages in {_num(f.get('wall_time_s'), '.2f')} s"
                  + (f" ({rate / 1e3:.1f} k messages/s)" if rate else "") + f" on {f['engine']}")
     return "\n".join(table) + "\n"

@@ -113,7 +113,7 @@ def _looks_like_bag(path: Path) -> str | None:
             )
         return None
     if path.suffix != ".bag":
-        return "not a ROS 1 .bag file or a ROS 2 bag directory"
+        return "not a ROS 1 .bag file, a ROS 2 bag directory or a PX4 .ulg log"
     return None
 
 
@@ -185,7 +185,9 @@ class InputBag:
     def _listing(self) -> str:
         if not self.topics:
             return "the bag has no topics"
-        return "topics: " + ", ".join(f"{i.topic} [{i.msgtype}]" for i in self.topics)
+        return "topics: " + ", ".join(
+            f"{i.topic} [{i.msgtype}]: {i.count} message{'' if i.count == 1 else 's'}"
+            for i in self.topics)
 
     def select_topic(
         self, role: str, explicit: str | None, msgtypes: Sequence[str], *, required: bool,
@@ -399,9 +401,15 @@ def migrate_to_jazzy(src_store: Any, msgtype: str, msg: Any, cache: dict[str, ob
     return migrate_message(src_store, store, msgtype, msgtype, cache, msg)
 
 
-def open_bag(path: str | os.PathLike[str]) -> InputBag:
-    """Open a ROS 1 ``.bag`` or a ROS 2 bag directory (:class:`BagError` names the file)."""
+def open_bag(path: str | os.PathLike[str], *, ulog_instance: int | None = None) -> InputBag:
+    """Open a ROS 1 ``.bag``, a ROS 2 bag directory or a PX4 ``.ulg`` log
+    (:mod:`cf_estimator.bag.ulog`; ``ulog_instance``: the multi_id to use where a topic has
+    several) — :class:`BagError` names the file."""
     p = Path(path)
+    if p.suffix.lower() == ".ulg" and not p.is_dir():
+        from cf_estimator.bag.ulog import open_ulog
+
+        return open_ulog(p, ulog_instance)
     why = _looks_like_bag(p)
     if why is not None:
         raise BagError(f"{p}: {why}", 2 if not p.exists() else 1)

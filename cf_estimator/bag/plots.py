@@ -93,11 +93,16 @@ def plot_replay(
         est_rpy = np.degrees(quat.to_euler(scored["q_est_aligned"]))
     offline = s.online_rpy_rad.shape[0] == t.size  # an offline replay: show the online too
     kind = "offline estimate" if offline else "estimate"
-    aligned = alignment_label(result.summary.get("reference", {}).get("heading_alignment"))
+    ref_info = result.summary.get("reference") or {}
+    aligned = alignment_label(ref_info.get("heading_alignment"))
+    autopilot = ref_info.get("kind") == "autopilot"  # a PX4 log: the autopilot's own estimate
+    ref_label = "autopilot (vehicle_attitude)" if autopilot else "reference"
+    versus = (" vs the autopilot's estimate (agreement, not ground truth)" if autopilot
+              else " vs reference")
     for i, ax in enumerate(axes):
         if ref_rpy is not None:
             tr = scored["t_s"] - t0
-            ax.plot(tr, ref_rpy[:, i], color="k", lw=1.0, label="reference")
+            ax.plot(tr, ref_rpy[:, i], color="k", lw=1.0, label=ref_label)
             ax.plot(tr, est_rpy[:, i], color="C0", lw=0.8, label=f"{kind}{aligned}")
         else:
             ax.plot(t, np.degrees(s.rpy_rad[:, i]), color="C0", lw=0.8, label=kind)
@@ -109,7 +114,7 @@ def plot_replay(
         _shade(ax, windows, t0)
     axes[0].legend(loc="upper right", fontsize=8)
     axes[-1].set_xlabel("time [s]")
-    fig.suptitle("Attitude" + suffix)
+    fig.suptitle("Attitude" + (versus if autopilot else "") + suffix)
     fig.tight_layout()
     written.append(_save(fig, out_dir / "attitude.png"))
 
@@ -128,7 +133,7 @@ def plot_replay(
             ax.grid(alpha=0.3)
             _shade(ax, windows, t0)
         axes[-1].set_xlabel("time [s]")
-        fig.suptitle("Error vs reference" + suffix)
+        fig.suptitle(("Difference" if autopilot else "Error") + versus + suffix)
         fig.tight_layout()
         written.append(_save(fig, out_dir / "error.png"))
 

@@ -31,13 +31,13 @@ from typing import Any
 import numpy as np
 
 from cf_estimator import __version__, metrics
-from cf_estimator.bag import cdr, io
+from cf_estimator.bag import cdr, io, ulog
 from cf_estimator.core import quaternion as quat
 from cf_estimator.core.filter import ComplementaryFilter, bias_sigma
 from cf_estimator.core.kernel import resolve_backend
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import BIAS_CONVERGED_SIGMA_RAD_S
-from cf_estimator.pipeline import ImuPipeline, PipelineParams, bulk
+from cf_estimator.pipeline import ImuPipeline, PipelineParams, bulk, checks, frames, px4
 from cf_estimator.schema import as_dict
 
 OUT_IMU_TOPIC = "/imu/data"
@@ -71,6 +71,11 @@ class ReplayOptions:
     bulk_pipeline: bool = True
     #: called with the number of messages read since the last call (a fleet's progress bar)
     on_messages: Callable[[int], None] | None = None
+    #: PX4 ulog: the multi_id to use where a topic has several (None: the lowest, said)
+    instance: int | None = None
+    #: names of the parameters the user set (a parameter file): PX4 input changes only the
+    #: others to PX4's conventions (None: those that differ from the default count as set)
+    explicit_params: frozenset[str] | None = None
 
 
 @dataclass
@@ -102,6 +107,11 @@ class ReplayResult:
 
 class ReplayError(Exception):
     """A user-facing replay failure (bad bag, bad topic, bad output path)."""
+
+
+class UnusableInput(io.BagError):
+    """The bag was read but gives no usable estimate (:func:`checks.unusable_reason`): exit 1,
+    no output written."""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -400,7 +410,7 @@ class _Run:
         self.outputs: list[tuple[int, Any]] = []
         self.offline_segments = 0
         if self.offline:
-            self.recorder = _RecordingFilter(self.fparams)
+            self.recorder = _RecordingFilter(frames.core_params(self.fparams))
             self.pipe._filter = self.recorder  # noqa: SLF001 - same filter, recording its input
         if self.out_path is not None:
             self.bag = io.OutputBag(self.out_path, storage=opts.storage, overwrite=opts.overwrite)
@@ -534,8 +544,10 @@ class _Run:
         """Offline: replace every output's orientation by the offline estimate, then write the
         held outputs and diagnostics in log-time order."""
         t = np.asarray(self.t, dtype=float)
-        q, self.offline_segments = _offline_orientations(t, self.recorder, self.fparams,
+        q, self.offline_segments = _offline_orientations(t, self.recorder,
+                                                         frames.core_params(self.fparams),
                                                          self.pparams.max_dt_s)
+        q = self.pipe.output_frame.apply_array(q)  # published world frame, as online
         self.online_rpy = list(self.rpy)  # what the online filter said, for the plots
         self.q = [tuple(r) if np.all(np.isfinite(r)) else None for r in q.tolist()]
         rpy = quat.to_euler(q)
@@ -611,7 +623,10 @@ def replay_variants(
         if v.output_path is not None:
             io.check_output_path(Path(v.output_path), overwrite=opts.overwrite, inputs=[in_path])
 
-    with io.open_bag(in_path) as bag:
+    with io.open_bag(in_path, ulog_instance=opts.instance) as bag:
+        px4_in = _px4_input(bag, opts, variants)
+        if px4_in is not None:
+            variants = px4_in.variants
         imu_topic = bag.select_topic("IMU", opts.imu_topic, [io.IMU_TYPE], required=True,
                                      option="--imu-topic")
         assert imu_topic is not None
@@ -621,7 +636,9 @@ def replay_variants(
             mag_topic = bag.select_topic("magnetometer", opts.mag_topic, [io.MAG_TYPE],
                                          required=False, option="--mag-topic")
         ref_topic = None
-        if opts.reference_topic is not None:
+        if px4_in is not None and px4_in.reference:
+            ref_topic = ulog.ATTITUDE_TOPIC  # the autopilot's own estimate, beside ours
+        elif opts.reference_topic is not None and opts.reference_topic.lower() != "none":
             ref_topic = bag.select_topic("reference", opts.reference_topic,
                                          (*io.REFERENCE_TYPES, io.IMU_TYPE), required=True,
                                          option="--reference-topic")
@@ -668,7 +685,10 @@ def replay_variants(
                     bulk_run.events(bulk.Events(
                         kinds, chunk.log_ns, chunk.row, chunk.blocks.get(io.IMU_TYPE),
                         chunk.blocks.get(io.MAG_TYPE), chunk.msg))
-                    if ref_topic is not None:
+                    fast_ref = getattr(chunk, "references", None)  # a ulog's, as arrays
+                    if ref_topic is not None and fast_ref is not None and ref_topic != imu_topic:
+                        n_ref += fast_ref(ref_topic, ref_t, ref_q)
+                    elif ref_topic is not None:
                         for i, t in enumerate(chunk.topic):
                             if t == ref_topic:
                                 if t != imu_topic:
@@ -728,79 +748,167 @@ def replay_variants(
             for r in runs:
                 r.abort()
             raise
-        for r in runs:
-            if r.bag is not None:
-                r.bag.commit()
 
     wall = time.perf_counter() - t_wall
-    results = []
+    try:
+        results = []
+        for r in runs:
+            if px4_in is not None:
+                r.warnings[:0] = px4_in.notes
+            r_ref_t, r_ref_q = (ref_t, ref_q) if px4_in is None or ref_topic != ulog.ATTITUDE_TOPIC \
+                else px4_in.reference_in_output(r, ref_t, ref_q)
+            series = _series(r, r_ref_t, r_ref_q)
+            counters = _jsonable(dict(r.pipe.counters))
+            stamps = series.t_s
+            duration = float(stamps[-1] - stamps[0]) if stamps.size > 1 else 0.0
+            init = np.all(np.isfinite(series.q_wxyz), axis=1)
+            clip_frac = float(np.mean(series.clipped[init])) if init.any() else None
+            final_bias = (
+                [float(c) for c in r.pipe.filter.gyro_bias_rad_s] if r.pipe.initialized else None
+            )
+            status = r.pipe.filter.status() if r.pipe.initialized else None
+            converged = np.asarray(r.bias_sigma) < BIAS_CONVERGED_SIGMA_RAD_S
+            mag_in_use = mag_topic is not None and r.fparams.use_mag
+            summary: dict[str, Any] = {
+                "variant": r.variant.name,
+                "mode": "offline" if r.offline else "online",
+                "input": str(in_path),
+                "input_format": in_format,
+                "output": str(r.out_path) if r.out_path is not None else None,
+                "storage": opts.storage if r.out_path is not None else None,
+                "topics": {"imu": imu_topic, "mag": mag_topic, "reference": ref_topic,
+                           **({"velocity": vel_topic} if vel_topic else {})},
+                "messages_in": n_imu,
+                "mag_messages_in": n_mag,
+                "reference_messages_in": n_ref,
+                "messages_processed": int(counters.get("processed", len(r.t))),
+                "messages_rejected": counters.get("rejected", {}),
+                "gaps": counters.get("gaps"),
+                "resets": counters.get("resets"),
+                "outputs_written": dict(r.bag.counts) if r.bag is not None else {},
+                "diagnostics_reports": r.n_diag,
+                "duration_s": duration,
+                "bag_duration_s": (last_log - first_log) * 1e-9 if first_log is not None else 0.0,
+                "imu_rate_hz": (stamps.size - 1) / duration if duration > 0 else None,
+                "clipped_fraction": clip_frac,
+                "final_gyro_bias_rad_s": final_bias,
+                "final_gyro_bias_sigma_rad_s": status.gyro_bias_sigma_rad_s if status else None,
+                "gyro_bias_converged": status.gyro_bias_converged if status else False,
+                "gyro_bias_converged_after_s": (
+                    float(r.bias_t[int(np.argmax(converged))] - r.bias_t[0])
+                    if converged.any() else None),
+                "still_fraction": float(np.mean(series.at_rest[init])) if init.any() else None,
+                **({"velocity": _velocity_summary(r.pipe, n_vel)} if vel_topic else {}),
+                "counters": counters,
+                "warnings": r.warnings,
+                **({"offline": {"segments": r.offline_segments,
+                                "note": "orientations from cf_estimator.core.offline (acausal); "
+                                        "the pipeline's guards chose the samples; /diagnostics "
+                                        "and the bias report the online filter"}}
+                   if r.offline else {}),
+                # what reproduces the run: the effective parameters, the version, the backend
+                "parameters": {"filter": as_dict(r.fparams), "pipeline": as_dict(r.pparams)},
+                "version": __version__,
+                "filter_backend": resolve_backend(),
+                "wall_time_s": wall,
+                "messages_per_s": (n_imu + n_mag + n_ref) / wall if wall > 0 else None,
+            }
+            scored = None
+            if ref_topic is not None:
+                align = resolve_heading_alignment(opts.heading_alignment, mag_in_use)
+                stats, scored = error_statistics(series.t_s, series.q_wxyz, series.ref_t_s,
+                                                 series.ref_q_wxyz, align)
+                stats["topic"] = ref_topic
+                if px4_in is not None and ref_topic == ulog.ATTITUDE_TOPIC:
+                    stats["kind"] = "autopilot"
+                    stats["label"] = AUTOPILOT_LABEL
+                summary["reference"] = stats
+                summary["rmse_deg"] = stats.get("rmse_deg")
+            if px4_in is not None:
+                summary["px4"] = px4_in.summary(r)
+            results.append(ReplayResult(_jsonable(summary), series, r.out_path, scored))
+    except BaseException:
+        for r in runs:
+            r.abort()
+        raise
+    # nothing that looks like a good result is left behind: an unusable run writes no output
+    unusable = [(r, checks.unusable_reason(res.summary)) for r, res in zip(runs, results,
+                                                                          strict=True)]
+    reason = next((why for _, why in unusable if why), None)
+    if reason is not None:
+        for r in runs:
+            r.abort()
+        raise UnusableInput(f"{in_path}: {reason}")
     for r in runs:
-        series = _series(r, ref_t, ref_q)
-        counters = _jsonable(dict(r.pipe.counters))
-        stamps = series.t_s
-        duration = float(stamps[-1] - stamps[0]) if stamps.size > 1 else 0.0
-        init = np.all(np.isfinite(series.q_wxyz), axis=1)
-        clip_frac = float(np.mean(series.clipped[init])) if init.any() else None
-        final_bias = (
-            [float(c) for c in r.pipe.filter.gyro_bias_rad_s] if r.pipe.initialized else None
-        )
-        status = r.pipe.filter.status() if r.pipe.initialized else None
-        converged = np.asarray(r.bias_sigma) < BIAS_CONVERGED_SIGMA_RAD_S
-        mag_in_use = mag_topic is not None and r.fparams.use_mag
-        summary: dict[str, Any] = {
-            "variant": r.variant.name,
-            "mode": "offline" if r.offline else "online",
-            "input": str(in_path),
-            "input_format": in_format,
-            "output": str(r.out_path) if r.out_path is not None else None,
-            "storage": opts.storage if r.out_path is not None else None,
-            "topics": {"imu": imu_topic, "mag": mag_topic, "reference": ref_topic,
-                       **({"velocity": vel_topic} if vel_topic else {})},
-            "messages_in": n_imu,
-            "mag_messages_in": n_mag,
-            "reference_messages_in": n_ref,
-            "messages_processed": int(counters.get("processed", len(r.t))),
-            "messages_rejected": counters.get("rejected", {}),
-            "gaps": counters.get("gaps"),
-            "resets": counters.get("resets"),
-            "outputs_written": dict(r.bag.counts) if r.bag is not None else {},
-            "diagnostics_reports": r.n_diag,
-            "duration_s": duration,
-            "bag_duration_s": (last_log - first_log) * 1e-9 if first_log is not None else 0.0,
-            "imu_rate_hz": (stamps.size - 1) / duration if duration > 0 else None,
-            "clipped_fraction": clip_frac,
-            "final_gyro_bias_rad_s": final_bias,
-            "final_gyro_bias_sigma_rad_s": status.gyro_bias_sigma_rad_s if status else None,
-            "gyro_bias_converged": status.gyro_bias_converged if status else False,
-            "gyro_bias_converged_after_s": (
-                float(r.bias_t[int(np.argmax(converged))] - r.bias_t[0])
-                if converged.any() else None),
-            "still_fraction": float(np.mean(series.at_rest[init])) if init.any() else None,
-            **({"velocity": _velocity_summary(r.pipe, n_vel)} if vel_topic else {}),
-            "counters": counters,
-            "warnings": r.warnings,
-            **({"offline": {"segments": r.offline_segments,
-                            "note": "orientations from cf_estimator.core.offline (acausal); "
-                                    "the pipeline's guards chose the samples; /diagnostics "
-                                    "and the bias report the online filter"}}
-               if r.offline else {}),
-            # what reproduces the run: the effective parameters, the version, the backend
-            "parameters": {"filter": as_dict(r.fparams), "pipeline": as_dict(r.pparams)},
-            "version": __version__,
-            "filter_backend": resolve_backend(),
-            "wall_time_s": wall,
-            "messages_per_s": (n_imu + n_mag + n_ref) / wall if wall > 0 else None,
-        }
-        scored = None
-        if ref_topic is not None:
-            align = resolve_heading_alignment(opts.heading_alignment, mag_in_use)
-            stats, scored = error_statistics(series.t_s, series.q_wxyz, series.ref_t_s,
-                                             series.ref_q_wxyz, align)
-            stats["topic"] = ref_topic
-            summary["reference"] = stats
-            summary["rmse_deg"] = stats.get("rmse_deg")
-        results.append(ReplayResult(_jsonable(summary), series, r.out_path, scored))
+        if r.bag is not None:
+            r.bag.commit()
     return results
+
+
+AUTOPILOT_LABEL = ("agreement with the autopilot's estimate (vehicle_attitude, itself an "
+                   "estimate), not ground truth")
+#: Below this share of the log's duration covered by the IMU, the replay says so.
+IMU_COVERAGE_WARN_FRACTION = 0.5
+
+
+@dataclass
+class _Px4Input:
+    """What a PX4 ulog changes in a replay: the conventions, the autopilot comparison, notes."""
+
+    bag: Any
+    variants: list[ReplayVariant]
+    changed: list[str]
+    reference: bool  #: compare with the log's vehicle_attitude
+    notes: list[str]
+    span: tuple[float, float, float]  #: first, last IMU stamp, log duration [s]
+
+    def reference_in_output(self, r: _Run, ref_t: Sequence[float], ref_q: Sequence[Any]
+                            ) -> tuple[list[float], list[Any]]:
+        """vehicle_attitude (FRD → NED) in the run's output frames, within the IMU's span."""
+        t = np.asarray(ref_t, dtype=float)
+        q = np.asarray(ref_q, dtype=float).reshape(-1, 4)
+        lo, hi, _dur = self.span
+        keep = (t >= lo - MAX_INTERPOLATION_GAP_S) & (t <= hi + MAX_INTERPOLATION_GAP_S)
+        world = r.fparams.world_frame
+        qo = px4.attitude_in_output_frames(q[keep], world,
+                                           px4.output_body(r.pparams.body_frame, world))
+        if qo is None:
+            text = f"vehicle_attitude is not compared: no conversion into world frame {world}"
+            if text not in r.warnings:
+                r.warnings.append(text)
+            return [], []
+        return t[keep].tolist(), [tuple(x) for x in qo.tolist()]
+
+    def summary(self, r: _Run) -> dict[str, Any]:
+        lo, hi, dur = self.span
+        return {"conventions_applied": self.changed, "instances": dict(self.bag.instances),
+                "truncated": bool(self.bag.truncated), "imu_first_s": lo, "imu_last_s": hi,
+                "log_duration_s": dur,
+                "output_frames": f"{px4.output_body(r.pparams.body_frame, r.fparams.world_frame)}"
+                                 f" body -> {r.fparams.world_frame} world"}
+
+
+def _px4_input(bag: Any, opts: ReplayOptions, variants: Sequence[ReplayVariant]
+               ) -> _Px4Input | None:
+    """PX4 input (a ulog): PX4's conventions for every parameter the user did not set, the
+    log's vehicle_attitude as the comparison (unless another reference was asked for), and
+    the reader's notes; None for a bag."""
+    if not isinstance(bag, ulog.UlogBag):
+        return None
+    out, changed = [], []
+    for v in variants:
+        fp, pp, changed = px4.apply_px4_conventions(
+            v.filter_params or FilterParams(), v.pipeline_params or PipelineParams(),
+            opts.explicit_params)
+        out.append(dataclasses.replace(v, filter_params=fp, pipeline_params=pp))
+    notes = list(bag.notes)
+    lo, hi, dur = bag.imu_coverage()
+    if dur > 0 and (hi - lo) < IMU_COVERAGE_WARN_FRACTION * dur:
+        notes.append(f"{ulog.IMU_TOPIC} covers only {hi - lo:.1f} s ({lo:.1f} s to {hi:.1f} s "
+                     f"since boot) of the {dur:.1f} s log: the estimate and the comparison "
+                     "cover that span only")
+    want_ref = opts.reference_topic is None and bag.count([ulog.ATTITUDE_TOPIC]) > 0
+    return _Px4Input(bag, out, changed, want_ref, notes, (lo, hi, dur))
 
 
 def _velocity_summary(pipe: Any, n_vel: int) -> dict[str, Any]:

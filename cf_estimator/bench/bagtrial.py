@@ -246,11 +246,17 @@ def _build(c: _Collected, path: Path, topics: dict[str, str | None], score_after
     )
 
 
+def _is_ulog(bag: Any) -> bool:
+    from cf_estimator.bag.ulog import UlogBag
+
+    return isinstance(bag, UlogBag)
+
+
 def load_bag_trial(
     path: str | os.PathLike[str], reference_topic: str = DEFAULT_REFERENCE_TOPIC, *,
     imu_topic: str | None = None, mag_topic: str | None = None,
     score_after_s: float = DEFAULT_SCORE_AFTER_S, mag_timeout_s: float | None = None,
-    max_dt_s: float | None = None,
+    max_dt_s: float | None = None, world_frame: str = "enu",
 ) -> BagTrial:
     """Read a bag into a :class:`BagTrial` (see the module docstring).
 
@@ -265,7 +271,21 @@ def load_bag_trial(
     pp = PipelineParams()
     p = Path(path)
     with io.open_bag(p) as bag:
+        px4_log = _is_ulog(bag)
+        if px4_log and reference_topic == DEFAULT_REFERENCE_TOPIC:
+            from cf_estimator.bag.ulog import ATTITUDE_TOPIC
+
+            reference_topic = ATTITUDE_TOPIC  # a PX4 log: the autopilot's own estimate
         topics = _select_topics(bag, imu_topic, mag_topic, reference_topic)
         c = _collect(bag, topics, pp.mag_timeout_s if mag_timeout_s is None else mag_timeout_s)
+    if px4_log and topics["reference"] == "vehicle_attitude" and c.ref_q:
+        # FRD → NED as logged; the trial's filter sees the FRD axes as they are (body "sensor")
+        from cf_estimator.pipeline import px4
+
+        q = px4.attitude_in_output_frames(np.asarray(c.ref_q), world_frame, "frd")
+        if q is None:
+            raise io.BagError(f"{p}: vehicle_attitude cannot be compared in world frame "
+                              f"{world_frame!r}", 2)
+        c.ref_q = [tuple(r) for r in q.tolist()]
     return _build(c, p, topics, score_after_s, pp.max_dt_s if max_dt_s is None else max_dt_s)
 

@@ -6,9 +6,13 @@ offline (its own offline mode). Rows (inclination [deg] unless marked):
 - EuRoC MH, ground start: RMS after the first 10 s, mean over flights;
 - EuRoC MH, mid-air starts (each flight cropped to start 20, 40, 60 s in): RMS 2-12 s and
   12 s-end after that start;
-- phantom4: RMS after the first 10 s, mean and worst recording;
-- BROAD: 6-D inclination RMSE per trial group, 9-D total RMSE of all trials;
-- thesis scenarios (simulated, 6-D): peak tilt error [arcmin] in the disturbance windows.
+- phantom4 (vertical zig-zags) and phantom4_horizontal (horizontal zig-zags, sustained
+  acceleration): RMS after the first 10 s, mean and worst recording;
+- BROAD: 6-D inclination RMSE and 9-D total RMSE per trial group;
+- thesis scenarios (simulated, 6-D): peak tilt error [arcmin] in the disturbance windows;
+- compass (simulated, 9-D): a magnet of 0.3, 0.5 and 1x the Earth field fixed to a turning
+  sensor for 60 s (:mod:`cf_estimator.scenarios.compass`): heading error [deg] while it is on,
+  peak and RMS, mean over COMPASS_SEEDS.
 
 Families whose data directory is missing are left out (a note says so). The defaults are chosen
 so that no row gets worse (BENCHMARKS.md "How the shipped defaults were chosen").
@@ -16,6 +20,7 @@ so that no row gets worse (BENCHMARKS.md "How the shipped defaults were chosen")
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -24,7 +29,11 @@ from pathlib import Path
 from cf_estimator.core.params import FilterParams
 
 COLUMNS = ("cf_estimator", "cf_estimator_offline", "vqf", "vqf_offline")
-FAMILIES = ("euroc", "phantom4", "broad", "scenarios")
+FAMILIES = ("euroc", "phantom4", "phantom4_horizontal", "broad", "scenarios", "compass")
+#: Simulated families (no data directory needed).
+SIMULATED = ("scenarios", "compass")
+COMPASS_FRACTIONS = (0.3, 0.5, 1.0)
+COMPASS_SEEDS = (0, 1, 2, 3)
 MIDAIR_STARTS_S = (20.0, 40.0, 60.0)
 SCENARIOS = ("impacts", "vibration", "acceleration")
 
@@ -92,9 +101,52 @@ def _broad_rows(root: Path, params: FilterParams, peers: Sequence[str], jobs: in
         rows.append(Row("broad", f"BROAD {group} ({len(members)}): 6-D inclination", "deg",
                         {c: res.group_mean(members, f"{c}_6d", "inclination_rmse_deg")
                          for c in COLUMNS}))
-    rows.append(Row("broad", f"BROAD all ({len(paths)}): 9-D total", "deg",
-                    {c: res.group_mean(list(res.trials), f"{c}_9d", "total_rmse_deg")
-                     for c in COLUMNS}))
+    for group, members in res.group_members().items():
+        rows.append(Row("broad", f"BROAD {group} ({len(members)}): 9-D total", "deg",
+                        {c: res.group_mean(members, f"{c}_9d", "total_rmse_deg")
+                         for c in COLUMNS}))
+    return rows
+
+
+def _compass_case(args: tuple[float, int, FilterParams, tuple[str, ...]]
+                  ) -> tuple[float, dict[str, tuple]]:
+    """(fraction, {column: (peak, rms)}) of the heading error while the magnet is on."""
+    import numpy as np
+
+    from cf_estimator.bench import peers as peer_mod
+    from cf_estimator.core.batch import estimate
+    from cf_estimator.scenarios.compass import heading_error_deg, magnet_on_turning_sensor
+
+    fraction, seed, params, peers = args
+    params = dataclasses.replace(params, use_mag=True)
+    c = magnet_on_turning_sensor(seed, fraction)
+    qs = {}
+    for col, offline in (("cf_estimator", False), ("cf_estimator_offline", True)):
+        qs[col] = estimate(c.gyro_rad_s, c.accel_m_s2, c.mag_T, rate_hz=c.rate_hz,
+                           params=params, offline=offline).quaternion
+    if "vqf" in peers:
+        qs["vqf"] = peer_mod.run_vqf(c.gyro_rad_s, c.accel_m_s2, c.mag_T, c.rate_hz)["9d"]
+        qs["vqf_offline"] = peer_mod.run_vqf_offline(c.gyro_rad_s, c.accel_m_s2, c.mag_T,
+                                                     c.rate_hz)["9d"]
+    out = {}
+    for col, q in qs.items():
+        e = heading_error_deg(q, c.q_true)[c.magnet_on]
+        out[col] = (float(np.max(e)), float(np.sqrt(np.mean(e * e))))
+    return fraction, out
+
+
+def _compass_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> list[Row]:
+    from cf_estimator.bench.parallel import run_tasks
+
+    work = [(f, s, params, tuple(peers)) for f in COMPASS_FRACTIONS for s in COMPASS_SEEDS]
+    found = run_tasks(_compass_case, work, jobs)
+    rows = []
+    for fraction in COMPASS_FRACTIONS:
+        runs = [out for f, out in found if f == fraction]
+        for i, what in enumerate(("peak", "RMS")):
+            rows.append(Row("compass", f"magnet {fraction:g}x on a turning sensor: heading {what}",
+                            "deg", {c: sum(r[c][i] for r in runs) / len(runs)
+                                    for c in COLUMNS if all(c in r for r in runs)}))
     return rows
 
 
@@ -126,6 +178,9 @@ def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = 
         if family == "scenarios":
             result.rows += _scenario_rows(params, peers, jobs)
             continue
+        if family == "compass":
+            result.rows += _compass_rows(params, peers, jobs)
+            continue
         folder = root / family
         if not folder.is_dir():
             result.notes.append(f"{family}: {folder} not found, left out")
@@ -133,8 +188,9 @@ def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = 
         if family == "euroc":
             result.rows += _euroc_rows(folder, params, peers, jobs, "euroc", "EuRoC MH",
                                        midair=True)
-        elif family == "phantom4":
-            result.rows += _euroc_rows(folder, params, peers, jobs, "phantom4", "phantom4",
+        elif family in ("phantom4", "phantom4_horizontal"):
+            label = "phantom4" if family == "phantom4" else "phantom4 horizontal"
+            result.rows += _euroc_rows(folder, params, peers, jobs, family, label,
                                        midair=False)
         elif family == "broad":
             # BROAD's evaluation runs VQF's offline mode with VQF itself

@@ -230,13 +230,50 @@ def _algorithms(peers: Sequence[str], velocity: VelocityInput | None) -> list[Al
     return algos + [ALGORITHMS[n] for n in peers]
 
 
+#: Inclination error [deg] below which a velocity-aided estimate counts as having taken hold.
+HOLD_THRESHOLD_DEG = 2.0
+
+
+def time_to_hold_s(flight: Flight, q_est: np.ndarray, threshold_deg: float = HOLD_THRESHOLD_DEG
+                   ) -> float:
+    """Time [s] from the flight's first velocity sample until the inclination error stays below
+    ``threshold_deg`` for the rest of the flight (samples with a ground truth); 0 if it already
+    is, NaN if it never settles (or the flight has no velocity)."""
+    if flight.velocity_t_s is None or len(flight.velocity_t_s) == 0:
+        return math.nan
+    err = metrics.inclination_error_deg(q_est, flight.q_ref)
+    t0 = float(flight.velocity_t_s[0])
+    use = flight.has_reference & (flight.t_s >= t0)
+    if not use.any():
+        return math.nan
+    bad = use & ~(err < threshold_deg)
+    if not bad.any():
+        return 0.0
+    last = int(np.flatnonzero(bad)[-1])
+    if last >= int(np.flatnonzero(use)[-1]):
+        return math.nan
+    return float(flight.t_s[last + 1]) - t0
+
+
 def evaluate_flight(flight: Flight, params: FilterParams, peers: Sequence[str] = (),
                     settle_s: float = SETTLE_S, velocity: VelocityInput | None = None
                     ) -> dict[str, dict[str, float]]:
     """``{algorithm: score}`` for ours (and, with ``velocity``, ours aided) and ``peers`` on one
-    flight."""
-    return {a.name: score_flight(flight, a.run(flight, params), settle_s)
-            for a in _algorithms(peers, velocity)}
+    flight; with ``velocity`` every algorithm also gets ``hold_s`` (:func:`time_to_hold_s`)."""
+    out = {}
+    for a in _algorithms(peers, velocity):
+        q = a.run(flight, params)
+        out[a.name] = score_flight(flight, q, settle_s)
+        if velocity is not None:
+            out[a.name]["hold_s"] = time_to_hold_s(flight, q)
+    return out
+
+
+def median_hold_s(result: EurocResult, algorithm: str) -> tuple[float, int, int]:
+    """(median hold_s over the flights that settle, flights that settle, flights)."""
+    vals = [per.get(algorithm, {}).get("hold_s", math.nan) for per in result.flights.values()]
+    ok = [v for v in vals if math.isfinite(v)]
+    return (float(np.median(ok)) if ok else math.nan), len(ok), len(vals)
 
 
 @dataclass

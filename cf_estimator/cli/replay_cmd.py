@@ -19,7 +19,7 @@ from typing import Any
 
 from cf_estimator.bag import io
 from cf_estimator.bag.replay import HEADING_ALIGNMENTS, ReplayError, ReplayOptions, replay_bag
-from cf_estimator.cli.base import CliError
+from cf_estimator.cli.base import EXIT_ALL_FAILED, EXIT_OK, EXIT_SOME_FAILED, CliError
 from cf_estimator.cli.common import (
     add_params_options,
     check_input_path,
@@ -34,18 +34,22 @@ def register(subparsers: Any) -> None:
     """Add the ``replay`` sub-command to ``subparsers``."""
     p = subparsers.add_parser(
         "replay",
-        help="replay a ROS 1/ROS 2 bag through the estimator (no ROS needed)",
+        help="replay a ROS 1/ROS 2 bag or a PX4 ulog through the estimator (no ROS needed)",
         description=(
             "Replay a recorded bag (ROS 1 .bag, or ROS 2 bag directory with sqlite3 or mcap "
             "storage) through exactly the node's processing and write a ROS 2 bag with its "
             "output topics /imu/data, /imu/rpy and /diagnostics (same types and stamps as the "
             "live node), a JSON summary and plots. IMU and magnetometer topics are detected by "
-            "message type when there is exactly one of each."
+            "message type when there is exactly one of each. A PX4 ulog (.ulg) is read like a "
+            "bag: sensor_combined, vehicle_magnetometer (or sensor_combined's magnetometer), "
+            "vehicle_local_position for --velocity-topic; the output follows PX4's conventions "
+            "(FRD body -> NED, stamps = log time since boot) and is compared with the log's "
+            "vehicle_attitude (agreement with the autopilot, not ground truth)."
         ),
     )
     p.add_argument("bag", metavar="BAG", nargs="+",
-                   help="input bag: ROS 1 .bag file or ROS 2 bag directory; several, or a "
-                   "directory of bags (searched recursively, ROS 1 and ROS 2 mixed), replay a "
+                   help="input bag: ROS 1 .bag file, ROS 2 bag directory or PX4 .ulg log; "
+                   "several, or a directory of them (searched recursively, mixed), replay a "
                    "fleet: one output per bag, a summary table and one JSON")
     p.add_argument("-o", "--output", metavar="OUT",
                    help="output ROS 2 bag directory (written atomically; see --overwrite); for "
@@ -62,6 +66,9 @@ def register(subparsers: Any) -> None:
                    help="orientation reference (geometry_msgs/PoseStamped, QuaternionStamped, "
                         "nav_msgs/Odometry, or a sensor_msgs/Imu's orientation): adds error "
                         "statistics")
+    p.add_argument("--instance", type=int, metavar="N",
+                   help="PX4 ulog: the instance (multi_id) to use of a topic logged several "
+                        "times, e.g. a second magnetometer (default: the lowest, said)")
     p.add_argument("--heading-alignment", choices=HEADING_ALIGNMENTS, default="auto",
                    help="unknown constant heading offset of the reference: none, first (match the "
                         "first scored sample), mean (circular mean); auto = none with a "
@@ -123,9 +130,9 @@ def velocity_line(s: dict[str, Any]) -> str:
     topic = s["topics"].get("velocity")
     if "used" not in v:
         return f"velocity {v['messages_in']} on {topic}: none usable (aiding off)"
-    heading = (f"heading offset {math.degrees(v['heading_offset_rad']):+.1f} deg ± "
-               f"{math.degrees(v['heading_sigma_rad']):.1f}" if v.get("heading_sigma_rad")
-               is not None else "heading offset not observed")
+    offset, sigma = v.get("heading_offset_rad"), v.get("heading_sigma_rad")
+    heading = (f"heading offset {math.degrees(offset):+.1f} deg ± {math.degrees(sigma):.1f}"
+               if sigma is not None and offset is not None else "heading offset not observed")
     return (f"velocity {v['messages_in']} on {topic}: used {v['used']}, stale {v['stale']}, "
             f"rejected {sum(v['rejected'].values())} ({_format_counts(v['rejected'])}); aided "
             f"{v['aided_samples']} IMU samples; {heading}"
@@ -152,17 +159,45 @@ def heading_warning(s: dict[str, Any]) -> str | None:
             "follows the gyro (see mag_rejection, mag_norm_tolerance, mag_dip_tolerance_rad)")
 
 
+def autopilot_line(ref: dict[str, Any]) -> str:
+    """``px4 vs vehicle_attitude``: roll, pitch, yaw, inclination RMS / max [deg], labelled as
+    agreement with the autopilot's estimate (not ground truth)."""
+    if not ref.get("rmse_deg"):
+        return (f"autopilot vs {ref['topic']}: no sample of the autopilot's estimate overlaps "
+                "ours")
+    rms, mx = ref["rpy_rmse_deg"], ref["rpy_max_deg"]
+    parts = [f"{k} {rms[k]:.3f}/{mx[k]:.3f}" for k in ("roll", "pitch", "yaw")]
+    parts.append(f"inclination {ref['rmse_deg']['inclination']:.3f}/"
+                 f"{ref['max_deg']['inclination']:.3f}")
+    return (f"autopilot {ref['label']}, {ref['samples_scored']} samples of {ref['topic']}: "
+            f"RMS/max [deg] {', '.join(parts)}")
+
+
+def _fmt(value: Any, spec: str, missing: str = "n/a") -> str:
+    """``value`` formatted with ``spec``; ``missing`` for None, NaN or Inf (a summary figure
+    that could not be computed must not stop the summary)."""
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return missing
+    return format(value, spec)
+
+
 def print_summary(s: dict[str, Any], out: Any = None) -> None:
-    """The human summary of one replay (to ``out``, default stdout)."""
+    """The human summary of one replay (to ``out``, default stdout). Every figure that may be
+    None or NaN in the JSON prints as ``n/a``."""
     out = sys.stdout if out is None else out
     rate = s.get("imu_rate_hz")
-    rate_text = f"{rate:.1f} Hz" if rate else "n/a"
+    rate_text = f"{_fmt(rate, '.1f')} Hz" if rate else "n/a"
     topics = s["topics"]
     if s.get("mode") == "offline":
         print(f"mode    offline (acausal), {s['offline']['segments']} segment(s)", file=out)
     print(f"input   {s['input']} ({s['input_format']}): {s['messages_in']} IMU on "
           f"{topics['imu']}, {s['mag_messages_in']} mag on {topics['mag'] or '-'}, "
-          f"{s['duration_s']:.1f} s of stamps, {rate_text}", file=out)
+          f"{_fmt(s.get('duration_s'), '.1f')} s of stamps, {rate_text}", file=out)
+    if s.get("px4"):
+        x = s["px4"]
+        print(f"px4     output {x['output_frames']} (PX4 conventions: "
+              f"{', '.join(x['conventions_applied']) or 'as set'}); stamps: log time since "
+              "boot", file=out)
     rej = s["messages_rejected"]
     print(f"pipeline processed {s['messages_processed']}, rejected "
           f"{sum(rej.values())} ({_format_counts(rej)}), gaps {s.get('gaps')}, resets "
@@ -174,27 +209,32 @@ def print_summary(s: dict[str, Any], out: Any = None) -> None:
     bias = s.get("final_gyro_bias_rad_s")
     if bias:
         after = s.get("gyro_bias_converged_after_s")
-        learned = (f"converged {after:.1f} s after start" if after is not None
+        learned = (f"converged {_fmt(after, '.1f')} s after start" if after is not None
                    else "not converged")
         print("bias    final gyro-bias estimate [rad/s]: "
-              + " ".join(f"{b:+.5f}" for b in bias)
-              + f" ± {s['final_gyro_bias_sigma_rad_s']:.5f} ({learned}); still "
+              + " ".join(_fmt(b, "+.5f") for b in bias)
+              + f" ± {_fmt(s.get('final_gyro_bias_sigma_rad_s'), '.5f')} ({learned}); still "
               f"{100.0 * (s.get('still_fraction') or 0.0):.0f}% of samples", file=out)
     if s.get("output"):
         print(f"output  {s['output']} ({s['storage']}): {_format_counts(s['outputs_written'])}",
               file=out)
     ref = s.get("reference")
-    if ref:
+    if ref and ref.get("kind") == "autopilot":
+        print(autopilot_line(ref), file=out)
+    elif ref:
         rmse = ref.get("rmse_deg")
         if rmse:
             print(f"error   vs {ref['topic']} ({ref['samples_scored']} samples, heading "
-                  f"alignment {ref['heading_alignment']}, offset {ref['heading_offset_deg']:.2f}"
-                  f" deg): RMSE total {rmse['total']:.3f}, inclination {rmse['inclination']:.3f},"
-                  f" heading {rmse['heading']:.3f} deg", file=out)
+                  f"alignment {ref['heading_alignment']}, offset "
+                  f"{_fmt(ref.get('heading_offset_deg'), '.2f')} deg): RMSE total "
+                  f"{_fmt(rmse.get('total'), '.3f')}, inclination "
+                  f"{_fmt(rmse.get('inclination'), '.3f')}, heading "
+                  f"{_fmt(rmse.get('heading'), '.3f')} deg", file=out)
         else:
             print(f"error   vs {ref['topic']}: no reference sample overlaps the estimate",
                   file=out)
-    print(f"speed   {s['messages_per_s']:.0f} messages/s ({s['wall_time_s']:.2f} s)", file=out)
+    print(f"speed   {_fmt(s.get('messages_per_s'), '.0f')} messages/s "
+          f"({_fmt(s.get('wall_time_s'), '.2f')} s)", file=out)
 
 
 def _is_fleet(args: argparse.Namespace) -> bool:
@@ -211,7 +251,11 @@ def _is_fleet(args: argparse.Namespace) -> bool:
 
 
 def _options(args: argparse.Namespace) -> ReplayOptions:
+    from cf_estimator.params_file import explicit_names
+
     return ReplayOptions(
+        instance=args.instance,
+        explicit_params=explicit_names(args.params, args.node_name),
         imu_topic=args.imu_topic, mag_topic=args.mag_topic, reference_topic=args.reference_topic,
         storage=args.storage, copy_inputs=args.copy_inputs, overwrite=args.overwrite,
         heading_alignment=args.heading_alignment, progress=args.progress,
@@ -219,12 +263,11 @@ def _options(args: argparse.Namespace) -> ReplayOptions:
     )
 
 
-#: Exit status of a fleet replay is the number of bags that failed, at most this.
-MAX_FAILED_EXIT = 100
 
 
 def run_fleet(args: argparse.Namespace) -> int:
-    """Replay several bags: one output each, a table, one JSON; exit = number failed."""
+    """Replay several bags: one output each, a table, one JSON. Exit status
+    (:mod:`cf_estimator.cli.base`): 0 every bag replayed, 1 some failed, 3 all failed."""
     from cf_estimator.bag import fleet
     from cf_estimator.cluster import ClusterError, make_engine
 
@@ -269,7 +312,8 @@ def run_fleet(args: argparse.Namespace) -> int:
         print(fleet.format_table(result), end="")
         if args.json is not None:
             print(f"json    {args.json}")
-    return min(result["fleet"]["failed"], MAX_FAILED_EXIT)
+    failed, replayed = result["fleet"]["failed"], result["fleet"]["replayed"]
+    return EXIT_OK if not failed else (EXIT_SOME_FAILED if replayed else EXIT_ALL_FAILED)
 
 
 def _finish_summary(summary: dict, args: argparse.Namespace, prefix: str = "") -> None:
@@ -309,13 +353,20 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(str(exc), 2) from None
     summary = result.summary
     _finish_summary(summary, args)
-    if args.plot is not None:
-        from cf_estimator.bag.plots import plot_replay
+    try:
+        if args.plot is not None:
+            from cf_estimator.bag.plots import plot_replay
 
-        paths = plot_replay(result, args.plot, title=Path(args.bag).name)
-        summary["plots"] = [str(p) for p in paths]
-    if args.json is not None:
-        write_json(args.json, summary)
+            paths = plot_replay(result, args.plot, title=Path(args.bag).name)
+            summary["plots"] = [str(p) for p in paths]
+        if args.json is not None:
+            write_json(args.json, summary)
+    except BaseException:  # no output bag without its summary: it would look complete
+        if result.output is not None:
+            import shutil
+
+            shutil.rmtree(result.output, ignore_errors=True)
+        raise
     if args.json != "-":
         print_summary(summary)
         if summary.get("plots"):

@@ -11,7 +11,7 @@ the peak tilt error; prints before/after and writes a ROS 2 parameter YAML that 
 Data: ``--data DIR`` (BROAD ``*.hdf5`` trials) or ``--bag PATH...`` (IMU, optional magnetometer
 and a reference topic: :mod:`cf_estimator.bench.bagtrial` says how it is read and scored); several
 bags, or directories of them, are tuned together (the mean objective over the recordings). A bag
-that cannot be read is reported on one line and left out; the exit status is how many were.
+that cannot be read is reported on one line and left out; the exit status is then 1.
 ``--cluster`` scores the candidates on Dask (docs/cluster.md).
 """
 
@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from cf_estimator.cli.base import CliError, finite_float
+from cf_estimator.cli.base import EXIT_OK, EXIT_SOME_FAILED, CliError, finite_float
 from cf_estimator.cli.common import (
     add_params_options,
     check_input_path,
@@ -229,6 +229,7 @@ class _BagLoad:
     imu_topic: str | None
     mag_topic: str | None
     score_after: float
+    world_frame: str = "enu"  #: the frame a PX4 log's vehicle_attitude is compared in
 
 
 def _load_bag(task: _BagLoad) -> tuple[Any, str | None, int]:
@@ -240,7 +241,8 @@ def _load_bag(task: _BagLoad) -> tuple[Any, str | None, int]:
     try:
         trial = bagtrial.load_bag_trial(task.path, task.reference, imu_topic=task.imu_topic,
                                         mag_topic=task.mag_topic,
-                                        score_after_s=task.score_after)
+                                        score_after_s=task.score_after,
+                                        world_frame=task.world_frame)
     except BagError as exc:
         return None, str(exc).splitlines()[0], exc.code
     except Exception as exc:  # noqa: BLE001 - anything else a broken bag raises: one line
@@ -248,7 +250,7 @@ def _load_bag(task: _BagLoad) -> tuple[Any, str | None, int]:
     return dataclasses.replace(trial, name=task.name), None, 0
 
 
-def _bag_source(args: Any, engine: Any) -> _Source:
+def _bag_source(args: Any, engine: Any, world_frame: str = "enu") -> _Source:
     from pathlib import Path
 
     from cf_estimator.bag.fleet import find_bags, output_names
@@ -263,7 +265,8 @@ def _bag_source(args: Any, engine: Any) -> _Source:
     reference = args.reference_topic or bagtrial.DEFAULT_REFERENCE_TOPIC
     score_after = bagtrial.DEFAULT_SCORE_AFTER_S if args.score_after is None else args.score_after
     loads = [_BagLoad(str(Path(b).absolute()), n, reference, args.imu_topic, args.mag_topic,
-                      score_after) for b, n in zip(bags, output_names(bags), strict=True)]
+                      score_after, world_frame)
+             for b, n in zip(bags, output_names(bags), strict=True)]
     loaded = engine.map(_load_bag, loads)
     trials = [t for t, _e, _c in loaded if t is not None]
     errors = [e for _t, e, _c in loaded if e is not None]
@@ -385,39 +388,66 @@ def _scenario_check(result: Any, base: Any, limits: dict[str, float], jobs: Any)
                    "arcmin): relax --scenario-limit, or --scenario-limit none")
 
 
-def _write(path: str, best: Any, header: str) -> None:
+#: Relative distance to a search bound under which a tuned value counts as "on the bound".
+ON_BOUND_REL = 1e-6
+
+
+def bound_notes(space: Sequence[Any], best: Any) -> dict[str, str]:
+    """``name → note`` for each tuned value that ended on (within :data:`ON_BOUND_REL` of) a
+    bound of its search box: the optimum may lie beyond it."""
+    from cf_estimator.bench import tuning
+
+    notes = {}
+    for d in space:
+        v = float(getattr(best, d.name))
+        for side, b in (("lower", d.lo), ("upper", d.hi)):
+            if abs(v - b) <= ON_BOUND_REL * max(abs(b), 1e-12):
+                safe = tuning.SAFETY_RANGES.get(d.name)
+                if safe is not None and b in safe:
+                    how = f"it is also the safety bound ({safe[0]:g}:{safe[1]:g}): kept there"
+                else:
+                    how = f"the optimum may lie beyond it: widen it with --bounds {d.name}=LO:HI"
+                notes[d.name] = f"{d.name} = {v:.6g} ended on its {side} search bound; {how}"
+    return notes
+
+
+def _write(path: str, best: Any, header: str, *, only: Sequence[str] | None,
+           pipeline_params: Any = None, notes: dict[str, str] | None = None) -> None:
     from pathlib import Path
 
     from cf_estimator.bag.io import write_atomic_text
     from cf_estimator.bench.paramio import render_filter_params
 
     try:
-        write_atomic_text(Path(path), render_filter_params(best, header))
+        write_atomic_text(Path(path), render_filter_params(
+            best, header, pipeline_params=pipeline_params, only=only, notes=notes))
     except OSError as exc:
         raise CliError(f"cannot write {path}: {exc.strerror or exc}", 2) from None
     print(f"wrote {path}")
 
 
 def run(args: Any) -> int:
-    """``tune``: exit 0, or the number of bags left out because they could not be read."""
+    """``tune``: exit 0, or 1 when bags were left out because they could not be read."""
     from cf_estimator.cluster import ClusterError, make_engine
 
     _check_args(args)
     check_output_file(args.out, overwrite=args.overwrite, option="--out")
     space = _search_space(args)
     limits = _scenario_limits(args.scenario_limit)
-    base = load_params(args.params, args.node_name)[0]
+    base, base_pipeline = load_params(args.params, args.node_name)
     try:
         with make_engine(args.cluster, args.jobs) as engine:
-            return _run(args, engine, space, limits, base)
+            return _run(args, engine, space, limits, base, base_pipeline)
     except ClusterError as exc:
         raise CliError(str(exc), 2) from None
 
 
-def _run(args: Any, engine: Any, space: Any, limits: dict[str, float], base: Any) -> int:
+def _run(args: Any, engine: Any, space: Any, limits: dict[str, float], base: Any,
+         base_pipeline: Any = None) -> int:
     from cf_estimator.bench import tuning
 
-    source = _bag_source(args, engine) if args.bag is not None else _broad_source(args, engine)
+    source = (_bag_source(args, engine, base.world_frame) if args.bag is not None
+              else _broad_source(args, engine))
     objective = _objective(args, source)
     space, dropped = tuning.for_objective(space, objective)
     if dropped:
@@ -475,10 +505,20 @@ def _run(args: Any, engine: Any, space: Any, limits: dict[str, float], base: Any
                       if limits else "none")
         loss_text = (f"# WARNING: worse than the start point on: {where} (--force)\n"
                      if losses else "# validation: not worse than the start point on any case\n")
+        notes = bound_notes(space, best)
+        for text in notes.values():
+            warn(text)
+        tuned = [d.name for d in space]
+        what = (f"# every parameter: those of --params {args.params}, the tuned ones "
+                f"({', '.join(tuned)}) replaced\n" if args.params else
+                f"# only the tuned parameters ({', '.join(tuned)}); every other one stays as "
+                "the node's defaults or an earlier --params-file set it\n")
         _write(args.out, best, f"# cf-estimator tune: objective {objective} on {source.label}; "
                f"before {final[0]:.4f}, after {final[1]:.4f} (decimate {args.decimate}); "
-               f"scenario limits: {limit_text}\n" + loss_text)
+               f"scenario limits: {limit_text}\n" + loss_text + what,
+               only=None if args.params else tuned,
+               pipeline_params=base_pipeline if args.params else None, notes=notes)
     if source.failed:
         print(f"{source.failed} bag(s) could not be read and were left out (exit status "
-              f"{min(source.failed, 100)})")
-    return min(source.failed, 100)
+              f"{EXIT_SOME_FAILED})")
+    return EXIT_SOME_FAILED if source.failed else EXIT_OK

@@ -36,6 +36,7 @@
 #define ACCEL_LOWPASS_TIME_CONSTANT_S 0.05
 #define ACCEL_SPIKE_SIGMAS 4.0
 #define QUICK_LAG_TIME_CONSTANT_S 0.2
+#define AIDED_LAG_TIME_CONSTANT_S 0.2
 #define REST_SAMPLE_SIGMAS 8.0
 #define REST_GATE_SIGMAS 3.0
 #define REST_NOISE_CAP 1.0
@@ -87,9 +88,9 @@ typedef struct {
         mag_last_time_s, mvx, mvy, mvz, mcx, mcy, mcz, mmx, mmy, mmz, mag_cand_norm, mag_seen_time_s,
         mag_ok_timer_s, mag_cand_timer_s, mag_ref_time_s, g_ref, accel_hold, acx, acy, acz, rate_lp, ex, ey,
         ez, error_norm,
-        fx, fy, fz, yaw_error_rad, recovery_count;
+        fx, fy, fz, yaw_error_rad, recovery_count, quick_until_s;
     char recovering, at_rest, mag_disturbed, heading_initialized, clipped, accel_used, moved,
-        bias_unverified, mag_recovering;
+        bias_unverified, mag_recovering, aided;
     int mag_status, phase;
 } cf_state;
 
@@ -161,6 +162,17 @@ static void turn_heading(cf_state *s, double angle)
     s->ly = ly;
 }
 
+/* _toward_unit() of step.py: v <- normalise(v + a (u - v)) */
+static void toward_unit(double *vx, double *vy, double *vz, double ux, double uy, double uz,
+                        double a)
+{
+    double x = *vx + a * (ux - *vx), y = *vy + a * (uy - *vy), z = *vz + a * (uz - *vz);
+    double n = maxd(sqrt(x * x + y * y + z * z), TINY);
+    *vx = x / n;
+    *vy = y / n;
+    *vz = z / n;
+}
+
 static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int fast, int learn)
 {
     double mx = mag[0], my = mag[1], mz = mag[2];
@@ -170,8 +182,8 @@ static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int
     rotate(s->qw, s->qx, s->qy, s->qz, ux, uy, uz, w);
     double horizontal = sqrt(w[0] * w[0] + w[1] * w[1]);
     double dip = atan2(-w[2], horizontal);
-    double dt_m = mind(s->mag_last_time_s < 0.0 ? 0.0 : s->time_s - s->mag_last_time_s,
-                       MAG_MAX_DT_S);
+    double age = s->mag_last_time_s < 0.0 ? 0.0 : s->time_s - s->mag_last_time_s;
+    double dt_m = mind(age, MAG_MAX_DT_S);
 
     double dt_s = mind(s->mag_seen_time_s < 0.0 ? 0.0 : s->time_s - s->mag_seen_time_s,
                        MAG_MAX_DT_S);
@@ -199,16 +211,10 @@ static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int
                            1.0 - mn / maxd(s->mag_ref_norm, TINY));
     double off_dip = maxd(dip - s->mag_ref_dip, s->mag_ref_dip - dip);
     double a = fresh ? 1.0 : dt_s / (MAG_SMOOTH_TIME_CONSTANT_S + dt_s);
-    double vx = s->mmx + a * (ux - s->mmx), vy = s->mmy + a * (uy - s->mmy),
-           vz = s->mmz + a * (uz - s->mmz);
-    double vn = maxd(sqrt(vx * vx + vy * vy + vz * vz), TINY);
-    double mmx = vx / vn, mmy = vy / vn, mmz = vz / vn;
-    s->mmx = mmx;
-    s->mmy = mmy;
-    s->mmz = mmz;
+    toward_unit(&s->mmx, &s->mmy, &s->mmz, ux, uy, uz, a);
+    double mmx = s->mmx, mmy = s->mmy, mmz = s->mmz;
     double tol = MAG_TURN_TOLERANCE_RAD +
                  MAG_TURN_FRACTION * MAG_TURN_TIME_CONSTANT_S * s->rate_lp;
-    double age = s->mag_last_time_s < 0.0 ? 0.0 : s->time_s - s->mag_last_time_s;
     double drift = MAG_DRIFT_SIGMAS * sqrt(maxd(s->bias_var, 0.0)) * age;
     int turned =
         sqrt(pow(mmx - s->mvx, 2.0) + pow(mmy - s->mvy, 2.0) + pow(mmz - s->mvz, 2.0)) > tol + drift;
@@ -231,14 +237,7 @@ static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int
         s->mag_cand_norm = mn;
     }
     a = fresh ? 1.0 : dt_s / (MAG_TURN_TIME_CONSTANT_S + dt_s);
-    double ar = disturbed ? 0.0 : a;
-    vx = s->mvx + ar * (ux - s->mvx);
-    vy = s->mvy + ar * (uy - s->mvy);
-    vz = s->mvz + ar * (uz - s->mvz);
-    vn = maxd(sqrt(vx * vx + vy * vy + vz * vz), TINY);
-    s->mvx = vx / vn;
-    s->mvy = vy / vn;
-    s->mvz = vz / vn;
+    toward_unit(&s->mvx, &s->mvy, &s->mvz, ux, uy, uz, disturbed ? 0.0 : a);
 
     int usable = p->use_mag && !disturbed && (horizontal > MAG_MIN_HORIZONTAL);
     s->mag_status = p->use_mag ? (disturbed ? MAG_REJECTED : MAG_USED) : MAG_DISABLED;
@@ -412,7 +411,7 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
     s->bias_var = (s->bias_var < 0.0 ? pow(p->bias_prior_sigma_rad_s, 2.0) : s->bias_var) +
                   pow(BIAS_RANDOM_WALK_RAD_S_SQRT_S, 2.0) * dt;
     int startup = s->time_s <= p->startup_duration_s;
-    int fast = startup || s->recovering;
+    int fast = startup || s->recovering || (s->time_s <= s->quick_until_s);
     int learn = !fast;
 
     /* 1. predict */
@@ -484,8 +483,8 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
         double scale = clipped ? limit / maxd(en, TINY) : 1.0;
         /* 4. aperiodic unit in the world frame */
         rotate(s->qw, s->qx, s->qy, s->qz, ex * scale, ey * scale, ez * scale, w);
-        double weight =
-            dt / ((quick ? QUICK_LAG_TIME_CONSTANT_S : p->aperiodic_time_constant_s) + dt);
+        double lag = s->aided ? AIDED_LAG_TIME_CONSTANT_S : p->aperiodic_time_constant_s;
+        double weight = dt / ((quick ? QUICK_LAG_TIME_CONSTANT_S : lag) + dt);
         s->lx = s->lx + weight * (w[0] - s->lx);
         s->ly = s->ly + weight * (w[1] - s->ly);
         s->lz = s->lz + weight * (w[2] - s->lz);
@@ -899,7 +898,7 @@ static PyMethodDef State_methods[] = {
 static PyMemberDef State_members[] = {
     SD(qw), SD(qx), SD(qy), SD(qz), SD(cx), SD(cy), SD(cz), SD(lx), SD(ly), SD(lz), SD(time_s),
     SD(clip_timer_s), SB(recovering), SD(recovery_count), SD(accel_hold), SD(acx), SD(acy), SD(acz),
-    SD(rate_lp), SI(phase), SD(rest_timer_s), SB(at_rest), SB(moved), SD(blk_n), SD(blk_t),
+    SD(rate_lp), SI(phase), SB(aided), SD(quick_until_s), SD(rest_timer_s), SB(at_rest), SB(moved), SD(blk_n), SD(blk_t),
     SD(blk_gx), SD(blk_gy), SD(blk_gz), SD(blk_ax), SD(blk_ay), SD(blk_az), SD(blk_g2), SD(blk_a2),
     SD(blk_d), SD(blk_mx), SD(blk_my), SD(blk_mz), SD(blk_mn), SD(prev_n), SD(pgx), SD(pgy),
     SD(pgz), SD(pax), SD(pay), SD(paz), SD(pmx), SD(pmy), SD(pmz), SD(pm_n), SD(last_n), SD(lgx),
@@ -939,7 +938,7 @@ PyMODINIT_FUNC PyInit__kernel(void)
     }
     if (PyDict_SetItemString(StateType.tp_dict, "FIELDS", fields) < 0) return NULL;
     Py_DECREF(fields);
-    PyObject *consts = Py_BuildValue("{s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:i,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:i}",
+    PyObject *consts = Py_BuildValue("{s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:i,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:d,s:i}",
                                      "ACCEL_LOWPASS_TIME_CONSTANT_S", ACCEL_LOWPASS_TIME_CONSTANT_S,
                                      "ACCEL_SPIKE_SIGMAS", ACCEL_SPIKE_SIGMAS,
                                      "REST_GATE_SIGMAS", REST_GATE_SIGMAS,
@@ -948,6 +947,7 @@ PyMODINIT_FUNC PyInit__kernel(void)
                                      "REST_MAG_TOLERANCE_RAD", REST_MAG_TOLERANCE_RAD,
                                      "ACCEL_DETECT_SIGMAS", ACCEL_DETECT_SIGMAS,
                                      "QUICK_LAG_TIME_CONSTANT_S", QUICK_LAG_TIME_CONSTANT_S,
+                                     "AIDED_LAG_TIME_CONSTANT_S", AIDED_LAG_TIME_CONSTANT_S,
                                      "RATE_LOWPASS_TIME_CONSTANT_S", RATE_LOWPASS_TIME_CONSTANT_S,
                                      "REST_NOISE_SIGMAS", REST_NOISE_SIGMAS,
                                      "REST_SAMPLE_SIGMAS", REST_SAMPLE_SIGMAS,

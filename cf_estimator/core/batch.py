@@ -22,7 +22,12 @@ from cf_estimator.core.input_checks import warn_units
 from cf_estimator.core.kernel import resolve_backend
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import BIAS_CONVERGED_SIGMA_RAD_S
-from cf_estimator.core.velocity import VelocityAiding, VelocityStatus, filter_bias
+from cf_estimator.core.velocity import (
+    VelocityAiding,
+    VelocityStatus,
+    apply_aiding,
+    filter_bias,
+)
 
 
 @dataclass
@@ -177,6 +182,7 @@ def run_aided(f: ComplementaryFilter, aiding: VelocityAiding, gyro: np.ndarray, 
         else:
             a_in = aiding.aided_accel(ts[i], g_rows[i], a_rows[i], dts[i],
                                       f.orientation_tuple(), filter_bias(f))
+            apply_aiding(f, aiding)
             f.update(g_rows[i], a_in, dts[i], m)
         q_out[i] = f.orientation_tuple()
         aided_out[i] = aiding.active

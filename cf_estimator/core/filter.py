@@ -32,6 +32,7 @@ from cf_estimator.core.step import (
     PHASE_STARTUP,
     StepState,
     step,
+    turn_heading,
 )
 from cf_estimator.schema import as_dict
 
@@ -41,6 +42,11 @@ _SQRT_HALF = math.sqrt(0.5)
 
 def step_params(params: FilterParams) -> SimpleNamespace:
     """The parameter view the step reads: FilterParams fields plus derived flags."""
+    if params.world_frame not in ("enu", "ned"):
+        raise ValueError(
+            f"world_frame {params.world_frame!r}: the core filters estimate in enu or ned; "
+            "the pipeline publishes nwu (cf_estimator.pipeline.frames.core_params)"
+        )
     view = SimpleNamespace(**as_dict(params))
     view.mag_full = params.mag_mode == "full"
     view.prefilter = params.aperiodic_prefilter
@@ -222,6 +228,31 @@ class ComplementaryFilter:
         s.heading_initialized = heading_known
         s.phase = PHASE_STARTUP
         self._initialized = True
+
+    def correct_heading(self, turn_rad: float) -> None:
+        """Turn the heading by ``turn_rad`` about the output world frame's z axis (ENU: up,
+        NED: down; roll/pitch unchanged): an outside heading reference (velocity aiding's
+        heading offset, 6-D)."""
+        if turn_rad:
+            up = -1.0 if self._params.world_frame == "ned" else 1.0  # the state is ENU inside
+            turn_heading(self._state, up * float(turn_rad), FloatOps)
+
+    def set_aided(self, aided: bool) -> None:
+        """Say whether the next update's accelerometer sample is velocity-aided (the vehicle's
+        acceleration taken out): the aperiodic unit then only averages vibration
+        (AIDED_LAG_TIME_CONSTANT_S instead of aperiodic_time_constant_s)."""
+        self._state.aided = bool(aided)
+
+    def take_hold(self, duration_s: float, reopen_bias: bool = False) -> None:
+        """Run the loop as in start-up (gain startup_k1, no clip, no bias learning) for the next
+        ``duration_s`` [s]: a correction that has just become trustworthy (velocity aiding that
+        began) reveals a tilt error that is real, not a disturbance to reject."""
+        s = self._state
+        s.quick_until_s = max(float(s.quick_until_s), float(s.time_s) + float(duration_s))
+        if reopen_bias:
+            # what the bias estimator learned from the untrustworthy error is suspect: uncertain
+            # again (the prior), so it is learned afresh from the trustworthy one
+            s.bias_var = max(float(s.bias_var), self._params.bias_prior_sigma_rad_s ** 2)
 
     def initialize_from(self, accel_m_s2: Vector, mag: Vector | None = None) -> bool:
         """Initialise from one accelerometer (and magnetometer) sample; False if not valid."""

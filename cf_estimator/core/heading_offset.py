@@ -14,8 +14,9 @@ the memory. With centred sums (means removed, which fits c), the least-squares a
 σ_n² the scatter left (velocity noise, a varying tilt error, vibration). Sums fade with a
 memory τ [s] because the 6-D filter's heading drifts. Weights are
 the share of new information of each overlapping window (interval / window length), so that
-σ counts independent windows. Known once σ < the required accuracy and at least
-:data:`MIN_WINDOWS` independent windows have been seen.
+σ counts independent windows. Known once σ < the required accuracy, at least
+:data:`MIN_WINDOWS` independent windows have been seen and the velocity's acceleration stands
+out of its own noise (:data:`MIN_SIGNAL_TO_NOISE`).
 """
 
 from __future__ import annotations
@@ -26,6 +27,10 @@ from dataclasses import dataclass
 
 #: Independent windows needed before the scatter (and so σ) is trusted.
 MIN_WINDOWS = 3.0
+#: The velocity's horizontal acceleration (its centred mean square) must exceed its own
+#: differentiation noise this many times: without real acceleration the fit sees only noise,
+#: and a small σ of noise against noise means nothing.
+MIN_SIGNAL_TO_NOISE = 1.5
 
 
 @dataclass(frozen=True)
@@ -41,9 +46,13 @@ class HeadingOffset:
 class HeadingOffsetEstimator:
     """Recursive, fading least-squares estimate of δ (see the module docstring)."""
 
-    def __init__(self, required_sigma_rad: float, memory_s: float) -> None:
+    def __init__(self, required_sigma_rad: float, memory_s: float,
+                 noise2_m2_s4: float = 0.0) -> None:
+        """``noise2_m2_s4``: variance [m²/s⁴] (both axes) of the velocity side's acceleration
+        noise (differentiation of a noisy velocity); see MIN_SIGNAL_TO_NOISE."""
         self.required_sigma_rad = float(required_sigma_rad)
         self.memory_s = float(memory_s)
+        self.noise2_m2_s4 = float(noise2_m2_s4)
         self.reset()
 
     def reset(self) -> None:
@@ -80,6 +89,13 @@ class HeadingOffsetEstimator:
         self._n += w
         return self.estimate()
 
+    def rotate(self, angle_rad: float) -> None:
+        """The filter's world frame was turned by ``angle_rad`` about the vertical (z_f →
+        e^{i·angle}·z_f): the sums follow, so the windows seen so far stay consistent."""
+        turn = cmath.exp(1j * angle_rad)
+        self._c *= turn
+        self._sf *= turn
+
     def estimate(self) -> HeadingOffset:
         """The current δ, σ and known flag."""
         n = self._n
@@ -96,5 +112,6 @@ class HeadingOffsetEstimator:
         residual = max(sff + svv - 2.0 * abs(c), 0.0)
         noise2 = residual / max(n - 1.0, 1e-12)
         sigma = math.sqrt(noise2 / (2.0 * svv))
-        known = self._n >= MIN_WINDOWS and sigma < self.required_sigma_rad
+        known = (self._n >= MIN_WINDOWS and sigma < self.required_sigma_rad
+                 and svv > MIN_SIGNAL_TO_NOISE * self.noise2_m2_s4 * n)
         return HeadingOffset(offset, sigma, known)

@@ -14,7 +14,9 @@ from dataclasses import dataclass
 
 from cf_estimator.schema import ParameterError, param, validate_fields
 
-WORLD_FRAMES = ("enu", "ned")
+#: ``world_frame`` choices. The core estimates in ENU or NED; NWU is published by the pipeline
+#: (:mod:`cf_estimator.pipeline.frames`, a fixed rotation of the ENU estimate).
+WORLD_FRAMES = ("enu", "ned", "nwu")
 MAG_MODES = ("yaw", "full")
 VELOCITY_HEADINGS = ("auto", "filter")
 
@@ -300,8 +302,10 @@ class FilterParams:
     world_frame: str = param(
         "enu",
         "",
-        "World frame of the output orientation: 'enu' (REP-103, z up, yaw from east) "
-        "or 'ned' (z down, yaw from north).",
+        "World frame of the output orientation: 'enu' (REP-103, z up, yaw from east), "
+        "'ned' (z down, yaw from north, clockwise) or 'nwu' (z up, yaw from north, "
+        "counter-clockwise; published by the node and the replay, the core filters take enu "
+        "or ned).",
         choices=WORLD_FRAMES,
         read_only=True,
         group="frames",
@@ -373,10 +377,11 @@ class FilterParams:
         group="velocity aiding",
     )
     velocity_heading_sigma_rad: float = param(
-        0.1,
+        0.3,
         "rad",
         "Velocity aiding ('auto'): aid only while the heading offset's standard deviation is "
-        "below this (0.1 rad = 5.7 deg: the tilt error left by it is about sigma*|a_h|/g).",
+        "below this (0.3 rad = 17 deg: the tilt error left by it is about sigma*|a_h|/g, "
+        "against |a_h|/g unaided: aiding that early already removes most of the error).",
         minimum=0.0,
         maximum=3.2,
         minimum_exclusive=True,

@@ -55,6 +55,10 @@ LOOP: tuple[Field, ...] = (
     *_vec("ac", "m/s^2", "accelerometer low-passed over 50 ms (detector), sensor frame"),
     _f("rate_lp", "rad/s", "low-passed bias-corrected rotation rate"),
     _f("phase", "1", "0 uninitialized, 1 startup, 2 running, 3 recovering", "int"),
+    _f("aided", "", "the accelerometer sample of this step is velocity-aided (set by the "
+       "caller)", "bool"),
+    _f("quick_until_s", "s", "the loop runs as in start-up until this time (a take-hold "
+       "phase: velocity aiding that just began); 0: none"),
 )
 
 CLASSIFIER: tuple[Field, ...] = (

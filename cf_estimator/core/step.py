@@ -98,6 +98,9 @@ ACCEL_SPIKE_SIGMAS = 4.0
 ACCEL_DETECT_SIGMAS = 3.0
 #: Time constant [s] of the aperiodic unit while the error bypasses it (start-up, rest, recovery).
 QUICK_LAG_TIME_CONSTANT_S = 0.2
+#: Time constant [s] of the aperiodic unit while the specific force is velocity-aided (the
+#: vehicle's acceleration taken out: what is left to average is vibration, not manoeuvres).
+AIDED_LAG_TIME_CONSTANT_S = 0.2
 #: Magnetometer samples averaged for the field reference (norm, dip) after start-up.
 MAG_REFERENCE_SAMPLES = 20
 #: A rejected field that has stayed steady and turned as the gyro says for as long as the
@@ -169,7 +172,7 @@ def _rotate(qw: Any, qx: Any, qy: Any, qz: Any, vx: Any, vy: Any, vz: Any) -> tu
     )
 
 
-def _turn_heading(s: StepState, angle: Any, o: Any) -> None:
+def turn_heading(s: StepState, angle: Any, o: Any) -> None:
     """q ← Exp_z(angle) ⊗ q (a world-vertical rotation), and the world-frame lag state with it.
 
     Turning the lag state too keeps the tilt path exactly independent of heading corrections:
@@ -184,6 +187,13 @@ def _turn_heading(s: StepState, angle: Any, o: Any) -> None:
     )
     c, sn = cw * cw - cz * cz, 2.0 * cw * cz
     s.lx, s.ly = c * s.lx - sn * s.ly, sn * s.lx + c * s.ly
+
+
+def _toward_unit(v: tuple, u: tuple, a: Any, o: Any) -> tuple:
+    """A unit vector low-pass: v + a·(u − v), renormalised (weight ``a`` in [0, 1])."""
+    x, y, z = v[0] + a * (u[0] - v[0]), v[1] + a * (u[1] - v[1]), v[2] + a * (u[2] - v[2])
+    n = o.maximum(o.sqrt(x * x + y * y + z * z), TINY)
+    return x / n, y / n, z / n
 
 
 def _normalize(s: StepState, o: Any) -> None:
@@ -210,14 +220,16 @@ def step(
     s.time_s = s.time_s + dt
     bias.add_process_noise(s, p, dt, o)
     startup = s.time_s <= p.startup_duration_s
-    fast = startup | s.recovering  # trust the accelerometer fully, learn no bias
+    # trust the accelerometer fully, learn no bias: start-up, recovery, and a take-hold phase
+    # (velocity aiding that just began: the tilt error it reveals is real)
+    fast = startup | s.recovering | (s.time_s <= s.quick_until_s)
     learn = o.not_(fast)
 
     # 1. predict with the bias-corrected gyro, then the magnetometer's yaw-rate correction
     dw, dx, dy, dz = _exp((gx - s.bx) * dt, (gy - s.by) * dt, (gz - s.bz) * dt, o)
     qw, qx, qy, qz = _mul(s.qw, s.qx, s.qy, s.qz, dw, dx, dy, dz)
     s.qw, s.qx, s.qy, s.qz = qw, qx, qy, qz
-    _turn_heading(s, s.z_m * dt, o)
+    turn_heading(s, s.z_m * dt, o)
     # the field directions the heading channel checks samples against turn with the body
     s.mvx, s.mvy, s.mvz = _rotate(dw, -dx, -dy, -dz, s.mvx, s.mvy, s.mvz)
     s.mcx, s.mcy, s.mcz = _rotate(dw, -dx, -dy, -dz, s.mcx, s.mcy, s.mcz)
@@ -279,7 +291,9 @@ def step(
         scale = o.where(clipped, limit / o.maximum(en, TINY), 1.0)
         # 4. aperiodic unit in the world frame (weight 1 = unit bypassed)
         wx, wy, wz = _rotate(s.qw, s.qx, s.qy, s.qz, ex * scale, ey * scale, ez * scale)
-        weight = dt / (o.where(quick, QUICK_LAG_TIME_CONSTANT_S, p.aperiodic_time_constant_s) + dt)
+        # aided (velocity aiding took the vehicle's acceleration out): nothing slow to average
+        lag = o.where(s.aided, AIDED_LAG_TIME_CONSTANT_S, p.aperiodic_time_constant_s)
+        weight = dt / (o.where(quick, QUICK_LAG_TIME_CONSTANT_S, lag) + dt)
         s.lx = s.lx + weight * (wx - s.lx)
         s.ly = s.ly + weight * (wy - s.ly)
         s.lz = s.lz + weight * (wz - s.lz)
@@ -338,9 +352,10 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
     wx, wy, wz = _rotate(s.qw, s.qx, s.qy, s.qz, ux, uy, uz)
     horizontal = o.sqrt(wx * wx + wy * wy)
     dip = o.atan2(-wz, horizontal)
-    dt_m = o.minimum(
-        o.where(s.mag_last_time_s < 0.0, 0.0, s.time_s - s.mag_last_time_s), MAG_MAX_DT_S
-    )
+    # time since the last used sample: the drift allowed to the predicted direction, and
+    # (capped) how long one correction stands for
+    age = o.where(s.mag_last_time_s < 0.0, 0.0, s.time_s - s.mag_last_time_s)
+    dt_m = o.minimum(age, MAG_MAX_DT_S)
 
     dt_s = o.minimum(
         o.where(s.mag_seen_time_s < 0.0, 0.0, s.time_s - s.mag_seen_time_s), MAG_MAX_DT_S
@@ -368,14 +383,11 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
     off_dip = o.maximum(dip - s.mag_ref_dip, s.mag_ref_dip - dip)
     # the measured direction, low-passed (every sample; turned by the gyro between samples)
     a = o.where(fresh, 1.0, dt_s / (MAG_SMOOTH_TIME_CONSTANT_S + dt_s))
-    vx, vy, vz = s.mmx + a * (ux - s.mmx), s.mmy + a * (uy - s.mmy), s.mmz + a * (uz - s.mmz)
-    vn = o.maximum(o.sqrt(vx * vx + vy * vy + vz * vz), TINY)
-    mmx, mmy, mmz = vx / vn, vy / vn, vz / vn
+    mmx, mmy, mmz = _toward_unit((s.mmx, s.mmy, s.mmz), (ux, uy, uz), a, o)
     s.mmx, s.mmy, s.mmz = mmx, mmy, mmz
     # a field that turned when the body did not: the measured direction against the one the
     # gyro predicts (tolerance: noise, a calibration's leftover times the angle turned, drift)
     tol = MAG_TURN_TOLERANCE_RAD + MAG_TURN_FRACTION * MAG_TURN_TIME_CONSTANT_S * s.rate_lp
-    age = o.where(s.mag_last_time_s < 0.0, 0.0, s.time_s - s.mag_last_time_s)
     drift = MAG_DRIFT_SIGMAS * o.sqrt(o.maximum(s.bias_var, 0.0)) * age
     turned = o.sqrt((mmx - s.mvx) ** 2 + (mmy - s.mvy) ** 2 + (mmz - s.mvz) ** 2) > tol + drift
     off = (off_norm > p.mag_norm_tolerance) | (off_dip > p.mag_dip_tolerance_rad) | turned
@@ -403,10 +415,8 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
                            o.where(keep, s.mcz, mmz))
     s.mag_cand_norm = o.where(keep, s.mag_cand_norm, mn)
     a = o.where(fresh, 1.0, dt_s / (MAG_TURN_TIME_CONSTANT_S + dt_s))
-    ar = o.where(disturbed, 0.0, a)
-    vx, vy, vz = s.mvx + ar * (ux - s.mvx), s.mvy + ar * (uy - s.mvy), s.mvz + ar * (uz - s.mvz)
-    vn = o.maximum(o.sqrt(vx * vx + vy * vy + vz * vz), TINY)
-    s.mvx, s.mvy, s.mvz = vx / vn, vy / vn, vz / vn
+    s.mvx, s.mvy, s.mvz = _toward_unit((s.mvx, s.mvy, s.mvz), (ux, uy, uz),
+                                       o.where(disturbed, 0.0, a), o)
 
     usable = p.use_mag & o.not_(disturbed) & (horizontal > MAG_MIN_HORIZONTAL)
     s.mag_status = o.where(p.use_mag, o.where(disturbed, MAG_REJECTED, MAG_USED), MAG_DISABLED)
@@ -439,7 +449,7 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
     yaw_mode = o.not_(p.mag_full) | first
     angle = o.where(first, yaw_error, o.where(yaw_mode, gain * yaw_c, 0.0))
     s.z_m = s.z_m + o.where(yaw_mode & o.not_(first), p.r2 * ldt * yaw_c, 0.0)
-    _turn_heading(s, angle, o)
+    turn_heading(s, angle, o)
 
     # 'full' mode (Ryzhkov, drift): vector error against the reference field, all axes
     full = p.mag_full & o.not_(first) & usable

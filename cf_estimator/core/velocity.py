@@ -52,6 +52,18 @@ from typing import Any
 from cf_estimator.core.heading_offset import HeadingOffset, HeadingOffsetEstimator
 from cf_estimator.core.params import FilterParams
 
+#: Velocity aiding that begins (or comes back after a dropout) lets the filter take hold for
+#: this long [s]: start-up gain, no clip, no bias learning (the tilt error it reveals is real).
+AIDING_TAKE_HOLD_S = 2.0
+#: Without a heading reference of its own (6-D), the filter is steered onto the velocity's
+#: frame once the heading offset δ is known: the first fix turns its heading at once, then it
+#: turns by this gain × δ per second, so the offset stays near 0 instead of drifting with the
+#: gyro. (An integral on the heading channel's rate correction z_m as well, 0.01/s², followed
+#: the estimator's lag — it averages 60 s of accelerations — and let the heading drift 7° in
+#: 40 s of a simulated flight: dropped.)
+HEADING_STEER_GAIN_1_S = 0.2
+#: Longest interval [s] between heading-offset updates that one steering step may stand for.
+HEADING_STEER_MAX_DT_S = 1.0
 #: Time constant [s] of the low-pass whose complement (the specific force's fast content:
 #: vibration, impacts) is passed through while aided: slower content is replaced by the
 #: velocity-aided gravity measurement.
@@ -128,13 +140,18 @@ class VelocityAiding:
         self._timeout = params.velocity_timeout_s
         self._jump = params.velocity_jump_threshold_m_s
         self._auto = params.velocity_heading == "auto"
+        # steer a filter without its own heading reference onto the velocity's frame
+        self._steer = self._auto and not params.use_mag
         self._span = params.velocity_timeout_s + params.velocity_window_s + BUFFER_MARGIN_S
+        # differentiation noise of the velocity over one window, both horizontal axes [m²/s⁴]
+        noise2 = 4.0 * (params.velocity_noise_m_s / params.velocity_window_s) ** 2
         if hasattr(self, "_heading"):
             self._heading.required_sigma_rad = params.velocity_heading_sigma_rad
             self._heading.memory_s = params.velocity_heading_memory_s
+            self._heading.noise2_m2_s4 = noise2
         else:
             self._heading = HeadingOffsetEstimator(params.velocity_heading_sigma_rad,
-                                                   params.velocity_heading_memory_s)
+                                                   params.velocity_heading_memory_s, noise2)
 
     def reset(self) -> None:
         """Forget the IMU history, the velocity window and the heading offset (counters kept
@@ -154,7 +171,9 @@ class VelocityAiding:
         self._m_t = -math.inf
         self._heading.reset()
         self._hd = HeadingOffset(0.0, math.inf, False)
-        self._active = False
+        self._active = self._started = self._first = self._ever = False
+        self._steer_t: float | None = None
+        self._turn = 0.0
         if not hasattr(self, "_received"):
             self.reset_counters()
 
@@ -236,7 +255,7 @@ class VelocityAiding:
         if bt:
             d = t_s - bt[-1]
             if d <= 0.0:  # not after the last stamp: nothing to add
-                self._active = False
+                self._active = self._started = self._first = False
                 return accel_m_s2
             sx, sy, sz = self._sum
             self._sum = (sx + fx * d, sy + fy * d, sz + fz * d)
@@ -257,11 +276,13 @@ class VelocityAiding:
                     self._b0 = 0
         m = self._m
         if m is None or t_s - self._m_t > self._timeout:
-            self._active = False
+            self._active = self._started = self._first = False
             if m is not None:
                 self._stale += 1
             return accel_m_s2
-        self._active = True
+        self._started = not self._active
+        self._first = self._started and not self._ever
+        self._active = self._ever = True
         self._aided += 1
         # Pᵀ·(m_P + f_P − lowpass(f_P)): gravity from the velocity window, fast content kept
         gx, gy, gz = m[0] + fx - lp[0], m[1] + fy - lp[1], m[2] + fz - lp[2]
@@ -355,12 +376,49 @@ class VelocityAiding:
             # gravity measurement (specific force minus acceleration), world → P
             self._m = _rot(ww, -wx, -wy, -wz, fwx - awx, fwy - awy, fwz)
             self._m_t = t
+            if self._steer:
+                self._steer_heading(t)
+
+    def _steer_heading(self, t: float) -> None:
+        """Schedule the turn of the filter's heading towards the velocity's frame (see
+        HEADING_STEER_GAIN_1_S); the estimator's sums and δ follow the turn at once."""
+        first = self._steer_t is None
+        dt = 0.0 if first else min(t - self._steer_t, HEADING_STEER_MAX_DT_S)
+        self._steer_t = t
+        d = self._hd.offset_rad
+        # the first fix turns the heading at once (as the magnetometer's first sample does)
+        turn = d if first else HEADING_STEER_GAIN_1_S * dt * d
+        self._turn -= turn
+        self._heading.rotate(-turn)
+        self._hd = HeadingOffset(d - turn, self._hd.sigma_rad, self._hd.known)
+
+    def take_heading_correction(self) -> float:
+        """The turn [rad] of the filter's heading (about the world vertical) due since the last
+        call (:meth:`~cf_estimator.core.filter.ComplementaryFilter.correct_heading`): 6-D with
+        ``velocity_heading='auto'`` only, zero otherwise."""
+        out = self._turn
+        self._turn = 0.0
+        return out
 
     # -- status --------------------------------------------------------------------------------
     @property
     def active(self) -> bool:
         """True when the last IMU sample was aided (vertically or fully)."""
         return self._active
+
+    @property
+    def started(self) -> bool:
+        """True when the last IMU sample was the first aided one after unaided ones (aiding
+        began, or came back after a dropout): the caller lets the filter take hold
+        (:meth:`~cf_estimator.core.filter.ComplementaryFilter.take_hold`)."""
+        return self._started
+
+    @property
+    def first_start(self) -> bool:
+        """True when :attr:`started` is the first start since the last reset: the bias learned
+        before it came from the unaided (untrustworthy) error and is learned afresh; after a
+        dropout it was learned while aided and is kept."""
+        return self._first
 
     @property
     def mode(self) -> str:
@@ -380,6 +438,17 @@ class VelocityAiding:
             heading_sigma_rad=self._hd.sigma_rad,
             heading_known=self._hd.known or not self._auto,
             age_s=now - self._m_t if self._m is not None else math.inf)
+
+
+def apply_aiding(f: Any, aiding: VelocityAiding) -> None:
+    """What the aiding tells the filter before its update (after
+    :meth:`VelocityAiding.aided_accel`): take hold when aiding began, whether the sample is
+    aided, the heading correction due. One place for the per-message pipeline and
+    :func:`~cf_estimator.core.batch.estimate`."""
+    if aiding.started:
+        f.take_hold(AIDING_TAKE_HOLD_S, reopen_bias=aiding.first_start)
+    f.set_aided(aiding.active)
+    f.correct_heading(aiding.take_heading_correction())
 
 
 def filter_bias(f: Any) -> tuple[float, float, float]:

@@ -44,13 +44,16 @@ from sensor_msgs.msg import Imu, MagneticField
 from cf_estimator.params_file import (
     all_specs,
     build_params,
+    check_names,
     describe_unknown,
     unapplied_file_warning,
     unknown_names,
 )
 from cf_estimator.pipeline import ImuPipeline
-from cf_estimator.pipeline.checks import RESET_CLOCK_JUMP
+from cf_estimator.pipeline.checks import RESET_CLOCK_JUMP, input_type_problem
 from cf_estimator.pipeline.diagnostics import LEVEL_NAMES
+from cf_estimator.pipeline.frames import check_tf_frames
+from cf_estimator.pipeline.log_events import RateLimitedWarnings
 from cf_estimator.schema import ParameterError, ParamSpec, as_dict
 
 NODE_NAME = "cf_estimator"
@@ -138,17 +141,30 @@ class CfEstimatorNode(Node):
         super().__init__(node_name, **kwargs)
         log = self.get_logger()
         self._names = {s.name for s in all_specs()}
-        values = {spec.name: self._declare(spec) for spec in all_specs()}
+        values = self._declare_all()
         filter_params, pipeline_params = build_params(values)  # ParameterError: main() reports
         unknown = unknown_names(getattr(self, "_parameter_overrides", {}))  # this node's overrides
-        if unknown:  # once, at start-up: a misspelt key would otherwise be silently ignored
+        if pipeline_params.strict_parameters:  # flight: refuse, with replay --params' lines
+            for path in params_files:
+                check_names(path, self.get_fully_qualified_name())  # ParameterError: main()
+            if unknown:
+                raise ParameterError(f"unknown parameter {describe_unknown(unknown)} "
+                                     "(strict_parameters)")
+        elif unknown:  # once, at start-up: a misspelt key would otherwise be silently ignored
             log.warning(f"unknown parameter(s), ignored: {describe_unknown(unknown)}")
         ns = self.get_namespace().rstrip("/")
+        px4_in = pipeline_params.input_type == "px4"
+        imu_in = (f"{pipeline_params.px4_topic_prefix}/sensor_combined" if px4_in else IMU_IN)
         self._pipe = ImuPipeline(
             filter_params, pipeline_params, diagnostics_name=f"{ns}/{self.get_name()}: attitude",
-            imu_topic=self.resolve_topic_name(IMU_IN),
+            imu_topic=self.resolve_topic_name(imu_in),
         )
         self._last_level: int | None = None
+        self._type_problems: dict[str, str] = {}  # input role -> the line warned
+        self._velocity_count = 0
+        self._events = RateLimitedWarnings(LOG_THROTTLE_S)
+        self._resets_logged = 0
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._converts_axes = self._pipe.converts_axes
 
         overrides = QoSOverridingOptions.with_default_policies()
@@ -167,22 +183,38 @@ class CfEstimatorNode(Node):
         )
         self._pub_tf = None
         if pipeline_params.publish_tf:
+            refusal, tf_warning = check_tf_frames(
+                filter_params.world_frame, pipeline_params.body_frame,
+                pipeline_params.tf_parent_frame, pipeline_params.output_frame_id)
+            if refusal:  # a transform every ROS consumer would misread: not published
+                raise StartError(refusal)
+            if tf_warning:
+                log.warning(tf_warning)
             try:
                 from tf2_msgs.msg import TFMessage
             except ImportError:
                 raise StartError(
                     "publish_tf needs the tf2_msgs package (ROS: apt install ros-jazzy-tf2-msgs; "
-                    "PyPI wheels: python3 scripts/build_tf2_msgs.py)"
+                    "PyPI wheels: python3 scripts/build_tf2_msgs.py into this environment, or "
+                    "python3 scripts/build_tf2_msgs.py --prefix DIR for a shared one that must "
+                    "stay unmodified, then the PYTHONPATH and LD_LIBRARY_PATH it prints)"
                 ) from None
             self._pub_tf = self.create_publisher(TFMessage, TF_OUT, QoSProfile(depth=TF_DEPTH))
             self._tf_msg = TFMessage(transforms=[TransformStamped()])
-        self._sub_imu = self.create_subscription(
-            Imu, IMU_IN, self._on_imu, _sensor_qos(IMU_QUEUE_DEPTH),
-            qos_overriding_options=overrides,
-        )
-        self._sub_mag = self.create_subscription(
-            MagneticField, MAG_IN, self._on_mag, _sensor_qos(), qos_overriding_options=overrides
-        )
+        self._px4 = None
+        if px4_in:  # px4_msgs from PX4's bridge, PX4's QoS (node/px4_input.py)
+            from cf_estimator.node.px4_input import Px4Input
+
+            self._px4 = Px4Input(self, pipeline_params, IMU_QUEUE_DEPTH, overrides)
+        else:
+            self._sub_imu = self.create_subscription(
+                Imu, IMU_IN, self._on_imu, _sensor_qos(IMU_QUEUE_DEPTH),
+                qos_overriding_options=overrides,
+            )
+            self._sub_mag = self.create_subscription(
+                MagneticField, MAG_IN, self._on_mag, _sensor_qos(),
+                qos_overriding_options=overrides,
+            )
         self._sub_vel = None
         if pipeline_params.velocity_topic:
             vel_type = self._velocity_type(pipeline_params)
@@ -206,8 +238,9 @@ class CfEstimatorNode(Node):
         if self._post_set:
             self.add_post_set_parameters_callback(self._apply_parameters)
 
+        ins = self._px4.topics if self._px4 else [IMU_IN, MAG_IN]
         topics = {
-            "in": [self.resolve_topic_name(IMU_IN), self.resolve_topic_name(MAG_IN)]
+            "in": [self.resolve_topic_name(t) for t in ins]
             + ([f"{self.resolve_topic_name(pipeline_params.velocity_topic)} (velocity aiding, "
                 f"{self._sub_vel.msg_type.__name__})"] if self._sub_vel else []),
             "out": [self.resolve_topic_name(IMU_OUT)]
@@ -217,7 +250,8 @@ class CfEstimatorNode(Node):
         }
         backend = self._pipe.filter.backend
         log.info(
-            f"subscribed (sensor-data QoS) to {', '.join(topics['in'])}; publishing "
+            f"subscribed ({'PX4 QoS: best effort, transient local' if px4_in else 'sensor-data'}"
+            f" QoS) to {', '.join(topics['in'])}; publishing "
             f"{', '.join(topics['out'])}; world frame {filter_params.world_frame}, body frame "
             f"{pipeline_params.body_frame}; filter step: "
             + ("compiled kernel" if backend == "compiled"
@@ -236,6 +270,19 @@ class CfEstimatorNode(Node):
             self.get_logger().warning(text)
         return texts
 
+    def _declare_all(self) -> dict[str, Any]:
+        """Declare every schema parameter; input_type first: PX4 input declares body_frame,
+        world_frame and velocity_frame with PX4's defaults (overrides still win)."""
+        specs = {s.name: s for s in all_specs()}
+        values = {"input_type": self._declare(specs["input_type"])}
+        px4_in = values["input_type"] == "px4"
+        if px4_in:
+            from cf_estimator.node.px4_input import px4_spec
+        for name, spec in specs.items():
+            if name not in values:
+                values[name] = self._declare(px4_spec(spec) if px4_in else spec)
+        return values
+
     def _declare(self, spec: ParamSpec) -> Any:
         """Declare one schema parameter; a value of the wrong type → ParameterError, one line."""
         try:
@@ -245,14 +292,23 @@ class CfEstimatorNode(Node):
             raise ParameterError(f"{text}{_type_hint(spec, text)}") from None
 
     # -- messages ---------------------------------------------------------------------------
+    def _log_events(self, flush: bool = False) -> None:
+        """One WARN per reset and per new kind of rejection, rate-limited per reason
+        (:class:`cf_estimator.pipeline.log_events.RateLimitedWarnings`, steady clock)."""
+        now_s = self._steady.now().nanoseconds * 1e-9
+        pipe = self._pipe
+        lines = (self._events.flush(now_s) if flush else
+                 self._events.update(pipe.reset_counts, pipe.rejected_counts, now_s))
+        self._resets_logged = pipe.reset_total
+        for text in lines:
+            self.get_logger().warning(text)
+
     def _on_imu(self, msg: Imu) -> None:
         out = self._pipe.on_imu(msg)
         log = self.get_logger()
+        if out is None or self._pipe.reset_total != self._resets_logged:
+            self._log_events()
         if out is None:
-            log.warning(
-                f"IMU message rejected: {self._pipe.last_reject_reason} (counted in /diagnostics)",
-                throttle_duration_sec=LOG_THROTTLE_S,
-            )
             return
         for text in out.warnings:
             log.warning(text)
@@ -260,6 +316,8 @@ class CfEstimatorNode(Node):
             # imu/data is the input message itself: header, vectors and covariances as received.
             q = msg.orientation
             q.x, q.y, q.z, q.w = out.orientation_xyzw
+            if out.frame_id != msg.header.frame_id:  # output_frame_id: the body published
+                msg.header.frame_id = out.frame_id
             msg.orientation_covariance = out.orientation_covariance
             if self._converts_axes:  # body_frame: the vectors in the output's convention too
                 v = msg.angular_velocity
@@ -322,6 +380,7 @@ class CfEstimatorNode(Node):
         return TwistStamped
 
     def _on_velocity(self, msg: Any) -> None:
+        self._velocity_count += 1
         reason = self._pipe.on_velocity(msg)
         if reason is not None and reason != "too_old":
             self.get_logger().warning(
@@ -337,19 +396,50 @@ class CfEstimatorNode(Node):
                 f"diagnostics failed: {exc}", throttle_duration_sec=LOG_THROTTLE_S
             )
 
+    def _input_type_problems(self) -> dict[str, str]:
+        """``role → one line`` for each input topic that has received nothing and that the
+        graph advertises only with another type (WARN once per topic and type)."""
+        c = self._pipe.counters
+        waiting = [(role, sub) for role, sub, n in (
+            ("IMU", self._sub_imu, c["received_imu"]),
+            ("magnetometer", self._sub_mag, c["received_mag"]),
+            ("velocity", self._sub_vel, self._velocity_count)) if sub is not None and n == 0]
+        if not waiting:
+            self._type_problems = {}
+            return {}
+        problems = {}
+        for role, sub in waiting:
+            cls = sub.msg_type
+            expected = f"{cls.__module__.split('.')[0]}/msg/{cls.__name__}"
+            # the publishers' types (the topic's own list holds this node's subscription too)
+            advertised = sorted({i.topic_type for i in
+                                 self.get_publishers_info_by_topic(sub.topic_name)})
+            text = input_type_problem(role, sub.topic_name, expected, advertised)
+            if text:
+                problems[role] = text
+                if self._type_problems.get(role) != text:
+                    self.get_logger().warning(text)
+        self._type_problems = problems
+        return problems
+
     def _publish_diagnostics(self) -> None:
         now = self.get_clock().now()
         report = self._pipe.diagnostics(now.nanoseconds * 1e-9)
+        problems = self._input_type_problems()
         status = DiagnosticStatus()
-        status.level = bytes([report.level])  # 'byte' field: bytes of length 1 in rclpy
+        level = max(report.level, 1) if problems and report.level < 2 else report.level
+        status.level = bytes([level])  # 'byte' field: bytes of length 1 in rclpy
         status.name = report.name
-        status.message = report.message
+        status.message = report.message + "".join(f"; {t}" for t in problems.values())
         status.hardware_id = report.hardware_id
-        status.values = [KeyValue(key=k, value=v) for k, v in report.values]
+        status.values = [KeyValue(key=k, value=v) for k, v in report.values] + [
+            KeyValue(key=f"input_type.{role.lower()}", value=text)
+            for role, text in problems.items()]
         array = DiagnosticArray()
         array.header.stamp = now.to_msg()
         array.status = [status]
         self._pub_diag.publish(array)
+        self._log_events(flush=True)  # what the rate limit held back, now due
         if report.level != self._last_level:
             text = f"status {LEVEL_NAMES.get(report.level, report.level)}: {report.message}"
             if report.level == 0:
@@ -363,6 +453,10 @@ class CfEstimatorNode(Node):
         if back_s >= self._pipe.pipeline_params.time_jump_back_threshold_s:
             self._pipe.reset(RESET_CLOCK_JUMP)
             self.get_logger().warning(f"clock jumped back by {back_s:.3f} s: filter reset")
+            # said just now: mark it reported (its line would repeat it)
+            self._events.update(self._pipe.reset_counts, {},
+                                self._steady.now().nanoseconds * 1e-9)
+            self._resets_logged = self._pipe.reset_total
 
     # -- parameters -------------------------------------------------------------------------------
     def _changes(self, params: list[Any]) -> dict[str, Any]:
@@ -373,6 +467,12 @@ class CfEstimatorNode(Node):
         if not changes:  # use_sim_time, qos_overrides...: not ours to judge
             return SetParametersResult(successful=True)
         ok, reason = self._pipe.validate_changes(changes)
+        if ok and self._pub_tf is not None and "tf_parent_frame" in changes:
+            pp, fp = self._pipe.pipeline_params, self._pipe.filter_params
+            refusal, _ = check_tf_frames(fp.world_frame, pp.body_frame,
+                                         str(changes["tf_parent_frame"]), pp.output_frame_id)
+            if refusal:  # the start-up refusal holds at run time too
+                ok, reason = False, refusal
         if ok and not self._post_set:  # rclpy without post-set callbacks: apply now
             self._apply_parameters(params)
         return SetParametersResult(successful=ok, reason=reason)

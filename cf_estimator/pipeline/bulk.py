@@ -301,7 +301,7 @@ def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = N
         last = t_ns
     out.end = end
     out.n_events = end - start
-    out.frame = str(p._imu_frame)
+    out.frame = p.output_frame_id(str(p._imu_frame))
     out.values = ev.imu.values if ev.imu is not None else None
     out.state = {
         "_last_ns": last, "_dt_mean": dt_mean, "_gaps": gaps, "_pending_mag": pending,
@@ -421,6 +421,8 @@ def commit(pipe: ImuPipeline, run: Scan, marks: Sequence[int] = (),
     w.n += n
     w.last_ns = run.t_ns[-1]
     # -- outputs ------------------------------------------------------------------------------
+    if not p._out_frame.identity:  # core world -> published (nwu, true north), as on_imu
+        q = p._out_frame.apply_array(q)
     atan2, asin = math.atan2, math.asin
     unwrap = p._pp.rpy_unwrap
     prev = p._unwrap_prev

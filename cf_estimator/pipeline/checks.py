@@ -46,7 +46,7 @@ GYRO_MAX_RAD_S = 1000.0
 ACCEL_MAX_M_S2 = 10000.0
 #: Magnetometer samples averaged before judging its units.
 MAG_CHECK_SAMPLES = 20
-#: Plausible Earth-field norm [T] (25-65 uT, with margin for local fields).
+#: Plausible Earth-field norm [T]: Earth's 25-65 uT with a margin for local fields.
 MAG_PLAUSIBLE_T = (10e-6, 100e-6)
 
 
@@ -117,12 +117,14 @@ def mag_units_warning(mean_norm: float) -> tuple[str, str] | None:
     elif mean_norm > 100.0:
         guess, fix = "raw counts or nanotesla", "apply the sensor's scale (nT: 1e-9)"
     else:
-        guess, fix = "an unexpected scale", "check the driver's scale"
+        guess, fix = ("an unexpected scale or a strong local field",
+                      "check the driver's scale factor and for magnets near the sensor")
     return (
         "mag_units",
-        f"|magnetic_field| averages {mean_norm:.3g}, expected 25e-6..65e-6 T: looks like "
-        f"{guess}. Heading still works (only directions are used), so /diagnostics stays OK; "
-        f"to fix the driver's scale (sensor_msgs/MagneticField is Tesla): {fix}",
+        f"|magnetic_field| averages {mean_norm:.3g}, outside the plausible {lo * 1e6:g}-"
+        f"{hi * 1e6:g} uT (Earth's field: 25-65 uT): looks like {guess}. Heading still works "
+        "(only directions are used), so /diagnostics stays OK; sensor_msgs/MagneticField is "
+        f"Tesla: {fix}",
     )
 
 
@@ -139,3 +141,60 @@ def mag_frame_warning(mag_frame: str, imu_frame: str) -> tuple[str, str]:
         f"magnetometer frame_id '{mag_frame}' differs from the IMU's '{imu_frame}': the filter "
         "assumes both vectors are in the same sensor frame (no tf lookup is done)",
     )
+
+
+# -- results that must not look like one --------------------------------------------------------
+#: Stamp rejections (out_of_order, duplicate_stamp, time_backwards) above this share of the IMU
+#: messages make a replay unusable: the stamps decrease (or repeat) through most of the input.
+STAMP_REJECT_UNUSABLE_FRACTION = 0.5
+_STAMP_REASONS = (OUT_OF_ORDER, DUPLICATE_STAMP, TIME_BACKWARDS)
+
+
+def _bad_number(value: object) -> bool:
+    """None, NaN or Inf (a figure a summary cannot report)."""
+    return value is None or (isinstance(value, float) and not math.isfinite(value))
+
+
+def unusable_reason(summary: dict) -> str | None:
+    """One line when a replay summary is no result to keep, else None.
+
+    ``summary`` needs ``messages_in``, ``messages_processed``, ``messages_rejected`` (reason →
+    count), ``resets`` and ``duration_s`` [s] (first to last processed stamp). Unusable: no
+    IMU message processed; stamps that decrease or repeat through most of the input (more than
+    :data:`STAMP_REJECT_UNUSABLE_FRACTION` of the messages rejected for their stamp, or the last
+    processed stamp before the first); a duration that is None/NaN with messages processed.
+    """
+    n_in = int(summary.get("messages_in") or 0)
+    processed = int(summary.get("messages_processed") or 0)
+    rejected = {k: int(v) for k, v in (summary.get("messages_rejected") or {}).items() if v}
+    resets = {k: int(v) for k, v in (summary.get("resets") or {}).items() if v}
+    if processed == 0:
+        detail = ", ".join(f"{v} {k}" for k, v in rejected.items()) or "none counted"
+        return f"no IMU message usable: {n_in} of {n_in} rejected ({detail})"
+    stamp = {k: rejected[k] for k in _STAMP_REASONS if k in rejected}
+    duration = summary.get("duration_s")
+    n_stamp = sum(stamp.values())
+    decreasing = (n_stamp > STAMP_REJECT_UNUSABLE_FRACTION * n_in
+                  or (not _bad_number(duration) and duration < 0.0))  # type: ignore[operator]
+    if decreasing:
+        what = ", ".join(f"{v} {k}" for k, v in stamp.items()) or "none"
+        jumps = resets.get(RESET_TIME_JUMP_BACK, 0)
+        return (f"stamps decrease: {n_stamp} of {n_in} rejected ({what})"
+                + (f", {jumps} resets {RESET_TIME_JUMP_BACK}" if jumps else "")
+                + "; no usable estimate (are the header stamps the driver's time?)")
+    if _bad_number(duration):
+        return f"no stamp span: duration {duration!r} with {processed} messages processed"
+    return None
+
+
+def input_type_problem(role: str, topic: str, expected: str,
+                       advertised: list[str]) -> str | None:
+    """One line when ``topic`` is advertised on the ROS graph only with types other than
+    ``expected`` (e.g. a Vector3Stamped on the IMU input: the subscription never matches, and
+    the node would only say "no IMU messages"); None when it matches or nobody advertises it.
+    """
+    if not advertised or expected in advertised:
+        return None
+    return (f"{role} input {topic} is advertised as {', '.join(sorted(advertised))}, but the "
+            f"node subscribes {expected}: no message can arrive (remap the right topic, or "
+            + ("set velocity_topic_type)" if role == "velocity" else "fix the publisher)"))

@@ -7,6 +7,7 @@ parameters; ``read_only`` ones shape the node's wiring (publishers, timer) and n
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from cf_estimator.schema import ParameterError, param, validate_fields
@@ -28,6 +29,25 @@ class PipelineParams:
         "'sensor': no convention assumed, the orientation of the message axes as they are (as "
         "imu_filter_madgwick).",
         choices=BODY_FRAMES, read_only=True, group="frames",
+    )
+    magnetic_declination_rad: float = param(
+        0.0, "rad", "Magnetic declination at the flight site, east positive (the World Magnetic "
+        "Model's D; imu_filter_madgwick's declination): the published yaw refers to true north "
+        "instead of magnetic north, in every world_frame.",
+        minimum=-math.pi, maximum=math.pi, group="frames",
+    )
+    yaw_offset_rad: float = param(
+        0.0, "rad", "Added to the published yaw (a rotation about the world frame's z axis, "
+        "after the declination): e.g. a mounting offset of the magnetometer.",
+        minimum=-math.pi, maximum=math.pi, group="frames",
+    )
+    output_frame_id: str = param(
+        "auto", "", "header.frame_id of imu/data and imu/rpy, and the child frame of /tf. "
+        "'auto': the input's frame_id, with '_frd' (or '_flu') added when body_frame makes the "
+        "published body axes differ from the input's (base_link -> base_link_frd in NED, "
+        "MAVROS' naming), so no reader takes an FRD orientation for a REP-103 FLU frame; any "
+        "other value is used as given.",
+        read_only=True, group="frames",
     )
     orientation_covariance_rad2: float = param(
         0.0003, "rad^2", "Floor of the variance reported for roll and pitch (diagonal "
@@ -125,14 +145,54 @@ class PipelineParams:
         1.0, "s", "Period of the /diagnostics report (the node's timer; steady clock).",
         minimum=0.05, maximum=60.0, read_only=True, group="diagnostics",
     )
+    input_type: str = param(
+        "sensor_msgs", "", "What the node subscribes to: 'sensor_msgs' (imu/data_raw, imu/mag) "
+        "or 'px4' (px4_msgs from PX4's uXRCE-DDS bridge: <px4_topic_prefix>/sensor_combined, "
+        "vehicle_magnetometer, optionally vehicle_local_position, with PX4's QoS; needs the "
+        "px4_msgs package). PX4 input defaults to body_frame frd, world_frame ned and "
+        "velocity_frame ned (PX4's vehicle_attitude conventions) unless those are set. Offline "
+        "tools read PX4 .ulg logs as PX4 input whatever this says.",
+        choices=("sensor_msgs", "px4"), read_only=True, group="px4",
+    )
+    px4_topic_prefix: str = param(
+        "/fmu/out", "", "Namespace of PX4's output topics with input_type px4, e.g. "
+        "/px4_1/fmu/out for the second vehicle of a multi-vehicle setup (relative: under the "
+        "node's namespace).",
+        read_only=True, group="px4",
+    )
+    px4_local_position: bool = param(
+        False, "", "With input_type px4: also subscribe to <px4_topic_prefix>/"
+        "vehicle_local_position and use its velocity (vx, vy, vz NED, while v_xy_valid and "
+        "v_z_valid) for the velocity aiding.",
+        read_only=True, group="px4",
+    )
+
+    strict_parameters: bool = param(
+        False, "", "Node start-up: refuse to start (exit 2, one line, as replay --params) on any "
+        "unknown or misspelt parameter and on a --params-file none of whose sections applies "
+        "to this node (false: warn and run). On in the shipped launch file.",
+        read_only=True, group="node",
+    )
 
     def __post_init__(self) -> None:
         validate_fields(self)
+        frame = self.output_frame_id
+        if not frame or frame != frame.strip() or frame.startswith("/"):
+            raise ParameterError(
+                f"output_frame_id: {frame!r} is not a frame id (non-empty, no spaces around it, "
+                "no leading '/'); 'auto' derives it from the input's"
+            )
         frame = self.tf_parent_frame
         if not frame or frame != frame.strip() or frame.startswith("/"):
             raise ParameterError(
                 f"tf_parent_frame: {frame!r} is not a frame id (non-empty, no spaces around it, "
                 "no leading '/')"
+            )
+        prefix = self.px4_topic_prefix
+        if not prefix or prefix != prefix.strip() or prefix.endswith("/") or "//" in prefix:
+            raise ParameterError(
+                f"px4_topic_prefix: {prefix!r} is not a topic namespace (e.g. /fmu/out or "
+                "/px4_1/fmu/out: no trailing '/', no spaces)"
             )
         if 0.0 < self.reset_after_gap_s < self.max_dt_s:
             raise ParameterError(

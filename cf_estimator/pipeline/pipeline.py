@@ -41,8 +41,8 @@ from typing import Any
 from cf_estimator.core.filter import ComplementaryFilter
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import MAG_DISABLED, MAG_REJECTED, MAG_USED
-from cf_estimator.core.velocity import VelocityAiding, filter_bias
-from cf_estimator.pipeline import checks
+from cf_estimator.core.velocity import VelocityAiding, apply_aiding, filter_bias
+from cf_estimator.pipeline import checks, frames
 from cf_estimator.pipeline.covariance import OrientationCovariance
 from cf_estimator.pipeline.diagnostics import (
     DiagnosticsReport,
@@ -105,7 +105,7 @@ class ImuPipeline:
     ) -> None:
         self._fp = filter_params if filter_params is not None else FilterParams()
         self._pp = pipeline_params if pipeline_params is not None else PipelineParams()
-        self._filter = ComplementaryFilter(self._fp)
+        self._filter = ComplementaryFilter(frames.core_params(self._fp))
         self.diagnostics_name = diagnostics_name
         self.imu_topic = imu_topic  #: named in the "no IMU messages" diagnostics (the node's)
         # cumulative counters (plain ints: the hot path increments attributes)
@@ -113,6 +113,7 @@ class ImuPipeline:
         self._processed = 0
         self._rejected: dict[str, int] = {}
         self._resets: dict[str, int] = {}
+        self.reset_total = 0  #: resets of every reason (a cheap "did it reset?" for the node)
         self._gaps = 0
         self._received_mag = 0
         self._mag_used = 0
@@ -197,10 +198,10 @@ class ImuPipeline:
         except Exception as exc:  # noqa: BLE001
             return False, str(exc)
         if fp is not self._fp:
-            self._filter.set_params(fp)
+            self._filter.set_params(frames.core_params(fp))
             self._fp = fp
             if self._aiding is not None:
-                self._aiding.set_params(fp)
+                self._aiding.set_params(frames.core_params(fp))
         self._pp = pp
         self._apply_derived()
         return True, ""
@@ -220,6 +221,15 @@ class ImuPipeline:
         self._mag_timeout_ns = int(round(pp.mag_timeout_s * 1e9))
         self._use_mag = self._fp.use_mag
         self._ned = self._fp.world_frame == "ned"
+        # the published world frame, true north, yaw offset (identity: skipped, bit-identical)
+        self._out_frame = frames.OutputFrame(self._fp.world_frame, pp.magnetic_declination_rad,
+                                             pp.yaw_offset_rad)
+        self._out_frame_ids: dict[str, str] = {}  # input frame_id -> output frame_id
+        # velocity (GNSS: true north) into the core's magnetic-north world: the inverse of the
+        # declination turn, about ENU's up (+D) or NED's down (-D) axis
+        d = pp.magnetic_declination_rad
+        d = -d if frames.core_world_frame(self._fp.world_frame) == "ned" else d
+        self._vel_turn = (math.cos(d), math.sin(d)) if d else None
         # FLU <-> FRD: (x, y, z) -> (x, -y, -z), a half turn about x. Applied to the input
         # vectors when their convention is not the one paired with the world frame (FLU-ENU,
         # FRD-NED), so the core estimates q_world_from_body in that paired convention.
@@ -245,9 +255,24 @@ class ImuPipeline:
         self._cov_model.reset()
         self._clear_time_state()
         self._resets[reason] = self._resets.get(reason, 0) + 1
+        self.reset_total += 1
         if self._pending_mag is not None:
             self._pending_mag = None
             self._mag_dropped += 1
+
+    def output_frame_id(self, input_frame_id: str) -> str:
+        """The frame id published for an input ``frame_id`` (:func:`frames.output_frame_id`)."""
+        out = self._out_frame_ids.get(input_frame_id)
+        if out is None:
+            out = frames.output_frame_id(input_frame_id, self._pp.output_frame_id,
+                                         self._fp.world_frame, self._pp.body_frame)
+            self._out_frame_ids[input_frame_id] = out
+        return out
+
+    @property
+    def output_frame(self) -> frames.OutputFrame:
+        """The rotation from the core's world frame to the published one."""
+        return self._out_frame
 
     @property
     def converts_axes(self) -> bool:
@@ -279,6 +304,16 @@ class ImuPipeline:
             "mag_disabled": self._mag_disabled,
             "mag_pending": 0 if self._pending_mag is None else 1,
         }
+
+    @property
+    def rejected_counts(self) -> Mapping[str, int]:
+        """IMU rejections by reason (the live dict: read, do not modify)."""
+        return self._rejected
+
+    @property
+    def reset_counts(self) -> Mapping[str, int]:
+        """Resets by reason (the live dict: read, do not modify)."""
+        return self._resets
 
     @property
     def input_warnings(self) -> dict[str, str]:
@@ -339,14 +374,18 @@ class ImuPipeline:
         :mod:`cf_estimator.pipeline.velocity_input`); returns None, or the rejection reason
         (counted)."""
         if self._aiding is None:
-            self._aiding = VelocityAiding(self._fp)
+            self._aiding = VelocityAiding(frames.core_params(self._fp))
         pp = self._pp
-        got = velocity_from_message(msg, pp.velocity_frame, self._fp.world_frame,
+        got = velocity_from_message(msg, pp.velocity_frame,
+                                    frames.core_world_frame(self._fp.world_frame),
                                     pp.velocity_frame_id)
         if isinstance(got, str):
             self._aiding.reject(got)
             return got
         t_ns, v = got
+        if self._vel_turn is not None:  # true-north velocity into the core's magnetic world
+            c, s_ = self._vel_turn
+            v = (c * v[0] - s_ * v[1], s_ * v[0] + c * v[1], v[2])
         return self._aiding.add_velocity(t_ns * 1e-9, v)
 
     @property
@@ -479,6 +518,7 @@ class ImuPipeline:
             if self._aiding is not None:
                 acc = self._aiding.aided_accel(t_ns * 1e-9, (gx, gy, gz), acc, dt,
                                                f.orientation_tuple(), filter_bias(f))
+                apply_aiding(f, self._aiding)
             q = f.update((gx, gy, gz), acc, dt, mag)
             s = f._state  # noqa: SLF001 - per-sample flags without building FilterStatus (20 us)
             if mag is not None:
@@ -517,6 +557,8 @@ class ImuPipeline:
             rpy = None
             initialized = False
         else:
+            if not self._out_frame.identity:  # core world -> published (nwu, true north)
+                q = self._out_frame.apply(q)
             qw, qx, qy, qz = q
             xyzw = (qx, qy, qz, qw)
             last_mag = self._last_mag_used_ns
@@ -542,8 +584,8 @@ class ImuPipeline:
         else:
             warnings = []
         out = PipelineOutput(
-            sec, nsec, str(frame), xyzw, cov, (gx, gy, gz), av_cov, (ax, ay, az), la_cov,
-            rpy, initialized, warnings,
+            sec, nsec, self.output_frame_id(str(frame)), xyzw, cov, (gx, gy, gz), av_cov,
+            (ax, ay, az), la_cov, rpy, initialized, warnings,
         )
         # -- statistics (incremental) -----------------------------------------------------------
         if w.n == 0:
