@@ -31,7 +31,10 @@ PY_MODULES = (step, stillness, bias)
 PY_EXTRA = (("ops.py", "FloatOps.sin_half_over"),)
 #: The C functions that repeat them; the first four are the rotation helpers.
 C_HELPERS = ("mul", "expmap", "rotate", "turn_heading")
-C_STEP = ("toward_unit", "magnetometer", "stillness", "cf_step")
+#: The step's stages, in the order step() and cf_step() call them: one name in both files.
+STAGES = ("predict", "classify_motion", "tilt_error", "saturate", "aperiodic", "regulate",
+          "recover", "heading")
+C_STEP = ("toward_unit", "stillness", "cf_step") + STAGES
 #: Where a C constant's Python counterpart may live (the step's modules, then the checks').
 PY_HOMES = (step, stillness, bias, ops, filter)
 #: Bare numbers the algebra needs (zero, one, the 2 of rotations and sample differences, the
@@ -107,6 +110,23 @@ def _c_counts() -> tuple[collections.Counter, collections.Counter]:
     bodies = "".join(_c_functions().values())
     names = collections.Counter(n for n in CONST.findall(bodies) if n != "NULL")
     return names, collections.Counter(re.findall(r"\bp->(\w+)", bodies))
+
+
+def _py_calls(fn: ast.FunctionDef) -> list[str]:
+    calls = [n for n in ast.walk(fn) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)]
+    return [c.func.id for c in sorted(calls, key=lambda c: (c.lineno, c.col_offset))]
+
+
+def test_step_and_cf_step_call_the_same_stages_in_the_same_order():
+    """One reads beside the other: each stage is a function of that name in both files."""
+    tree = ast.parse(Path(step.__file__).read_text())
+    py = {f.name: f for f in tree.body if isinstance(f, ast.FunctionDef)}
+    assert set(STAGES) <= set(py), sorted(set(STAGES) - set(py))
+    py_order = [name for name in _py_calls(py["step"]) if name in STAGES]
+    c_body = _c_functions()["cf_step"]
+    c_order = [name for name in re.findall(r"\b(\w+)\(", c_body) if name in STAGES]
+    assert py_order == list(STAGES)
+    assert c_order == py_order
 
 
 def test_every_c_constant_has_its_python_counterpart_with_the_same_value():
