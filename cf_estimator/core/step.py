@@ -1,16 +1,18 @@
 """The 3-D compensation-scheme step: the filter's equations, written once for floats and arrays.
 
-One sample, in the order the code runs (world frame ENU inside; q = q_world_from_sensor)::
+One sample, in the order the code runs (world frame ENU inside; q = q_world_from_sensor); each
+stage is a function of its name here and a static function of the same name in core/_kernel.c::
 
-    1. predict    q⁻ = Exp_z(z_m·dt) ⊗ q ⊗ Exp((ω − b)·dt)
+    1. predict()  q⁻ = Exp_z(z_m·dt) ⊗ q ⊗ Exp((ω − b)·dt)
                   (gyro ω, bias estimate b; z_m: heading channel's world-vertical rate)
-    2. error      e = (a/‖g‖) × ĝ,  ĝ = R⁻ᵀ·ẑ   (Ryzhkov & Karpenko: scaled by gravity, not |a|)
+    .  classify_motion(): stillness blocks (rest → bias measurement), quick, linear acceleration
+    2. tilt_error() e = (a/‖g‖) × ĝ,  ĝ = R⁻ᵀ·ẑ   (Ryzhkov & Karpenko: scaled by gravity, not |a|)
                   (≈ small-angle tilt error; linear in the linear acceleration)
-    3. saturate   e_s = e·min(1, L/|e|)                     (by norm, keeps the direction)
+    3. saturate() e_s = e·min(1, L/|e|)                     (by norm, keeps the direction)
                   L = saturation_limit_rad while a linear acceleration is present and the gyro
                   is still (impacts, vibration, manoeuvres), else wide_saturation_limit_rad
-    4. aperiodic  l ← l + dt/(T+dt)·(R⁻·e_s − l);  f = R⁻ᵀ·l  (1/(T s+1) in the world frame)
-    5. regulator  c ← c + k3·dt·f;  b ← b − dt·(k2'·f + c);  q ← q⁻ ⊗ Exp(g(k1')·f)
+    4. aperiodic() l ← l + dt/(T+dt)·(R⁻·e_s − l);  f = R⁻ᵀ·l  (1/(T s+1) in the world frame)
+    5. regulate() c ← c + k3·dt·f;  b ← b − dt·(k2'·f + c);  q ← q⁻ ⊗ Exp(g(k1')·f)
                   (W1 = k1 + k2/s + k3/s²; g(k) = k·dt/(1+k·dt), the backward-Euler gain;
                   b, the integral state, is the gyro-bias estimate; k2' = max(k2,
                   bias_learning_k2·σ_b²/σ_0²) and k1' = max(k1, 2√k2') while the bias is
@@ -18,7 +20,8 @@ One sample, in the order the code runs (world frame ENU inside; q = q_world_from
                   the tight clip is on): the correction also turns the unit's memory (p = 1: a
                   pre-filter of the specific force in the world frame, as VQF's; p = 0: the
                   thesis's unit on the error)
-    6. magnetom.  'yaw':  e_ψ = atan2(m_E, m_N) of the measured field in the world frame,
+    .  recover()  a clip unbroken for recovery_trigger_s: RECOVERING (as start-up)
+    6. heading()  'yaw':  e_ψ = atan2(m_E, m_N) of the measured field in the world frame,
                   saturated; q ← Exp_z(g(r1)·e_ψ) ⊗ q; z_m ← z_m + r2·dt_m·e_ψ (heading only:
                   a rotation about the world vertical never changes roll/pitch); saturated
                   for recovery_trigger_s: heading recovery with startup_k1 (as the tilt's)
@@ -261,7 +264,7 @@ def predict(s: StepState, gyro: tuple, dt: Any, o: Any) -> None:
 
 def classify_motion(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple | None,
                     fast: Any, dt: Any, o: Any) -> tuple[Any, Any]:
-    """Stage 2: rest or motion, and is there a linear acceleration → (quick, accelerating).
+    """Before the error: rest or motion, and is there a linear acceleration → (quick, accelerating).
 
     The stillness blocks (``stillness.classify``) and their bias measurement at rest; quick: the
     error bypasses the clip and the unit (``fast``, or at rest with |a| = ‖g‖ and no strong
@@ -305,7 +308,7 @@ def classify_motion(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple 
 
 
 def tilt_error(s: StepState, accel: tuple, o: Any) -> tuple[tuple, tuple, Any]:
-    """Stage 3: e = (a/‖g‖) × ĝ (into s.ex, s.ey, s.ez, s.error_norm) → (a/‖g‖, ĝ, |e|).
+    """Stage 2: e = (a/‖g‖) × ĝ (into s.ex, s.ey, s.ez, s.error_norm) → (a/‖g‖, ĝ, |e|).
 
     Ryzhkov & Karpenko: scaled by gravity, not by |a|, so the error stays linear in the linear
     acceleration and the aperiodic unit averages zero-mean accelerations out. ĝ: the predicted
@@ -324,7 +327,7 @@ def tilt_error(s: StepState, accel: tuple, o: Any) -> tuple[tuple, tuple, Any]:
 
 def saturate(s: StepState, p: Any, en: Any, quick: Any, accelerating: Any,
              o: Any) -> tuple[Any, Any, Any, Any]:
-    """Stage 4a: saturation by norm → (scale of e, clip level L [rad], tight, clipped).
+    """Stage 3: saturation by norm → (scale of e, clip level L [rad], tight, clipped).
 
     The tight clip only for a linear acceleration on a still gyro (impacts, vibration,
     manoeuvres); never while quick."""
@@ -336,7 +339,7 @@ def saturate(s: StepState, p: Any, en: Any, quick: Any, accelerating: Any,
 
 
 def aperiodic(s: StepState, p: Any, scale: Any, quick: Any, dt: Any, o: Any) -> tuple:
-    """Stage 4b: the aperiodic unit 1/(T s+1) in the world frame on the saturated error →
+    """Stage 4: the aperiodic unit 1/(T s+1) in the world frame on the saturated error →
     f = R⁻ᵀ·l in the sensor frame [rad] (quick: the error bypasses the unit)."""
     ex, ey, ez = s.ex * scale, s.ey * scale, s.ez * scale
     wx, wy, wz = _rotate(s.qw, s.qx, s.qy, s.qz, ex, ey, ez)
@@ -388,8 +391,8 @@ def regulate(s: StepState, p: Any, f: tuple, en: Any, u: tuple, v: tuple, quick:
 
 def recover(s: StepState, p: Any, clipped: Any, en: Any, limit: Any, learn: Any, dt: Any,
             o: Any) -> None:
-    """Stage 5b: a clip unbroken for recovery_trigger_s [s] is a real attitude error, not a
-    disturbance: recovery (as start-up) until |e| < RECOVERY_EXIT_FRACTION · L."""
+    """After the regulator: a clip unbroken for recovery_trigger_s [s] is a real attitude
+    error, not a disturbance: recovery (as start-up) until |e| < RECOVERY_EXIT_FRACTION · L."""
     s.clip_timer_s = o.where(clipped, s.clip_timer_s + dt, 0.0)
     enter = (p.recovery_trigger_s > 0.0) & (s.clip_timer_s >= p.recovery_trigger_s) & learn
     leave = s.recovering & (en < RECOVERY_EXIT_FRACTION * limit)
