@@ -48,6 +48,32 @@ REFERENCE_TYPES = (QUATERNION_STAMPED_TYPE, POSE_STAMPED_TYPE, ODOMETRY_TYPE)
 STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
 #: rosbag2 metadata version written (Jazzy's rosbag2 writes and reads version 9).
 ROSBAG2_VERSION = 9
+#: The rosbags releases [from, to) this module is tested with (setup.py pins the same range):
+#: the reader and writer use the public API, and the direct mcap path of
+#: :meth:`OutputBag.write_raw` / :meth:`OutputBag.write_rows` also writes into ``McapWriter``'s
+#: pending chunk (not public API), checked byte for byte against rosbags' own ``Writer.write``
+#: with 0.11.0 and 0.11.9 (test/test_bulk_decode.py). Outside the range (a rosbags installed
+#: past the pin) every message goes through ``Writer.write``: the same file, only slower.
+ROSBAGS_TESTED = ((0, 11), (0, 12))
+
+
+def rosbags_version() -> tuple[int, ...]:
+    """The installed rosbags release as integers (``0.11.9`` → ``(0, 11, 9)``; () if unknown)."""
+    import importlib.metadata
+    import re
+
+    try:
+        text = importlib.metadata.version("rosbags")
+    except importlib.metadata.PackageNotFoundError:
+        return ()
+    return tuple(int(x) for x in re.findall(r"\d+", text)[:3])
+
+
+def direct_mcap_supported(version: tuple[int, ...] | None = None) -> bool:
+    """True when the installed rosbags (or ``version``) is in :data:`ROSBAGS_TESTED`."""
+    v = rosbags_version() if version is None else version
+    lo, hi = ROSBAGS_TESTED
+    return bool(v) and lo <= v[:2] < hi
 
 
 class BagError(Exception):
@@ -771,7 +797,10 @@ class OutputBag:
 
     @functools.cached_property
     def _mcap(self) -> Any:
-        """rosbags' McapWriter when :meth:`write_raw` may write into it directly, else None."""
+        """rosbags' McapWriter when :meth:`write_raw` may write into it directly, else None
+        (a rosbags outside :data:`ROSBAGS_TESTED`, compression, another storage)."""
+        if not direct_mcap_supported():
+            return None
         from rosbags.rosbag2.storage_mcap import McapWriter
         from rosbags.rosbag2.writer import CompressionMode
 

@@ -22,7 +22,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Sequence
+import statistics
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -40,12 +41,26 @@ SCENARIOS = ("impacts", "vibration", "acceleration")
 
 @dataclass
 class Row:
-    """One row: ``values[column]`` in ``unit`` (NaN: not run / not applicable)."""
+    """One row: ``values[column]`` in ``unit`` (NaN: not run / not applicable).
+
+    ``noise[column]``: the standard error of the row's mean over its recordings (sample standard
+    deviation / √n, in ``unit``; NaN for a single recording or a maximum): how far the row moves
+    for a change that is neutral on average — the margin a regression guard allows.
+    """
 
     family: str
     label: str
     unit: str
     values: dict[str, float] = field(default_factory=dict)
+    noise: dict[str, float] = field(default_factory=dict)
+
+
+def standard_error(values: Iterable[float]) -> float:
+    """Sample standard deviation / √n of ``values`` (NaN below two values or with a NaN)."""
+    vals = [float(v) for v in values]
+    if len(vals) < 2 or not all(math.isfinite(v) for v in vals):
+        return math.nan
+    return statistics.stdev(vals) / math.sqrt(len(vals))
 
 
 @dataclass
@@ -56,13 +71,14 @@ class CrossResult:
     notes: list[str] = field(default_factory=list)
 
     def to_json(self) -> dict:
-        """``{"columns", "rows": [{family, label, unit, values}], "notes"}`` (NaN → null)."""
+        """``{"columns", "rows": [{family, label, unit, values, noise}], "notes"}`` (NaN → null)."""
         def clean(v: float) -> float | None:
             return None if not math.isfinite(v) else round(float(v), 4)
 
         return {"columns": list(COLUMNS), "notes": list(self.notes),
                 "rows": [{"family": r.family, "label": r.label, "unit": r.unit,
-                          "values": {c: clean(r.values.get(c, math.nan)) for c in COLUMNS}}
+                          "values": {c: clean(r.values.get(c, math.nan)) for c in COLUMNS},
+                          "noise": {c: clean(r.noise.get(c, math.nan)) for c in COLUMNS}}
                          for r in self.rows]}
 
 
@@ -74,8 +90,14 @@ def _euroc_rows(root: Path, params: FilterParams, peers: Sequence[str], jobs: in
     flights = euroc.load_flights(root)
     res = ev.run_euroc(flights, params, peers, ev.SETTLE_S, jobs=jobs)
     start = ", ground start" if midair else ""
+
+    def noise(found: ev.EurocResult, c: str, score: str) -> float:
+        return standard_error([per.get(c, {}).get(score, math.nan)
+                               for per in found.flights.values()])
+
     mean = Row(family, f"{label}{start}, after 10 s: mean", "deg",
-               {c: res.mean(c, "inclination_rms_deg") for c in COLUMNS})
+               {c: res.mean(c, "inclination_rms_deg") for c in COLUMNS},
+               {c: noise(res, c, "inclination_rms_deg") for c in COLUMNS})
     rows = [mean]
     if not midair:
         rows.append(Row(family, f"{label}, after 10 s: worst recording", "deg",
@@ -86,7 +108,8 @@ def _euroc_rows(root: Path, params: FilterParams, peers: Sequence[str], jobs: in
         mid = ev.run_midair(flights, params, start, peers, jobs=jobs)
         for key, window in zip(ev.MIDAIR_SCORES, ("2-12 s", "12 s-end"), strict=True):
             rows.append(Row(family, f"{label}, mid-air start {start:g} s: {window}", "deg",
-                            {c: mid.mean(c, key) for c in COLUMNS}))
+                            {c: mid.mean(c, key) for c in COLUMNS},
+                            {c: noise(mid, c, key) for c in COLUMNS}))
     return rows
 
 
@@ -97,14 +120,21 @@ def _broad_rows(root: Path, params: FilterParams, peers: Sequence[str], jobs: in
     paths = broad.list_trials(root)
     res = run_broad(paths, broad.read_trial_info(root), params, peers, jobs)
     rows = []
+
+    def noise(members: Sequence[str], algorithm: str, metric: str) -> float:
+        return standard_error([res.trials[t].get(algorithm, {}).get(metric, math.nan)
+                               for t in members])
+
     for group, members in res.group_members().items():
         rows.append(Row("broad", f"BROAD {group} ({len(members)}): 6-D inclination", "deg",
                         {c: res.group_mean(members, f"{c}_6d", "inclination_rmse_deg")
-                         for c in COLUMNS}))
+                         for c in COLUMNS},
+                        {c: noise(members, f"{c}_6d", "inclination_rmse_deg") for c in COLUMNS}))
     for group, members in res.group_members().items():
         rows.append(Row("broad", f"BROAD {group} ({len(members)}): 9-D total", "deg",
                         {c: res.group_mean(members, f"{c}_9d", "total_rmse_deg")
-                         for c in COLUMNS}))
+                         for c in COLUMNS},
+                        {c: noise(members, f"{c}_9d", "total_rmse_deg") for c in COLUMNS}))
     return rows
 
 
@@ -144,9 +174,10 @@ def _compass_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> list
     for fraction in COMPASS_FRACTIONS:
         runs = [out for f, out in found if f == fraction]
         for i, what in enumerate(("peak", "RMS")):
+            cols = [c for c in COLUMNS if all(c in r for r in runs)]
             rows.append(Row("compass", f"magnet {fraction:g}x on a turning sensor: heading {what}",
-                            "deg", {c: sum(r[c][i] for r in runs) / len(runs)
-                                    for c in COLUMNS if all(c in r for r in runs)}))
+                            "deg", {c: sum(r[c][i] for r in runs) / len(runs) for c in cols},
+                            {c: standard_error([r[c][i] for r in runs]) for c in cols}))
     return rows
 
 
