@@ -16,21 +16,31 @@ the targets (the targets are scored on recordings we do not have). An improvemen
 re-set ``BASELINE`` from the printed table when a change is accepted (BENCHMARKS.md then
 changes too: test_doc_outputs fails until it does).
 
-**Targets that are met today** (issues 16, 22; the rows the table prints), one test each below.
+The aided rows (issue 23: velocity aiding, ours only — VQF takes no velocity, its columns are
+'-') are guarded alike; their "median time to < 2 deg" rows take as noise the standard error of
+the per-flight times over the flights that settle, at least ``HOLD_MARGIN_FLOOR_S`` (one
+velocity sample at 10 Hz: a median of identical times has no spread to measure).
+
+**Targets that are met today** (issues 16, 22, 23; the rows the table prints), one test each
+below.
 The targets **missed** on the dev data are deliberately not asserted (a test would fail, or a
 looser bound would pretend); they stay open in BENCHMARKS.md:
 
 - issue 16: EuRoC mid-air start 60 s, 2-12 s ≤ 5° — 5.39° (20 s: 4.91, 40 s: 4.14 are met);
 - issue 16/22: BROAD 6-D inclination ≤ 0.68° — 0.687° (VQF online 0.689°);
 - issue 22: phantom4 horizontal ≤ 3.0° and below VQF online — 5.37° (VQF 4.05°);
-- issue 22: phantom4 horizontal, no recording above 6° — worst 12.94°.
+- issue 22: phantom4 horizontal, no recording above 6° — worst 12.94°;
+- issue 23: phantom4 horizontal aided ≤ 1.2° online — 1.51° (the DOT's own filter 1.54°);
+- issue 23: EuRoC mid-air aided, 12 s-end ≤ 1.2° — 1.68 / 1.50 / 1.27° (20 / 40 / 60 s);
+- issue 23: median time to < 2° after the first velocity ≤ 5 s — met on EuRoC (0 s), missed on
+  phantom4 (14.8 s) and phantom4 horizontal (19.5 s; the offline pass takes 19.5 s as well);
+- issue 23: thesis acceleration aided ≤ 15' — 25.5'.
 
 Targets of those issues that this table does not print (so not checked here): issue 22's
 simulated sustained-acceleration cases (learned-bias error, inclination against VQF), the
 compass 90° off at power-on, each magnet *trial* within VQF + 1° (the table has group means:
 checked on them as a necessary condition), BROAD peaks against every peer other than VQF, the
-per-sample speed; issue 23's aided rows (``bench euroc --velocity``, BENCHMARKS.md "Velocity
-aiding").
+per-sample speed; issue 23's node load with velocity.
 """
 
 from __future__ import annotations
@@ -57,6 +67,8 @@ NOISE_FROM = {
     "BROAD tapping (1): 9-D total": "BROAD all (18): 9-D total",
     "BROAD vibration (1): 9-D total": "BROAD all (18): 9-D total",
 }
+#: The smallest margin of a "median time to < 2 deg" row [s] (one velocity sample at 10 Hz).
+HOLD_MARGIN_FLOOR_S = 0.1
 #: The thesis scenarios' margin, as a fraction of the value (one deterministic run: no noise).
 SIMULATED_MARGIN = 0.05
 #: Our (online, offline) value of each row when the guards were last set (issue 26, on the
@@ -110,6 +122,16 @@ BASELINE: dict[str, tuple[float, float | None]] = {
     "magnet 0.5x on a turning sensor: heading RMS": (0.6843, 0.6266),
     "magnet 1x on a turning sensor: heading peak": (1.4733, 1.3765),
     "magnet 1x on a turning sensor: heading RMS": (0.6824, 0.6221),
+    "phantom4 horizontal, aided, after 10 s: mean": (1.5134, 0.8449),
+    "phantom4 horizontal, aided: median time to < 2 deg": (19.4929, 19.4802),
+    "phantom4, aided, after 10 s: mean": (1.1573, 0.7004),
+    "phantom4, aided: median time to < 2 deg": (14.8094, 7.0011),
+    "EuRoC MH, ground start, aided, after 10 s: mean": (0.9637, 0.7502),
+    "EuRoC MH, ground start, aided: median time to < 2 deg": (0.0, 0.0),
+    "EuRoC MH, aided, mid-air start 20 s: 12 s-end": (1.6797, 0.8168),
+    "EuRoC MH, aided, mid-air start 40 s: 12 s-end": (1.5047, 0.8375),
+    "EuRoC MH, aided, mid-air start 60 s: 12 s-end": (1.2678, 1.2111),
+    "thesis acceleration, aided: peak (limit 90')": (25.4873, None),
 }
 
 
@@ -138,7 +160,15 @@ def margin(rows: dict, label: str, column: str) -> float:
     """How much worse than BASELINE the row may get: its noise, or its family's (see above)."""
     if label.startswith("thesis"):
         return SIMULATED_MARGIN * BASELINE[label][0]
-    return rows[NOISE_FROM.get(label, label)]["noise"][column]
+    noise = rows[NOISE_FROM.get(label, label)]["noise"][column]
+    if label.endswith("median time to < 2 deg"):
+        return max(noise, HOLD_MARGIN_FLOOR_S) if math.isfinite(noise) else HOLD_MARGIN_FLOOR_S
+    return noise
+
+
+def aided(label: str) -> bool:
+    """A velocity-aided row (ours only: VQF takes no velocity)."""
+    return ", aided" in label
 
 
 def test_the_guards_share_the_run_benchmarks_md_quotes():
@@ -151,7 +181,10 @@ def test_every_row_has_a_baseline_and_vqf_beside(table):
     assert list(rows) == list(BASELINE), "a row was added, removed or renamed: set BASELINE"
     for label, row in rows.items():
         assert math.isfinite(row["values"]["cf_estimator"]), label
-        assert math.isfinite(row["values"]["vqf"]), label
+        if aided(label):
+            assert math.isnan(row["values"]["vqf"]), label
+        else:
+            assert math.isfinite(row["values"]["vqf"]), label
 
 
 def test_every_guard_has_a_positive_finite_margin(table):
@@ -259,3 +292,30 @@ def test_target_magnet_on_a_turning_sensor_heading_below_5_deg_on_every_seed(tab
 def test_unknown_family_is_refused_in_one_line(capsys):
     assert main(["bench", "cross", "--families", "euroc,mars"]) == 2
     assert "unknown 'mars'" in capsys.readouterr().err
+
+
+# --- issue 23 targets met on the dev data (velocity aiding) ------------------------------------
+
+def test_target_aided_euroc_ground_start_at_most_1_deg_and_at_once(table):
+    rows, _ = table
+    assert _ours(rows, "EuRoC MH, ground start, aided, after 10 s: mean") <= 1.0
+    assert _ours(rows, "EuRoC MH, ground start, aided: median time to < 2 deg") <= 5.0
+
+
+def test_target_aided_phantom4_vertical_at_most_1_5_deg(table):
+    rows, _ = table
+    assert _ours(rows, "phantom4, aided, after 10 s: mean") <= 1.5
+
+
+def test_aided_beats_unaided_on_every_recorded_family(table):
+    """Velocity aiding is worth having wherever the vehicle accelerates: each family's aided
+    mean below its unaided one, online and offline."""
+    rows, _ = table
+    for unaided, with_v in (("EuRoC MH, ground start, after 10 s: mean",
+                             "EuRoC MH, ground start, aided, after 10 s: mean"),
+                            ("phantom4, after 10 s: mean", "phantom4, aided, after 10 s: mean"),
+                            ("phantom4 horizontal, after 10 s: mean",
+                             "phantom4 horizontal, aided, after 10 s: mean")):
+        for column in OURS:
+            assert _ours(rows, with_v, column) < _ours(rows, unaided, column), (with_v, column)
+        assert _ours(rows, with_v) < _ours(rows, unaided, "vqf"), with_v

@@ -12,7 +12,15 @@ offline (its own offline mode). Rows (inclination [deg] unless marked):
 - thesis scenarios (simulated, 6-D): peak tilt error [arcmin] in the disturbance windows;
 - compass (simulated, 9-D): a magnet of 0.3, 0.5 and 1x the Earth field fixed to a turning
   sensor for 60 s (:mod:`cf_estimator.scenarios.compass`): heading error [deg] while it is on,
-  peak and RMS, mean over COMPASS_SEEDS.
+  peak and RMS, mean over COMPASS_SEEDS;
+- aided (6-D, velocity aiding, :mod:`cf_estimator.core.velocity`): ours aided online and
+  offline in our two columns (VQF takes no velocity: '-'): phantom4 and phantom4_horizontal with
+  their RTK velocity as given, EuRoC with its ground truth's velocity degraded to GNSS quality
+  (10 Hz, 0.1 m/s, 100 ms late, as ``bench euroc --velocity-rate 10 --velocity-noise 0.1
+  --velocity-latency 0.1``) from the ground and from the mid-air starts
+  (12 s-end), and the median time from the first velocity sample until the inclination error
+  stays below 2° (:func:`~cf_estimator.bench.euroc_eval.time_to_hold_s`), and the thesis
+  acceleration manoeuvre with a simulated GNSS velocity (peak [arcmin]).
 
 Families whose data directory is missing are left out (a note says so). The defaults are chosen
 so that no row gets worse (BENCHMARKS.md "How the shipped defaults were chosen").
@@ -26,17 +34,32 @@ import statistics
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from cf_estimator.core.params import FilterParams
 
+if TYPE_CHECKING:
+    from cf_estimator.bench.euroc_eval import VelocityInput
+
 COLUMNS = ("cf_estimator", "cf_estimator_offline", "vqf", "vqf_offline")
-FAMILIES = ("euroc", "phantom4", "phantom4_horizontal", "broad", "scenarios", "compass")
+FAMILIES = ("euroc", "phantom4", "phantom4_horizontal", "broad", "scenarios", "compass",
+            "aided")
 #: Simulated families (no data directory needed).
 SIMULATED = ("scenarios", "compass")
+#: The aided rows' recorded families (data directories) and the label of each.
+AIDED_FAMILIES = (("phantom4_horizontal", "phantom4 horizontal"), ("phantom4", "phantom4"),
+                  ("euroc", "EuRoC MH"))
 COMPASS_FRACTIONS = (0.3, 0.5, 1.0)
 COMPASS_SEEDS = (0, 1, 2, 3)
 MIDAIR_STARTS_S = (20.0, 40.0, 60.0)
 SCENARIOS = ("impacts", "vibration", "acceleration")
+
+
+def _euroc_gnss() -> VelocityInput:
+    """EuRoC's ground-truth velocity degraded to GNSS quality (the aided rows)."""
+    from cf_estimator.bench.euroc_eval import VelocityInput
+
+    return VelocityInput(rate_hz=10.0, noise_m_s=0.1, latency_s=0.1)
 
 
 @dataclass
@@ -181,6 +204,54 @@ def _compass_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> list
     return rows
 
 
+def _aided_rows(root: Path, params: FilterParams, jobs: int) -> tuple[list[Row], list[str]]:
+    """The velocity-aided rows (module docstring) and notes for missing data directories."""
+    from cf_estimator.bench import euroc
+    from cf_estimator.bench import euroc_eval as ev
+    from cf_estimator.bench.scenarios import run_scenarios
+
+    base = dataclasses.replace(params, use_mag=False)
+    rows, notes = [], []
+    aided = {"cf_estimator": "cf_estimator_aided",
+             "cf_estimator_offline": "cf_estimator_aided_offline"}
+    for family, label in AIDED_FAMILIES:
+        folder = root / family
+        if not folder.is_dir():
+            notes.append(f"aided: {folder} not found, its rows left out")
+            continue
+        flights = euroc.load_flights(folder)
+        vin = _euroc_gnss() if family == "euroc" else ev.VelocityInput()
+        res = ev.run_euroc(flights, base, (), ev.SETTLE_S, jobs=jobs, velocity=vin)
+        start = ", ground start" if family == "euroc" else ""
+
+        def noise(found: ev.EurocResult, a: str, score: str) -> float:
+            return standard_error([per.get(a, {}).get(score, math.nan)
+                                   for per in found.flights.values()])
+
+        rows.append(Row("aided", f"{label}{start}, aided, after 10 s: mean", "deg",
+                        {c: res.mean(a, "inclination_rms_deg") for c, a in aided.items()},
+                        {c: noise(res, a, "inclination_rms_deg") for c, a in aided.items()}))
+        holds = {a: [per.get(a, {}).get("hold_s", math.nan) for per in res.flights.values()]
+                 for a in aided.values()}
+        rows.append(Row("aided", f"{label}{start}, aided: median time to < 2 deg", "s",
+                        {c: ev.median_hold_s(res, a)[0] for c, a in aided.items()},
+                        {c: standard_error([h for h in holds[a] if math.isfinite(h)])
+                         for c, a in aided.items()}))
+        if family != "euroc":
+            continue
+        for at in MIDAIR_STARTS_S:
+            mid = ev.run_midair(flights, base, at, (), jobs=jobs, velocity=vin)
+            key = ev.MIDAIR_SCORES[1]
+            rows.append(Row("aided", f"{label}, aided, mid-air start {at:g} s: 12 s-end", "deg",
+                            {c: mid.mean(a, key) for c, a in aided.items()},
+                            {c: noise(mid, a, key) for c, a in aided.items()}))
+    found = run_scenarios(["acceleration"], base, (), jobs=jobs, velocity=True)
+    peak = {r["algorithm"]: r["peak_arcmin"] for r in found}
+    rows.append(Row("aided", "thesis acceleration, aided: peak (limit 90')", "arcmin",
+                    {"cf_estimator": peak.get("cf_estimator_aided", math.nan)}))
+    return rows, notes
+
+
 def _scenario_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> list[Row]:
     from cf_estimator.bench.scenarios import run_scenarios
 
@@ -212,6 +283,11 @@ def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = 
         if family == "compass":
             result.rows += _compass_rows(params, peers, jobs)
             continue
+        if family == "aided":
+            rows, notes = _aided_rows(root, params, jobs)
+            result.rows += rows
+            result.notes += notes
+            continue
         folder = root / family
         if not folder.is_dir():
             result.notes.append(f"{family}: {folder} not found, left out")
@@ -232,7 +308,7 @@ def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = 
 
 
 def format_table(result: CrossResult) -> str:
-    """Rows × the four columns, two decimals (arcmin one), '-' where not applicable."""
+    """Rows × the four columns, two decimals (arcmin and s one), '-' where not applicable."""
     w = max([len(r.label) for r in result.rows] + [6])
     cw = max(len(c) for c in COLUMNS)
     lines = [f"  {'row':<{w}}  {'unit':<6}" + "".join(f"  {c:>{cw}}" for c in COLUMNS)]
@@ -240,7 +316,7 @@ def format_table(result: CrossResult) -> str:
         cells = []
         for c in COLUMNS:
             v = r.values.get(c, math.nan)
-            text = "-" if not math.isfinite(v) else (f"{v:.1f}" if r.unit == "arcmin"
+            text = "-" if not math.isfinite(v) else (f"{v:.1f}" if r.unit in ("arcmin", "s")
                                                      else f"{v:.2f}")
             cells.append(f"  {text:>{cw}}")
         lines.append(f"  {r.label:<{w}}  {r.unit:<6}" + "".join(cells))
