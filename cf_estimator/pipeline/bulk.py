@@ -17,8 +17,9 @@ on real and hostile bags (test/test_bulk_decode.py). It relies on: ``run_rows`` 
 :func:`cf_estimator.core.filter.state_extras` (clipped, phase, bias sigma,
 magnetometer status, the aperiodic unit's world-frame state, the heading error and the
 accelerometer noise per row: what the orientation covariance model needs), and the error norm
-being ``sqrt(ex² + ey² + ez²)`` of the error vector (core/step.py). body_frame's half turn is applied as ``on_imu``/``on_mag`` apply it; with
-velocity aiding the pipeline runs per message.
+being ``sqrt(ex² + ey² + ez²)`` of the error vector (core/step.py). body_frame's half turn
+is applied as ``on_imu``/``on_mag`` apply it; with velocity aiding the pipeline runs per
+message.
 """
 
 from __future__ import annotations
