@@ -101,15 +101,47 @@ def test_stale_velocity_gives_the_unaided_outputs_bit_equal(uav, uav_unaided):
     assert r.velocity_status.rejected["too_old"] + r.velocity_status.used > 0
 
 
-def test_velocity_without_a_known_heading_leaves_the_filter_unaided():
-    """Hover (no horizontal acceleration): the heading offset stays unknown, outputs identical."""
+def test_velocity_without_a_known_heading_aids_the_vertical_alone():
+    """Hover (no horizontal acceleration): the heading offset stays unknown, so only the
+    vertical acceleration (which needs no heading) is taken out; the tilt stays as good."""
     sc = make_scenario("static", duration_s=30.0, seed=0)
     vd = measure_velocity(sc.truth, VelocityModel(10.0, 0.1, 0.1), np.random.default_rng(0))
     imu = sc.imu
     r0 = estimate(imu.gyro_rad_s, imu.accel_m_s2, timestamps_s=imu.t_s, params=P6)
     r1 = _run(sc, vd)
-    assert not r1.velocity_status.heading_known
-    assert np.array_equal(r0.quaternion, r1.quaternion)
+    st = r1.velocity_status
+    assert not st.heading_known
+    assert st.mode == "vertical" and st.axes == "z" and st.aided_samples > 0.9 * imu.n_samples
+    e0, e1 = _tilt_arcmin(sc, r0), _tilt_arcmin(sc, r1)
+    assert _rms(e1) < max(1.2 * _rms(e0), 2.0)
+
+
+def test_vertical_aiding_takes_the_vertical_acceleration_out_of_the_specific_force():
+    """A level IMU bobbing up and down (±3 m/s², 0.5 Hz) with its vertical velocity: the
+    specific force given to the filter is gravity alone (the raw one swings by ±3 m/s²)."""
+    g, rate = 9.81, 200.0
+    t = np.arange(0.0, 20.0, 1.0 / rate)
+    w = 2.0 * math.pi * 0.5
+    a_z = 3.0 * np.sin(w * t)
+    v_z = 3.0 / w * (1.0 - np.cos(w * t))
+    aiding = VelocityAiding(P6)
+    q, zero = (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+    jv, out = 0, []
+    for k, tk in enumerate(t):
+        while jv < t.size and t[jv] <= tk - 0.1:  # 10 Hz velocity, 100 ms late
+            if jv % 20 == 0:
+                aiding.add_velocity(float(t[jv]), (0.0, 0.0, float(v_z[jv])))
+            jv += 1
+        f = (0.0, 0.0, g + float(a_z[k]))
+        out.append(aiding.aided_accel(float(tk), zero, f, 1.0 / rate, q, zero))
+    st = aiding.status()
+    assert st.mode == "vertical" and st.axes == "z" and not st.heading_known
+    late = np.asarray(out[int(5 * rate):])
+    raw = g + a_z[int(5 * rate):]
+    assert np.max(np.abs(raw - g)) > 2.9
+    # what is left is the window's smoothing of a sine (1 s window, 0.5 Hz): well under 1 m/s²
+    assert np.max(np.abs(late[:, 2] - g)) < 1.0
+    assert np.max(np.abs(late[:, :2])) < 1e-9
 
 
 # -- the correction ----------------------------------------------------------------------------

@@ -51,6 +51,12 @@ def test_replay_aided_and_unaided_side_by_side(faulty_bag):
     assert va["rejected"].get("jump", 0) >= 3  # the 5 m/s glitch
     assert va["used"] > 400 and va["heading_known"]
     assert va["unaided_stale_samples"] > 0  # the dropout
+    assert va["aided_axes_at_end"] == "xy" and 0.5 < va["aided_fraction"] < 1.0
+    # vertical-only until the heading offset is known, horizontal after it
+    assert 0.3 < va["aided_horizontal_fraction"] < va["aided_fraction"]
+    assert va["time_to_aid_s"] is not None and va["time_to_aid_s"] > 0.0
+    # aiding came back after the 30-36 s dropout: the stretch at the end began after 36 s
+    assert 0.0 < va["aided_for_s_at_end"] < 60.0 - 36.0
     inc_a = aided.summary["reference"]["rmse_deg"]["inclination"]
     inc_u = unaided.summary["reference"]["rmse_deg"]["inclination"]
     assert inc_a < 0.5 * inc_u
@@ -134,6 +140,19 @@ def test_pipeline_counts_velocity_and_reports_it_in_diagnostics(uav):
     assert values["velocity_aiding"] == "aided"
     assert values["velocity_heading_known"] == "true"
     assert int(values["velocity_received"]) == jv
+    # which axes are aided, for how long, and how long aiding took to begin
+    st = pipe.velocity_aiding.status()
+    assert values["velocity_aided_axes"] == "xy"
+    assert 0 < int(values["velocity_aided_horizontal_samples"]) < int(
+        values["velocity_aided_samples"])
+    first_v = st.first_velocity_t_s - T0_NS * 1e-9  # pipeline stamps are the header's
+    assert np.min(np.abs(vd.t_s - first_v)) < 1e-6 and first_v < 1.0
+    to_aid = float(values["velocity_time_to_aid_s"])
+    assert to_aid == pytest.approx(st.first_aided_t_s - st.first_velocity_t_s, rel=1e-5)
+    assert 0.0 < to_aid < 30.0  # it does begin, and not at the first velocity sample
+    # one aided stretch since it began (no dropout in this stream): it lasted to the end
+    assert float(values["velocity_aided_for_s"]) == pytest.approx(
+        float(imu.t_s[-1]) + T0_NS * 1e-9 - st.first_aided_t_s, abs=1e-3)
     # a reset (time jump back) resets the aiding as well
     pipe.on_imu(io.imu_message(1, 0, "imu", (0, 0, 0, 1), None, (0, 0, 0), None, (0, 0, 9.8),
                                None))

@@ -755,8 +755,9 @@ def replay_variants(
         for r in runs:
             if px4_in is not None:
                 r.warnings[:0] = px4_in.notes
-            r_ref_t, r_ref_q = (ref_t, ref_q) if px4_in is None or ref_topic != ulog.ATTITUDE_TOPIC \
-                else px4_in.reference_in_output(r, ref_t, ref_q)
+            r_ref_t, r_ref_q = (ref_t, ref_q)
+            if px4_in is not None and ref_topic == ulog.ATTITUDE_TOPIC:
+                r_ref_t, r_ref_q = px4_in.reference_in_output(r, ref_t, ref_q)
             series = _series(r, r_ref_t, r_ref_q)
             counters = _jsonable(dict(r.pipe.counters))
             stamps = series.t_s
@@ -926,7 +927,18 @@ def _velocity_summary(pipe: Any, n_vel: int) -> dict[str, Any]:
         "heading_offset_rad": st.heading_offset_rad,
         "heading_sigma_rad": st.heading_sigma_rad if math.isfinite(st.heading_sigma_rad)
         else None,
+        "aided_axes_at_end": st.axes,
+        "aided_horizontal_samples": st.horizontal_samples,
+        "aided_fraction": st.aided_samples / max(1, pipe.counters.get("processed", 0)),
+        "aided_horizontal_fraction": st.horizontal_samples
+        / max(1, pipe.counters.get("processed", 0)),
+        "time_to_aid_s": _finite_or_none(st.first_aided_t_s - st.first_velocity_t_s),
+        "aided_for_s_at_end": st.aided_for_s,
     }
+
+
+def _finite_or_none(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
 
 
 def _series(r: _Run, ref_t: Sequence[float], ref_q: Sequence[Any]) -> ReplaySeries:

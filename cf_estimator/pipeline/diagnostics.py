@@ -249,7 +249,9 @@ def velocity_values(status: Any) -> list[tuple[str, str]]:
     """Key-values of the velocity aiding (a :class:`cf_estimator.core.velocity.VelocityStatus`):
     whether the last IMU sample was aided, velocity messages received / used / stale /
     rejected by reason, IMU samples aided and left unaided by a stale velocity, the heading
-    offset between the filter's world frame and the velocity's and its standard deviation."""
+    offset between the filter's world frame and the velocity's and its standard deviation, the
+    world axes aided now (``xy`` or ``none``), how long the current aided stretch has lasted
+    and how long aiding took to begin after the first velocity sample [s]."""
     rejected = dict(status.rejected)
     stale = rejected.pop("too_old", 0)
     values = [
@@ -263,11 +265,22 @@ def velocity_values(status: Any) -> list[tuple[str, str]]:
     values += [
         ("velocity_reanchors", str(status.reanchors)),
         ("velocity_aided_samples", str(status.aided_samples)),
+        ("velocity_aided_horizontal_samples", str(status.horizontal_samples)),
         ("velocity_stale_samples", str(status.stale_samples)),
         ("velocity_age_s", _f(status.age_s if math.isfinite(status.age_s) else None)),
         ("velocity_heading_known", str(bool(status.heading_known)).lower()),
         ("velocity_heading_offset_rad", _f(status.heading_offset_rad)),
         ("velocity_heading_sigma_rad", _f(status.heading_sigma_rad
                                           if math.isfinite(status.heading_sigma_rad) else None)),
+        ("velocity_aided_axes", status.axes),
+        ("velocity_aided_for_s", _f(status.aided_for_s)),
+        ("velocity_time_to_aid_s", _f(_time_to_aid(status))),
     ]
     return values
+
+
+def _time_to_aid(status: Any) -> float | None:
+    """Seconds from the first accepted velocity sample to the first aided IMU sample (None:
+    not aided yet)."""
+    t = status.first_aided_t_s - status.first_velocity_t_s
+    return t if math.isfinite(t) else None
