@@ -10,6 +10,11 @@ offline (its own offline mode). Rows (inclination [deg] unless marked):
   acceleration): RMS after the first 10 s, mean and worst recording;
 - BROAD: 6-D inclination RMSE and 9-D total RMSE per trial group;
 - thesis scenarios (simulated, 6-D): peak tilt error [arcmin] in the disturbance windows;
+- covariance consistency (issue 27), per data family, our online filter only: the share of
+  samples whose error is beyond 2σ [%] and mean(e²/σ²) [1], σ the reported orientation
+  covariance (tilt: √(cov[0] + cov[4]), 6-D; heading: √cov[8], BROAD 9-D), after 10 s
+  (:mod:`cf_estimator.bench.consistency`; a consistent Gaussian: tilt 1.8 %, heading 4.6 %,
+  mean 1);
 - compass (simulated, 9-D): a magnet of 0.3, 0.5 and 1x the Earth field fixed to a turning
   sensor for 60 s (:mod:`cf_estimator.scenarios.compass`): heading error [deg] while it is on,
   peak and RMS, mean over COMPASS_SEEDS.
@@ -36,6 +41,8 @@ COMPASS_FRACTIONS = (0.3, 0.5, 1.0)
 COMPASS_SEEDS = (0, 1, 2, 3)
 MIDAIR_STARTS_S = (20.0, 40.0, 60.0)
 SCENARIOS = ("impacts", "vibration", "acceleration")
+#: A consistent Gaussian's share beyond 2σ (tilt 2-D with σ² = cov[0] + cov[4]; heading 1-D).
+CONSISTENT_BEYOND = {"tilt": "1.8 %", "heading": "4.6 %"}
 
 
 @dataclass
@@ -162,6 +169,23 @@ def _scenario_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> lis
     return rows
 
 
+def _consistency_rows(folder: Path, family: str, label: str, params: FilterParams,
+                      jobs: int) -> list[Row]:
+    from cf_estimator.bench.consistency import family_consistency
+
+    found = family_consistency(folder, family, params, jobs)
+    rows = []
+    for what, head in (("tilt", f"{label}: tilt"), ("heading", f"{label} 9-D: heading")):
+        if what not in found:
+            continue
+        c = found[what]
+        rows.append(Row(family, f"{head} beyond 2σ (consistent {CONSISTENT_BEYOND[what]})", "%",
+                        {"cf_estimator": c["beyond_2sigma_pct"]}))
+        rows.append(Row(family, f"{head} mean(e²/σ²) (consistent 1)", "1",
+                        {"cf_estimator": c["mean_ratio"]}))
+    return rows
+
+
 def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = FAMILIES,
               jobs: int = 1, progress: Callable[[str], None] | None = None) -> CrossResult:
     """The table over the families below ``data`` (``euroc/``, ``phantom4/``, ``broad/``)."""
@@ -188,20 +212,23 @@ def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = 
         if family == "euroc":
             result.rows += _euroc_rows(folder, params, peers, jobs, "euroc", "EuRoC MH",
                                        midair=True)
+            result.rows += _consistency_rows(folder, family, "EuRoC MH", params, jobs)
         elif family in ("phantom4", "phantom4_horizontal"):
             label = "phantom4" if family == "phantom4" else "phantom4 horizontal"
             result.rows += _euroc_rows(folder, params, peers, jobs, family, label,
                                        midair=False)
+            result.rows += _consistency_rows(folder, family, label, params, jobs)
         elif family == "broad":
             # BROAD's evaluation runs VQF's offline mode with VQF itself
             result.rows += _broad_rows(folder, params, [p for p in peers if p == "vqf"], jobs)
+            result.rows += _consistency_rows(folder, family, "BROAD all", params, jobs)
         else:
             raise ValueError(f"unknown family {family!r}; valid: {', '.join(FAMILIES)}")
     return result
 
 
 def format_table(result: CrossResult) -> str:
-    """Rows × the four columns, two decimals (arcmin one), '-' where not applicable."""
+    """Rows × the four columns, two decimals (arcmin and % one), '-' where not applicable."""
     w = max([len(r.label) for r in result.rows] + [6])
     cw = max(len(c) for c in COLUMNS)
     lines = [f"  {'row':<{w}}  {'unit':<6}" + "".join(f"  {c:>{cw}}" for c in COLUMNS)]
@@ -209,7 +236,7 @@ def format_table(result: CrossResult) -> str:
         cells = []
         for c in COLUMNS:
             v = r.values.get(c, math.nan)
-            text = "-" if not math.isfinite(v) else (f"{v:.1f}" if r.unit == "arcmin"
+            text = "-" if not math.isfinite(v) else (f"{v:.1f}" if r.unit in ("arcmin", "%")
                                                      else f"{v:.2f}")
             cells.append(f"  {text:>{cw}}")
         lines.append(f"  {r.label:<{w}}  {r.unit:<6}" + "".join(cells))
