@@ -28,6 +28,9 @@ the world x and y axes::
   channel sees share one magnitude (one in the other's quadrature over a zig-zag, hence the
   mean square over ``1/k1``), gain 1. When velocity aiding takes the vehicle's acceleration
   out, or at rest, the disagreement is the real (small) tilt error: ``M`` shrinks by itself.
+  While aided the unit's lag is AIDED_LAG_TIME_CONSTANT_S ``T_a`` instead of
+  ``aperiodic_time_constant_s`` ``T``: the extra accelerometer noise it lets into ``|l_h|²``,
+  ``σ_a²/g²·dt·(1/T_a − 1/T)``, is not a disagreement and is taken off ``M`` (at least 0).
 - ``V`` [rad²] = ``σ_a²/g² · dt · k1`` with ``σ_a² = noise_a2/6`` [(m/s²)²] the accelerometer's
   white noise per axis (vibration; ``noise_a2`` = the stillness blocks' mean squared
   sample-to-sample difference summed over the axes) and ``dt`` [s] the sample interval: the
@@ -52,7 +55,7 @@ from __future__ import annotations
 
 import math
 
-from cf_estimator.core.step import PHASE_RECOVERING, PHASE_STARTUP
+from cf_estimator.core.step import AIDED_LAG_TIME_CONSTANT_S, PHASE_RECOVERING, PHASE_STARTUP
 
 _PI2 = math.pi * math.pi
 _SETTLING = (PHASE_STARTUP, PHASE_RECOVERING)
@@ -70,20 +73,22 @@ UNREFERENCED_YAW_RAD2 = 10.0
 class OrientationCovariance:
     """Per-message covariance model (see the module docstring); ``reset`` with the filter.
 
-    ``k1`` [1/s]: the accelerometer channel's gain (FilterParams.k1); ``gravity_m_s2``: ‖g‖.
+    ``k1`` [1/s]: the accelerometer channel's gain (FilterParams.k1); ``gravity_m_s2``: ‖g‖;
+    ``lag_s`` [s]: the aperiodic unit's time constant (aperiodic_time_constant_s).
     """
 
     __slots__ = ("_clip_s", "_yaw_err", "_ms", "tilt0", "yaw0", "yaw_unref", "bias_prior", "k1",
-                 "_inv_6g2")
+                 "lag_s", "_inv_6g2")
 
     def __init__(self, tilt0_rad2: float, yaw0_rad2: float, yaw_unreferenced_rad2: float,
                  bias_prior_sigma_rad_s: float, k1: float = 0.35,
-                 gravity_m_s2: float = 9.80665) -> None:
+                 gravity_m_s2: float = 9.80665, lag_s: float = 2.0) -> None:
         self.tilt0 = tilt0_rad2
         self.yaw0 = yaw0_rad2
         self.yaw_unref = yaw_unreferenced_rad2
         self.bias_prior = bias_prior_sigma_rad_s
         self.k1 = k1
+        self.lag_s = lag_s
         self._inv_6g2 = 1.0 / (6.0 * gravity_m_s2 * gravity_m_s2)
         self.reset()
 
@@ -111,17 +116,18 @@ class OrientationCovariance:
                          s.error_norm, s.lx, s.ly, s.noise_a2,  # type: ignore[attr-defined]
                          bool(s.heading_initialized),  # type: ignore[attr-defined]
                          s.yaw_error_rad if mag_used else 0.0,  # type: ignore[attr-defined]
-                         mag_used, mag_age_s)
+                         mag_used, mag_age_s, bool(s.aided))  # type: ignore[attr-defined]
 
     def step(self, dt_s: float, clipped: bool, bias_sigma_rad_s: float | None, phase: float,
              error_norm_rad: float, lx_rad: float, ly_rad: float, noise_a2: float,
              heading_initialized: bool, yaw_error_rad: float, mag_used: bool,
-             mag_age_s: float | None) -> tuple[float, ...]:
+             mag_age_s: float | None, aided: bool = False) -> tuple[float, ...]:
         """:meth:`update` from the state's figures (the bulk pipeline and ``estimate`` have them
         per row): ``bias_sigma_rad_s`` = √bias_var (None: no estimate yet, the prior is used),
         ``lx_rad``, ``ly_rad`` the aperiodic unit's world-frame state, ``noise_a2``
         [(m/s²)²] the accelerometer noise of the stillness blocks, ``yaw_error_rad`` read only
-        when ``mag_used``."""
+        when ``mag_used``, ``aided``: the sample was velocity-aided (the unit's lag is
+        AIDED_LAG_TIME_CONSTANT_S)."""
         self._clip_s = self._clip_s + dt_s if clipped else 0.0
         sigma_b = bias_sigma_rad_s if bias_sigma_rad_s is not None else self.bias_prior
         kdt = self.k1 * dt_s
@@ -130,8 +136,16 @@ class OrientationCovariance:
         self._ms = ms
         e_t = error_norm_rad if phase in _SETTLING else 0.0
         drift = sigma_b * self._clip_s
-        tilt = min(self.tilt0 + e_t * e_t + drift * drift
-                   + 0.5 * (ms + noise_a2 * self._inv_6g2 * kdt), max(_PI2, self.tilt0))
+        noise = noise_a2 * self._inv_6g2 * dt_s  # σ_a²/g²·dt [rad²·s]
+        if aided:  # the unit's short lag passes more noise into l_h: not a disagreement
+            more = 1.0 / AIDED_LAG_TIME_CONSTANT_S - (1.0 / self.lag_s if self.lag_s > 0.0
+                                                      else math.inf)
+            if more > 0.0:
+                ms -= noise * more
+                if ms < 0.0:
+                    ms = 0.0
+        tilt = min(self.tilt0 + e_t * e_t + drift * drift + 0.5 * (ms + noise * self.k1),
+                   max(_PI2, self.tilt0))
         if heading_initialized:
             if mag_used:
                 self._yaw_err = abs(yaw_error_rad)
