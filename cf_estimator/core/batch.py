@@ -9,6 +9,7 @@ before that are NaN. Row k is integrated over dt_k = t_k − t_{k−1} with samp
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 
@@ -218,8 +219,18 @@ def _run_filter(f: ComplementaryFilter, gyro: np.ndarray, acc: np.ndarray, mg: n
             start = 1
         q_out[start - 1] = f.orientation_tuple()
         if extra_out is not None:
-            extra_out[start - 1] = state_extras(f._state)  # noqa: SLF001 - read-only
+            extra_out[start - 1] = _init_extras(f, mg is not None and start - 1 >= 0
+                                                and bool(np.all(np.isfinite(mg[start - 1]))))
         f.run_rows(gyro, acc, mg, np.diff(t, prepend=t[0]), start, q_out, extra_out)
+
+
+def _init_extras(f: ComplementaryFilter, with_mag: bool) -> tuple:
+    """The extra row of the initialising sample: its magnetometer sample, when it set the
+    heading, counts as used (as the pipeline counts it for the covariance)."""
+    row = list(state_extras(f._state))  # noqa: SLF001 - read-only
+    if with_mag and f._state.heading_initialized:  # noqa: SLF001
+        row[9] = MAG_USED
+    return tuple(row)
 
 
 def velocity_arrays(velocity: tuple[ArrayLike, ArrayLike]) -> tuple[np.ndarray, np.ndarray]:
@@ -251,6 +262,7 @@ def run_aided(f: ComplementaryFilter, aiding: VelocityAiding, gyro: np.ndarray, 
     arrival = (t_v + latency_s)[order].tolist()
     tv_rows, v_rows = t_v[order].tolist(), v[order].tolist()
     nv, jv = len(arrival), 0
+    init_row = -1
     g_rows, a_rows = gyro.tolist(), acc.tolist()
     m_rows = mg.tolist() if mg is not None else None
     ts = t.tolist()
@@ -265,6 +277,7 @@ def run_aided(f: ComplementaryFilter, aiding: VelocityAiding, gyro: np.ndarray, 
                 f.update(g_rows[i], a_rows[i], 1.0, m)
             if not f.initialized:
                 continue
+            init_row = i
             a_in = a_rows[i]
             aiding.aided_accel(ts[i], g_rows[i], a_in, 1e-9, f.orientation_tuple(),
                                filter_bias(f))
@@ -278,7 +291,8 @@ def run_aided(f: ComplementaryFilter, aiding: VelocityAiding, gyro: np.ndarray, 
         if accel_out is not None:
             accel_out[i] = a_in
         if extra_out is not None:
-            extra_out[i] = state_extras(f._state)  # noqa: SLF001 - read-only
+            extra_out[i] = (_init_extras(f, m is not None and all(math.isfinite(c) for c in m))
+                            if i == init_row else state_extras(f._state))  # noqa: SLF001
 
 
 def estimate(
