@@ -198,3 +198,21 @@ def test_model_terms_have_their_documented_sizes() -> None:
         c = m.step(0.01, True, 0.01, 2, 0.0, 0.0, 0.0, 0.0, True, 0.0, False, 5.0)
     assert c[0] == pytest.approx(1e-4 + (0.01 * 2.0) ** 2, rel=1e-9)
     assert c[8] == pytest.approx(4e-4 + (0.01 * 5.0) ** 2, rel=1e-12)  # 5 s without a field
+
+
+def test_replay_summary_scores_the_covariance_against_the_ground_truth(tmp_path) -> None:
+    import json
+
+    from cf_estimator.cli.main import main
+
+    bag, out, js = tmp_path / "flight", tmp_path / "out", tmp_path / "flight.json"
+    assert main(["simulate", "--scenario", "flight", "--duration", "30", "-o", str(bag)]) == 0
+    assert main(["replay", str(bag), "-o", str(out), "--reference-topic",
+                 "/ground_truth/orientation", "--json", str(js)]) == 0
+    doc = json.loads(js.read_text())
+    summary = doc[0] if isinstance(doc, list) else doc
+    cov = summary["reference"]["covariance"]
+    for name in ("tilt", "heading"):  # 9-D: the magnetometer references the heading
+        c = cov[name]
+        assert c["samples"] > 1000, (name, c)
+        assert 0.0 <= c["beyond_2sigma_pct"] <= 100.0 and c["mean_ratio"] > 0.0, (name, c)
