@@ -128,9 +128,13 @@ def _compass_case(args: tuple[float, int, FilterParams, tuple[str, ...]]
     params = dataclasses.replace(params, use_mag=True)
     c = magnet_on_turning_sensor(seed, fraction)
     qs = {}
+    var = None
     for col, offline in (("cf_estimator", False), ("cf_estimator_offline", True)):
-        qs[col] = estimate(c.gyro_rad_s, c.accel_m_s2, c.mag_T, rate_hz=c.rate_hz,
-                           params=params, offline=offline).quaternion
+        r = estimate(c.gyro_rad_s, c.accel_m_s2, c.mag_T, rate_hz=c.rate_hz, params=params,
+                     offline=offline)
+        qs[col] = r.quaternion
+        if not offline:  # the reported heading variance, for the consistency rows
+            var = r.orientation_covariance()[:, 8][c.magnet_on]
     if "vqf" in peers:
         qs["vqf"] = peer_mod.run_vqf(c.gyro_rad_s, c.accel_m_s2, c.mag_T, c.rate_hz)["9d"]
         qs["vqf_offline"] = peer_mod.run_vqf_offline(c.gyro_rad_s, c.accel_m_s2, c.mag_T,
@@ -139,10 +143,14 @@ def _compass_case(args: tuple[float, int, FilterParams, tuple[str, ...]]
     for col, q in qs.items():
         e = heading_error_deg(q, c.q_true)[c.magnet_on]
         out[col] = (float(np.max(e)), float(np.sqrt(np.mean(e * e))))
+        if col == "cf_estimator":
+            out["_consistency"] = (np.radians(e), var)
     return fraction, out
 
 
 def _compass_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> list[Row]:
+    import numpy as np
+
     from cf_estimator.bench.parallel import run_tasks
 
     work = [(f, s, params, tuple(peers)) for f in COMPASS_FRACTIONS for s in COMPASS_SEEDS]
@@ -154,6 +162,17 @@ def _compass_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> list
             rows.append(Row("compass", f"magnet {fraction:g}x on a turning sensor: heading {what}",
                             "deg", {c: sum(r[c][i] for r in runs) / len(runs)
                                     for c in COLUMNS if all(c in r for r in runs)}))
+    from cf_estimator.bench.consistency import consistency
+
+    for fraction in COMPASS_FRACTIONS:  # the reported heading sigma while the magnet is on
+        parts = [out["_consistency"] for f, out in found if f == fraction]
+        k = consistency(np.concatenate([p[0] for p in parts]),
+                        np.concatenate([p[1] for p in parts]))
+        label = f"magnet {fraction:g}x on a turning sensor: heading"
+        rows.append(Row("compass", f"{label} beyond 2σ (consistent 4.6 %)", "%",
+                        {"cf_estimator": k["beyond_2sigma_pct"]}))
+        rows.append(Row("compass", f"{label} mean(e²/σ²) (consistent 1)", "1",
+                        {"cf_estimator": k["mean_ratio"]}))
     return rows
 
 
