@@ -289,6 +289,24 @@ def test_target_magnet_on_a_turning_sensor_heading_below_5_deg_on_every_seed(tab
         assert bound < 5.0, (column, bound)
 
 
+def test_covariance_consistency_rows(table):
+    """Issue 27: the reported orientation covariance against the real errors (σ² = cov[0] +
+    cov[4] for the tilt, cov[8] for the heading). Fitted on phantom4 (vertical) only; mean(e²/σ²)
+    in [0.5, 2] on every family it can be held on, the beyond-2σ share within the issue's
+    25 %. BROAD's lab-grade IMU and optical reference have errors below the fitted floor: its
+    tilt is conservative (reported, not asserted in range) but never overconfident."""
+    rows, _ = table
+    for label in ("EuRoC MH: tilt", "phantom4: tilt", "phantom4 horizontal: tilt",
+                  "BROAD all 9-D: heading"):
+        ratio = _row(rows, f"{label} mean(e²/σ²)")["cf_estimator"]
+        beyond = _row(rows, f"{label} beyond 2σ")["cf_estimator"]
+        assert 0.5 <= ratio <= 2.0, (label, ratio)
+        assert beyond <= 25.0, (label, beyond)
+    assert _row(rows, "BROAD all: tilt mean(e²/σ²)")["cf_estimator"] <= 2.0
+    for f in ("0.3", "0.5", "1"):  # the compass: conservative while a magnet is on
+        assert _row(rows, f"magnet {f}x on a turning sensor: heading mean")["cf_estimator"] <= 2.0
+
+
 def test_unknown_family_is_refused_in_one_line(capsys):
     assert main(["bench", "cross", "--families", "euroc,mars"]) == 2
     assert "unknown 'mars'" in capsys.readouterr().err
