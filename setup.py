@@ -82,7 +82,9 @@ setup(
     install_requires=[
         "numpy",
         "scipy",
-        "rosbags",
+        # the range bag/io.py is tested with (ROSBAGS_TESTED: its direct mcap path writes into
+        # rosbags' McapWriter; 0.10 lacks the public StoragePlugin)
+        "rosbags>=0.11,<0.12",
         "matplotlib",
         "h5py",
         "tqdm",

@@ -1,75 +1,292 @@
-"""`cf-estimator bench cross`: the cross-dataset table of BENCHMARKS.md, run as a user runs it.
+"""`cf-estimator bench cross` on the dev data: regression guards per row, and the issues' targets.
 
-The shipped defaults must hold the dev-data targets of issue 16 in every family at once; these
-assertions are the guard a default change has to pass (a change that wins one family and
-loses another fails here).
+Two kinds of checks on one run of the table (the run BENCHMARKS.md quotes; test/cli_runs.py
+shares it with test/test_doc_outputs.py, so it runs once per session):
+
+**Regression guards on dev data** (``test_no_row_got_worse_beyond_its_noise``): every row of our
+two columns (online, offline) stays at most one noise margin above its value when the guard was
+last set (``BASELINE``). The margin is the row's noise from ``bench cross`` itself
+(``Row.noise``: the standard error of the row's mean over its recordings, flights, trials or
+seeds) — how far a change that is neutral on average moves the row. A row without a spread of
+its own borrows its family's: a worst recording or a single-trial BROAD group takes the noise of
+the family's mean over all its recordings (``NOISE_FROM``); the thesis scenarios (one simulated
+run each, nothing to spread over) get a fixed 5 % (``SIMULATED_MARGIN``), the only margin here
+that is not measured. These guards hold today's values on the data the team has; they are not
+the targets (the targets are scored on recordings we do not have). An improvement passes;
+re-set ``BASELINE`` from the printed table when a change is accepted (BENCHMARKS.md then
+changes too: test_doc_outputs fails until it does).
+
+The aided rows (issue 23: velocity aiding, ours only — VQF takes no velocity, its columns are
+'-') are guarded alike; their "median time to < 2 deg" rows take as noise the standard error of
+the per-flight times over the flights that settle, at least ``HOLD_MARGIN_FLOOR_S`` (one
+velocity sample at 10 Hz: a median of identical times has no spread to measure).
+
+**Targets that are met today** (issues 16, 22, 23; the rows the table prints), one test each
+below.
+The targets **missed** on the dev data are deliberately not asserted (a test would fail, or a
+looser bound would pretend); they stay open in BENCHMARKS.md:
+
+- issue 16: EuRoC mid-air start 60 s, 2-12 s ≤ 5° — 5.39° (20 s: 4.91, 40 s: 4.14 are met);
+- issue 16/22: BROAD 6-D inclination ≤ 0.68° — 0.687° (VQF online 0.689°);
+- issue 22: phantom4 horizontal ≤ 3.0° and below VQF online — 5.37° (VQF 4.05°);
+- issue 22: phantom4 horizontal, no recording above 6° — worst 12.94°;
+- issue 23: phantom4 horizontal aided ≤ 1.2° online — 1.51° (the DOT's own filter 1.54°);
+- issue 23: EuRoC mid-air aided, 12 s-end ≤ 1.2° — 1.68 / 1.50 / 1.27° (20 / 40 / 60 s);
+- issue 23: median time to < 2° after the first velocity ≤ 5 s — met on EuRoC (0 s), missed on
+  phantom4 (14.8 s) and phantom4 horizontal (19.5 s; the offline pass takes 19.5 s as well);
+- issue 23: thesis acceleration aided ≤ 15' — 25.5'.
+
+Targets of those issues that this table does not print (so not checked here): issue 22's
+simulated sustained-acceleration cases (learned-bias error, inclination against VQF), the
+compass 90° off at power-on, each magnet *trial* within VQF + 1° (the table has group means:
+checked on them as a necessary condition), BROAD peaks against every peer other than VQF, the
+per-sample speed; issue 23's node load with velocity.
 """
 
 from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 
 import pytest
+from cli_runs import CROSS_COMMAND, REPO, SHARED, run_documented
 
+from cf_estimator.bench.cross import COMPASS_SEEDS, standard_error
 from cf_estimator.cli.main import main
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+DATA = SHARED / "data"
+OURS = ("cf_estimator", "cf_estimator_offline")
+#: Rows without a spread of their own → the row whose noise they borrow (the family's mean).
+NOISE_FROM = {
+    "phantom4, after 10 s: worst recording": "phantom4, after 10 s: mean",
+    "phantom4 horizontal, after 10 s: worst recording": "phantom4 horizontal, after 10 s: mean",
+    "BROAD combined (1): 6-D inclination": "BROAD all (18): 6-D inclination",
+    "BROAD tapping (1): 6-D inclination": "BROAD all (18): 6-D inclination",
+    "BROAD vibration (1): 6-D inclination": "BROAD all (18): 6-D inclination",
+    "BROAD combined (1): 9-D total": "BROAD all (18): 9-D total",
+    "BROAD tapping (1): 9-D total": "BROAD all (18): 9-D total",
+    "BROAD vibration (1): 9-D total": "BROAD all (18): 9-D total",
+}
+#: The smallest margin of a "median time to < 2 deg" row [s] (one velocity sample at 10 Hz).
+HOLD_MARGIN_FLOOR_S = 0.1
+#: The thesis scenarios' margin, as a fraction of the value (one deterministic run: no noise).
+SIMULATED_MARGIN = 0.05
+#: Our (online, offline) value of each row when the guards were last set (issue 26, on the
+#: tree with issues 22-25 merged; `cf-estimator bench cross --json`, 4 decimals).
+BASELINE: dict[str, tuple[float, float | None]] = {
+    "EuRoC MH, ground start, after 10 s: mean": (1.5567, 0.9504),
+    "EuRoC MH, mid-air start 20 s: 2-12 s": (4.9081, 0.8442),
+    "EuRoC MH, mid-air start 20 s: 12 s-end": (2.0495, 0.9659),
+    "EuRoC MH, mid-air start 40 s: 2-12 s": (4.1428, 1.3571),
+    "EuRoC MH, mid-air start 40 s: 12 s-end": (2.0535, 0.9188),
+    "EuRoC MH, mid-air start 60 s: 2-12 s": (5.387, 0.769),
+    "EuRoC MH, mid-air start 60 s: 12 s-end": (2.2558, 1.0673),
+    "phantom4, after 10 s: mean": (1.8573, 1.3392),
+    "phantom4, after 10 s: worst recording": (2.6703, 3.0384),
+    "phantom4 horizontal, after 10 s: mean": (5.3726, 2.3493),
+    "phantom4 horizontal, after 10 s: worst recording": (12.9358, 5.1262),
+    "BROAD all (18): 6-D inclination": (0.6866, 0.5411),
+    "BROAD undisturbed (11): 6-D inclination": (0.6482, 0.5159),
+    "BROAD disturbed (7): 6-D inclination": (0.7469, 0.5807),
+    "BROAD rotation (5): 6-D inclination": (0.6203, 0.5759),
+    "BROAD translation (5): 6-D inclination": (0.4289, 0.3629),
+    "BROAD combined (1): 6-D inclination": (1.8847, 0.9817),
+    "BROAD slow (6): 6-D inclination": (0.3789, 0.3114),
+    "BROAD fast (5): 6-D inclination": (0.9714, 0.7613),
+    "BROAD no_breaks (7): 6-D inclination": (0.7003, 0.524),
+    "BROAD with_breaks (4): 6-D inclination": (0.5571, 0.5018),
+    "BROAD tapping (1): 6-D inclination": (0.6202, 0.5562),
+    "BROAD vibration (1): 6-D inclination": (0.338, 0.3275),
+    "BROAD stationary_magnet (2): 6-D inclination": (1.1398, 0.857),
+    "BROAD attached_magnet (3): 6-D inclination": (0.6635, 0.489),
+    "BROAD all (18): 9-D total": (1.9929, 1.8927),
+    "BROAD undisturbed (11): 9-D total": (1.5258, 1.4482),
+    "BROAD disturbed (7): 9-D total": (2.7271, 2.5913),
+    "BROAD rotation (5): 9-D total": (1.3809, 1.3605),
+    "BROAD translation (5): 9-D total": (1.2911, 1.2217),
+    "BROAD combined (1): 9-D total": (3.4233, 3.0194),
+    "BROAD slow (6): 9-D total": (1.271, 1.2063),
+    "BROAD fast (5): 9-D total": (1.8315, 1.7385),
+    "BROAD no_breaks (7): 9-D total": (1.889, 1.7804),
+    "BROAD with_breaks (4): 9-D total": (0.8901, 0.867),
+    "BROAD tapping (1): 9-D total": (1.3787, 1.3467),
+    "BROAD vibration (1): 9-D total": (6.7742, 6.7015),
+    "BROAD stationary_magnet (2): 9-D total": (1.8102, 1.6434),
+    "BROAD attached_magnet (3): 9-D total": (2.4387, 2.2679),
+    "thesis impacts: peak (limit 90')": (17.5312, None),
+    "thesis vibration: peak (limit 90')": (16.3198, None),
+    "thesis acceleration: peak (limit 90')": (69.7847, None),
+    "magnet 0.3x on a turning sensor: heading peak": (1.6807, 1.5241),
+    "magnet 0.3x on a turning sensor: heading RMS": (0.7435, 0.6582),
+    "magnet 0.5x on a turning sensor: heading peak": (1.4833, 1.3791),
+    "magnet 0.5x on a turning sensor: heading RMS": (0.6843, 0.6266),
+    "magnet 1x on a turning sensor: heading peak": (1.4733, 1.3765),
+    "magnet 1x on a turning sensor: heading RMS": (0.6824, 0.6221),
+    "phantom4 horizontal, aided, after 10 s: mean": (1.5134, 0.8449),
+    "phantom4 horizontal, aided: median time to < 2 deg": (19.4929, 19.4802),
+    "phantom4, aided, after 10 s: mean": (1.1573, 0.7004),
+    "phantom4, aided: median time to < 2 deg": (14.8094, 7.0011),
+    "EuRoC MH, ground start, aided, after 10 s: mean": (0.9637, 0.7502),
+    "EuRoC MH, ground start, aided: median time to < 2 deg": (0.0, 0.0),
+    "EuRoC MH, aided, mid-air start 20 s: 12 s-end": (1.6797, 0.8168),
+    "EuRoC MH, aided, mid-air start 40 s: 12 s-end": (1.5047, 0.8375),
+    "EuRoC MH, aided, mid-air start 60 s: 12 s-end": (1.2678, 1.2111),
+    "thesis acceleration, aided: peak (limit 90')": (25.4873, None),
+}
+
+
+def _nan(v: float | None) -> float:
+    return math.nan if v is None else float(v)
 
 
 @pytest.fixture(scope="module")
 def table(tmp_path_factory):
-    if not all((DATA / f).is_dir() for f in ("euroc", "phantom4", "broad")):
-        pytest.skip(f"{DATA} does not hold euroc/, phantom4/ and broad/")
+    """{label: row} of the run BENCHMARKS.md quotes (values and noise; null → NaN)."""
+    missing = [f for f in ("euroc", "phantom4", "phantom4_horizontal", "broad")
+               if not (DATA / f).is_dir()]
+    if missing:
+        pytest.skip(f"{DATA} does not hold {', '.join(missing)}")
     pytest.importorskip("vqf")
-    out = tmp_path_factory.mktemp("cross") / "cross.json"
-    assert main(["bench", "cross", "--data", str(DATA), "--json", str(out)]) == 0
-    doc = json.loads(out.read_text())
-    return {r["label"]: r["values"] for r in doc["rows"]}, doc
+    run = run_documented(CROSS_COMMAND, tmp_path_factory)
+    assert run.rc == 0
+    doc = json.loads((run.cwd / "cross.json").read_text())
+    rows = {r["label"]: {k: {c: _nan(v) for c, v in r[k].items()} for k in ("values", "noise")}
+            for r in doc["rows"]}
+    assert len(rows) == len(doc["rows"]), "duplicate row labels"
+    return rows, doc
 
 
-def _row(rows: dict, start: str) -> dict:
-    found = [v for k, v in rows.items() if k.startswith(start)]
-    assert len(found) == 1, (start, list(rows))
-    return found[0]
+def margin(rows: dict, label: str, column: str) -> float:
+    """How much worse than BASELINE the row may get: its noise, or its family's (see above)."""
+    if label.startswith("thesis"):
+        return SIMULATED_MARGIN * BASELINE[label][0]
+    noise = rows[NOISE_FROM.get(label, label)]["noise"][column]
+    if label.endswith("median time to < 2 deg"):
+        return max(noise, HOLD_MARGIN_FLOOR_S) if math.isfinite(noise) else HOLD_MARGIN_FLOOR_S
+    return noise
 
 
-def test_every_family_has_its_rows_with_vqf_beside(table):
+def aided(label: str) -> bool:
+    """A velocity-aided row (ours only: VQF takes no velocity)."""
+    return ", aided" in label
+
+
+def test_the_guards_share_the_run_benchmarks_md_quotes():
+    assert f"<!-- output of: {CROSS_COMMAND} -->" in (REPO / "BENCHMARKS.md").read_text()
+
+
+def test_every_row_has_a_baseline_and_vqf_beside(table):
     rows, doc = table
     assert doc["columns"] == ["cf_estimator", "cf_estimator_offline", "vqf", "vqf_offline"]
-    for start in ("EuRoC MH, ground start", "EuRoC MH, mid-air start 20 s: 2-12 s",
-                  "EuRoC MH, mid-air start 60 s: 12 s-end", "phantom4, after 10 s: mean",
-                  "BROAD all (18): 6-D", "BROAD all (18): 9-D", "thesis impacts"):
-        v = _row(rows, start)
-        assert math.isfinite(v["cf_estimator"]) and math.isfinite(v["vqf"]), start
+    assert list(rows) == list(BASELINE), "a row was added, removed or renamed: set BASELINE"
+    for label, row in rows.items():
+        assert math.isfinite(row["values"]["cf_estimator"]), label
+        if aided(label):
+            assert math.isnan(row["values"]["vqf"]), label
+        else:
+            assert math.isfinite(row["values"]["vqf"]), label
 
 
-def test_euroc_ground_and_mid_air_targets(table):
+def test_every_guard_has_a_positive_finite_margin(table):
     rows, _ = table
-    assert _row(rows, "EuRoC MH, ground start")["cf_estimator"] <= 1.7
-    for s in (20, 40, 60):
-        late = _row(rows, f"EuRoC MH, mid-air start {s} s: 12 s-end")
-        early = _row(rows, f"EuRoC MH, mid-air start {s} s: 2-12 s")
-        assert late["cf_estimator"] <= 2.5 and late["cf_estimator"] < late["vqf"], s
-        assert early["cf_estimator"] < early["vqf"], s
+    for label, (_, offline) in BASELINE.items():
+        for column in OURS if offline is not None else OURS[:1]:
+            m = margin(rows, label, column)
+            assert math.isfinite(m) and m > 0.0, (label, column, m)
 
 
-def test_phantom4_targets(table):
+def test_no_row_got_worse_beyond_its_noise(table):
     rows, _ = table
-    mean = _row(rows, "phantom4, after 10 s: mean")
-    assert mean["cf_estimator"] <= 2.5 and mean["cf_estimator"] < mean["vqf"]
-    assert _row(rows, "phantom4, after 10 s: worst")["cf_estimator"] < 6.0
+    worse = []
+    for label, base in BASELINE.items():
+        for column, before in zip(OURS, base, strict=True):
+            if before is None:
+                continue
+            now, m = rows[label]["values"][column], margin(rows, label, column)
+            if not now <= before + m:
+                worse.append(f"{label} [{column}]: {now:.4f} > {before:.4f} + noise {m:.4f}")
+    assert not worse, "worse than the baseline beyond the row's noise:\n" + "\n".join(worse)
 
 
-def test_broad_and_thesis_rows(table):
+def test_standard_error_is_the_sample_deviation_over_root_n():
+    assert standard_error([1.0, 2.0, 3.0]) == pytest.approx(1.0 / math.sqrt(3.0))
+    assert math.isnan(standard_error([1.0]))  # one recording: no spread to measure
+    assert math.isnan(standard_error([1.0, math.nan]))
+
+
+# --- issue 16 / 22 targets met on the dev data -------------------------------------------------
+
+def _ours(rows: dict, label: str, column: str = "cf_estimator") -> float:
+    return rows[label]["values"][column]
+
+
+def test_target_euroc_ground_start_at_most_1_7_deg(table):
     rows, _ = table
-    assert _row(rows, "BROAD all (18): 9-D total")["cf_estimator"] <= 2.0
-    for label, v in rows.items():
-        if label.startswith("BROAD") and "6-D" in label:  # no group 10 % behind VQF online
-            assert v["cf_estimator"] <= 1.10 * v["vqf"], label
-        if label.startswith("thesis"):
-            assert v["cf_estimator"] < 90.0 and v["cf_estimator"] < v["vqf"], label
+    assert _ours(rows, "EuRoC MH, ground start, after 10 s: mean") <= 1.7
+
+
+@pytest.mark.parametrize("start", [20, 40, 60])
+def test_target_euroc_mid_air_late_at_most_2_5_deg_and_both_windows_below_vqf(table, start):
+    rows, _ = table
+    late = f"EuRoC MH, mid-air start {start} s: 12 s-end"
+    early = f"EuRoC MH, mid-air start {start} s: 2-12 s"
+    assert _ours(rows, late) <= 2.5
+    assert _ours(rows, late) < _ours(rows, late, "vqf")
+    assert _ours(rows, early) < _ours(rows, early, "vqf")
+
+
+@pytest.mark.parametrize("start", [20, 40])  # 60 s: 5.39°, missed (module docstring)
+def test_target_euroc_mid_air_early_at_most_5_deg(table, start):
+    rows, _ = table
+    assert _ours(rows, f"EuRoC MH, mid-air start {start} s: 2-12 s") <= 5.0
+
+
+def test_target_phantom4_vertical_at_most_2_deg_below_vqf_no_recording_above_6(table):
+    rows, _ = table
+    mean = "phantom4, after 10 s: mean"
+    assert _ours(rows, mean) <= 2.0  # issue 22 (issue 16: 2.5)
+    assert _ours(rows, mean) < _ours(rows, mean, "vqf")
+    assert _ours(rows, "phantom4, after 10 s: worst recording") <= 6.0
+
+
+def test_target_broad_9d_at_most_2_deg(table):
+    rows, _ = table
+    assert _ours(rows, "BROAD all (18): 9-D total") <= 2.0
+
+
+def test_target_no_broad_group_more_than_10_percent_behind_vqf_online(table):
+    rows, _ = table
+    groups = [k for k in rows if k.startswith("BROAD")]
+    assert len(groups) == 28
+    behind = {k: _ours(rows, k) / _ours(rows, k, "vqf") for k in groups}
+    assert max(behind.values()) <= 1.10, behind
+
+
+def test_target_broad_magnet_groups_within_vqf_online_plus_1_deg(table):
+    """Issue 22 asks it per magnet trial; the table's group means are a necessary condition."""
+    rows, _ = table
+    for group in ("stationary_magnet (2)", "attached_magnet (3)"):
+        label = f"BROAD {group}: 9-D total"
+        assert _ours(rows, label) <= _ours(rows, label, "vqf") + 1.0, label
+
+
+def test_target_thesis_peaks_below_90_arcmin_and_below_vqf(table):
+    rows, _ = table
+    for name in ("impacts", "vibration", "acceleration"):
+        label = f"thesis {name}: peak (limit 90')"
+        assert _ours(rows, label) < 90.0 and _ours(rows, label) < _ours(rows, label, "vqf")
+
+
+@pytest.mark.parametrize("fraction", ["0.3", "0.5", "1"])
+def test_target_magnet_on_a_turning_sensor_heading_below_5_deg_on_every_seed(table, fraction):
+    """Issue 22: < 5° throughout, on each seed. The row is the mean of the seeds' peaks, with its
+    standard error; Samuelson's inequality bounds every seed's peak by mean + (n − 1)·SE."""
+    rows, _ = table
+    row = rows[f"magnet {fraction}x on a turning sensor: heading peak"]
+    n = len(COMPASS_SEEDS)
+    for column in OURS:
+        bound = row["values"][column] + (n - 1) * row["noise"][column]
+        assert bound < 5.0, (column, bound)
 
 
 def test_covariance_consistency_rows(table):
@@ -93,3 +310,30 @@ def test_covariance_consistency_rows(table):
 def test_unknown_family_is_refused_in_one_line(capsys):
     assert main(["bench", "cross", "--families", "euroc,mars"]) == 2
     assert "unknown 'mars'" in capsys.readouterr().err
+
+
+# --- issue 23 targets met on the dev data (velocity aiding) ------------------------------------
+
+def test_target_aided_euroc_ground_start_at_most_1_deg_and_at_once(table):
+    rows, _ = table
+    assert _ours(rows, "EuRoC MH, ground start, aided, after 10 s: mean") <= 1.0
+    assert _ours(rows, "EuRoC MH, ground start, aided: median time to < 2 deg") <= 5.0
+
+
+def test_target_aided_phantom4_vertical_at_most_1_5_deg(table):
+    rows, _ = table
+    assert _ours(rows, "phantom4, aided, after 10 s: mean") <= 1.5
+
+
+def test_aided_beats_unaided_on_every_recorded_family(table):
+    """Velocity aiding is worth having wherever the vehicle accelerates: each family's aided
+    mean below its unaided one, online and offline."""
+    rows, _ = table
+    for unaided, with_v in (("EuRoC MH, ground start, after 10 s: mean",
+                             "EuRoC MH, ground start, aided, after 10 s: mean"),
+                            ("phantom4, after 10 s: mean", "phantom4, aided, after 10 s: mean"),
+                            ("phantom4 horizontal, after 10 s: mean",
+                             "phantom4 horizontal, aided, after 10 s: mean")):
+        for column in OURS:
+            assert _ours(rows, with_v, column) < _ours(rows, unaided, column), (with_v, column)
+        assert _ours(rows, with_v) < _ours(rows, unaided, "vqf"), with_v

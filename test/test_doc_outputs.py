@@ -4,7 +4,9 @@ A quoted example is a fenced block whose first line is ``$ cf-estimator ...`` (t
 then maybe more ``$`` lines), or a block right after ``<!-- output of: cf-estimator ... -->``
 (an excerpt of that command's output). Each example runs in a fresh directory next to a link to
 ``../shared`` (examples reading ``../shared/data`` are skipped when it is absent); its quoted
-lines must appear, in order and contiguously, in what the command prints. Only wall-clock
+lines must appear, in order and contiguously, in what the command prints. A single-command
+example runs once per session (test/cli_runs.py), shared with the tests that read the same
+run's files (the cross-dataset table's guards read its ``--json``). Only wall-clock
 figures are masked (``N messages/s (T s)``, ``done in T s``, tune's ``(T s)`` per pass):
 everything else is deterministic.
 
@@ -16,14 +18,12 @@ from __future__ import annotations
 import re
 import shlex
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import pytest
+from cli_runs import REPO, SHARED, run_documented
 
 from cf_estimator.cli.main import main
 
-REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared"
 DOCS = (REPO / "README.md", REPO / "docs" / "replay.md", REPO / "BENCHMARKS.md")
 MARKER = re.compile(r"<!-- output of: (cf-estimator .*?) -->")
 MASKS = (
@@ -88,7 +88,19 @@ def contains_block(actual: list[str], expected: list[str]) -> bool:
     return any(act[k:k + len(exp)] == exp for k in range(len(act) - len(exp) + 1))
 
 
-_CACHE: dict[str, tuple[int, str]] = {}
+def _missing_peers(command: str) -> list[str]:
+    """The peers a ``bench`` command's table has a column for that are not installed here."""
+    argv = shlex.split(command)
+    if argv[1:2] != ["bench"]:
+        return []
+    names = ["vqf"] if argv[2:3] == ["cross"] else []  # cross: VQF beside, always
+    if "--peers" in argv:
+        names = argv[argv.index("--peers") + 1].split(",")
+    if names in (["none"], []):
+        return []
+    from cf_estimator.bench.euroc_eval import peer_names, select_peers
+
+    return select_peers(peer_names() if names == ["all"] else names)[1]
 
 
 def _run(command: str, capsys) -> tuple[int, str]:
@@ -99,22 +111,24 @@ def _run(command: str, capsys) -> tuple[int, str]:
 
 
 @pytest.mark.parametrize("example", examples(), ids=lambda e: e.id)
-def test_quoted_output_is_what_the_command_prints(example, tmp_path, monkeypatch, capsys):
+def test_quoted_output_is_what_the_command_prints(example, tmp_path, tmp_path_factory,
+                                                  monkeypatch, capsys):
     if any("../shared" in cmd for cmd, _ in example.steps) and not SHARED.is_dir():
         pytest.skip(f"{SHARED} not available")
+    missing = [peer for cmd, _ in example.steps for peer in _missing_peers(cmd)]
+    if missing:  # a table with a peer's column: that peer must run (not on a plain [test] install)
+        pytest.skip(f"peers not installed: {', '.join(missing)} (pip install '.[bench]')")
     work = tmp_path / "work"
     work.mkdir()
     if SHARED.is_dir():
         (tmp_path / "shared").symlink_to(SHARED, target_is_directory=True)
     monkeypatch.chdir(work)
     for k, (command, expected) in enumerate(example.steps):
-        standalone = len(example.steps) == 1  # its output depends on nothing run before
-        if standalone and command in _CACHE:
-            rc, out = _CACHE[command]
+        if len(example.steps) == 1:  # its output depends on nothing run before: run once
+            run = run_documented(command, tmp_path_factory)
+            rc, out = run.rc, run.out
         else:
             rc, out = _run(command, capsys)
-            if standalone:
-                _CACHE[command] = (rc, out)
         assert rc == 0, f"{example.id}: `{command}` exited {rc}"
         assert contains_block(out.splitlines(), expected), (
             f"{example.id}, step {k + 1}: `{command}` no longer prints what the doc quotes. "

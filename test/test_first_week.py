@@ -291,7 +291,7 @@ def test_tune_inclination_objective_does_not_search_the_magnetometer_gains(fligh
 def test_tune_validate_reads_held_out_euroc_flights(flight60, capsys):
     euroc = REPO.parent / "shared" / "data" / "euroc" / "MH_04_difficult"
     if not euroc.is_dir():
-        pytest.skip("EuRoC data not present")
+        pytest.skip(f"EuRoC data not present in {euroc}")
     assert cli_main(["tune", "--bag", str(flight60), "--search", "k1", "--candidates", "2",
                      "--passes", "1", "--scenario-limit", "none", "--validate",
                      str(euroc)]) == 0
@@ -402,7 +402,7 @@ def test_rest_detection_and_bias_learning_work_with_five_samples_per_block(rate_
 def test_euroc_at_10_hz_block_averaged_stays_near_full_rate() -> None:
     data = REPO.parent / "shared" / "data" / "euroc"
     if not data.is_dir():
-        pytest.skip("EuRoC data not present")
+        pytest.skip(f"EuRoC data not present in {data}")
     from cf_estimator.bench import euroc
 
     bench = _load_low_rate_script()

@@ -226,7 +226,7 @@ def test_score_candidates_on_a_cluster_gives_the_local_arrays(good_dir, engine):
 BROAD = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "broad"
 
 
-@pytest.mark.skipif(not BROAD.is_dir(), reason="BROAD data not available")
+@pytest.mark.skipif(not BROAD.is_dir(), reason=f"BROAD data not available in {BROAD}")
 def test_bench_broad_on_a_local_cluster_matches_the_local_run(tmp_path, engine, capsys):
     args = ["bench", "broad", "--data", str(BROAD), "--trials", "02,07", "--peers", "none",
             "--quiet"]

@@ -17,7 +17,15 @@ offline (its own offline mode). Rows (inclination [deg] unless marked):
   mean 1);
 - compass (simulated, 9-D): a magnet of 0.3, 0.5 and 1x the Earth field fixed to a turning
   sensor for 60 s (:mod:`cf_estimator.scenarios.compass`): heading error [deg] while it is on,
-  peak and RMS, mean over COMPASS_SEEDS.
+  peak and RMS, mean over COMPASS_SEEDS;
+- aided (6-D, velocity aiding, :mod:`cf_estimator.core.velocity`): ours aided online and
+  offline in our two columns (VQF takes no velocity: '-'): phantom4 and phantom4_horizontal with
+  their RTK velocity as given, EuRoC with its ground truth's velocity degraded to GNSS quality
+  (10 Hz, 0.1 m/s, 100 ms late, as ``bench euroc --velocity-rate 10 --velocity-noise 0.1
+  --velocity-latency 0.1``) from the ground and from the mid-air starts
+  (12 s-end), and the median time from the first velocity sample until the inclination error
+  stays below 2° (:func:`~cf_estimator.bench.euroc_eval.time_to_hold_s`), and the thesis
+  acceleration manoeuvre with a simulated GNSS velocity (peak [arcmin]).
 
 Families whose data directory is missing are left out (a note says so). The defaults are chosen
 so that no row gets worse (BENCHMARKS.md "How the shipped defaults were chosen").
@@ -27,16 +35,25 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Sequence
+import statistics
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from cf_estimator.core.params import FilterParams
 
+if TYPE_CHECKING:
+    from cf_estimator.bench.euroc_eval import VelocityInput
+
 COLUMNS = ("cf_estimator", "cf_estimator_offline", "vqf", "vqf_offline")
-FAMILIES = ("euroc", "phantom4", "phantom4_horizontal", "broad", "scenarios", "compass")
+FAMILIES = ("euroc", "phantom4", "phantom4_horizontal", "broad", "scenarios", "compass",
+            "aided")
 #: Simulated families (no data directory needed).
 SIMULATED = ("scenarios", "compass")
+#: The aided rows' recorded families (data directories) and the label of each.
+AIDED_FAMILIES = (("phantom4_horizontal", "phantom4 horizontal"), ("phantom4", "phantom4"),
+                  ("euroc", "EuRoC MH"))
 COMPASS_FRACTIONS = (0.3, 0.5, 1.0)
 COMPASS_SEEDS = (0, 1, 2, 3)
 MIDAIR_STARTS_S = (20.0, 40.0, 60.0)
@@ -45,14 +62,35 @@ SCENARIOS = ("impacts", "vibration", "acceleration")
 CONSISTENT_BEYOND = {"tilt": "1.8 %", "heading": "4.6 %"}
 
 
+def _euroc_gnss() -> VelocityInput:
+    """EuRoC's ground-truth velocity degraded to GNSS quality (the aided rows)."""
+    from cf_estimator.bench.euroc_eval import VelocityInput
+
+    return VelocityInput(rate_hz=10.0, noise_m_s=0.1, latency_s=0.1)
+
+
 @dataclass
 class Row:
-    """One row: ``values[column]`` in ``unit`` (NaN: not run / not applicable)."""
+    """One row: ``values[column]`` in ``unit`` (NaN: not run / not applicable).
+
+    ``noise[column]``: the standard error of the row's mean over its recordings (sample standard
+    deviation / √n, in ``unit``; NaN for a single recording or a maximum): how far the row moves
+    for a change that is neutral on average — the margin a regression guard allows.
+    """
 
     family: str
     label: str
     unit: str
     values: dict[str, float] = field(default_factory=dict)
+    noise: dict[str, float] = field(default_factory=dict)
+
+
+def standard_error(values: Iterable[float]) -> float:
+    """Sample standard deviation / √n of ``values`` (NaN below two values or with a NaN)."""
+    vals = [float(v) for v in values]
+    if len(vals) < 2 or not all(math.isfinite(v) for v in vals):
+        return math.nan
+    return statistics.stdev(vals) / math.sqrt(len(vals))
 
 
 @dataclass
@@ -63,13 +101,14 @@ class CrossResult:
     notes: list[str] = field(default_factory=list)
 
     def to_json(self) -> dict:
-        """``{"columns", "rows": [{family, label, unit, values}], "notes"}`` (NaN → null)."""
+        """``{"columns", "rows": [{family, label, unit, values, noise}], "notes"}`` (NaN → null)."""
         def clean(v: float) -> float | None:
             return None if not math.isfinite(v) else round(float(v), 4)
 
         return {"columns": list(COLUMNS), "notes": list(self.notes),
                 "rows": [{"family": r.family, "label": r.label, "unit": r.unit,
-                          "values": {c: clean(r.values.get(c, math.nan)) for c in COLUMNS}}
+                          "values": {c: clean(r.values.get(c, math.nan)) for c in COLUMNS},
+                          "noise": {c: clean(r.noise.get(c, math.nan)) for c in COLUMNS}}
                          for r in self.rows]}
 
 
@@ -81,8 +120,14 @@ def _euroc_rows(root: Path, params: FilterParams, peers: Sequence[str], jobs: in
     flights = euroc.load_flights(root)
     res = ev.run_euroc(flights, params, peers, ev.SETTLE_S, jobs=jobs)
     start = ", ground start" if midair else ""
+
+    def noise(found: ev.EurocResult, c: str, score: str) -> float:
+        return standard_error([per.get(c, {}).get(score, math.nan)
+                               for per in found.flights.values()])
+
     mean = Row(family, f"{label}{start}, after 10 s: mean", "deg",
-               {c: res.mean(c, "inclination_rms_deg") for c in COLUMNS})
+               {c: res.mean(c, "inclination_rms_deg") for c in COLUMNS},
+               {c: noise(res, c, "inclination_rms_deg") for c in COLUMNS})
     rows = [mean]
     if not midair:
         rows.append(Row(family, f"{label}, after 10 s: worst recording", "deg",
@@ -93,7 +138,8 @@ def _euroc_rows(root: Path, params: FilterParams, peers: Sequence[str], jobs: in
         mid = ev.run_midair(flights, params, start, peers, jobs=jobs)
         for key, window in zip(ev.MIDAIR_SCORES, ("2-12 s", "12 s-end"), strict=True):
             rows.append(Row(family, f"{label}, mid-air start {start:g} s: {window}", "deg",
-                            {c: mid.mean(c, key) for c in COLUMNS}))
+                            {c: mid.mean(c, key) for c in COLUMNS},
+                            {c: noise(mid, c, key) for c in COLUMNS}))
     return rows
 
 
@@ -104,14 +150,21 @@ def _broad_rows(root: Path, params: FilterParams, peers: Sequence[str], jobs: in
     paths = broad.list_trials(root)
     res = run_broad(paths, broad.read_trial_info(root), params, peers, jobs)
     rows = []
+
+    def noise(members: Sequence[str], algorithm: str, metric: str) -> float:
+        return standard_error([res.trials[t].get(algorithm, {}).get(metric, math.nan)
+                               for t in members])
+
     for group, members in res.group_members().items():
         rows.append(Row("broad", f"BROAD {group} ({len(members)}): 6-D inclination", "deg",
                         {c: res.group_mean(members, f"{c}_6d", "inclination_rmse_deg")
-                         for c in COLUMNS}))
+                         for c in COLUMNS},
+                        {c: noise(members, f"{c}_6d", "inclination_rmse_deg") for c in COLUMNS}))
     for group, members in res.group_members().items():
         rows.append(Row("broad", f"BROAD {group} ({len(members)}): 9-D total", "deg",
                         {c: res.group_mean(members, f"{c}_9d", "total_rmse_deg")
-                         for c in COLUMNS}))
+                         for c in COLUMNS},
+                        {c: noise(members, f"{c}_9d", "total_rmse_deg") for c in COLUMNS}))
     return rows
 
 
@@ -159,9 +212,10 @@ def _compass_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> list
     for fraction in COMPASS_FRACTIONS:
         runs = [out for f, out in found if f == fraction]
         for i, what in enumerate(("peak", "RMS")):
+            cols = [c for c in COLUMNS if all(c in r for r in runs)]
             rows.append(Row("compass", f"magnet {fraction:g}x on a turning sensor: heading {what}",
-                            "deg", {c: sum(r[c][i] for r in runs) / len(runs)
-                                    for c in COLUMNS if all(c in r for r in runs)}))
+                            "deg", {c: sum(r[c][i] for r in runs) / len(runs) for c in cols},
+                            {c: standard_error([r[c][i] for r in runs]) for c in cols}))
     from cf_estimator.bench.consistency import consistency
 
     for fraction in COMPASS_FRACTIONS:  # the reported heading sigma while the magnet is on
@@ -174,6 +228,54 @@ def _compass_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> list
         rows.append(Row("compass", f"{label} mean(e²/σ²) (consistent 1)", "1",
                         {"cf_estimator": k["mean_ratio"]}))
     return rows
+
+
+def _aided_rows(root: Path, params: FilterParams, jobs: int) -> tuple[list[Row], list[str]]:
+    """The velocity-aided rows (module docstring) and notes for missing data directories."""
+    from cf_estimator.bench import euroc
+    from cf_estimator.bench import euroc_eval as ev
+    from cf_estimator.bench.scenarios import run_scenarios
+
+    base = dataclasses.replace(params, use_mag=False)
+    rows, notes = [], []
+    aided = {"cf_estimator": "cf_estimator_aided",
+             "cf_estimator_offline": "cf_estimator_aided_offline"}
+    for family, label in AIDED_FAMILIES:
+        folder = root / family
+        if not folder.is_dir():
+            notes.append(f"aided: {folder} not found, its rows left out")
+            continue
+        flights = euroc.load_flights(folder)
+        vin = _euroc_gnss() if family == "euroc" else ev.VelocityInput()
+        res = ev.run_euroc(flights, base, (), ev.SETTLE_S, jobs=jobs, velocity=vin)
+        start = ", ground start" if family == "euroc" else ""
+
+        def noise(found: ev.EurocResult, a: str, score: str) -> float:
+            return standard_error([per.get(a, {}).get(score, math.nan)
+                                   for per in found.flights.values()])
+
+        rows.append(Row("aided", f"{label}{start}, aided, after 10 s: mean", "deg",
+                        {c: res.mean(a, "inclination_rms_deg") for c, a in aided.items()},
+                        {c: noise(res, a, "inclination_rms_deg") for c, a in aided.items()}))
+        holds = {a: [per.get(a, {}).get("hold_s", math.nan) for per in res.flights.values()]
+                 for a in aided.values()}
+        rows.append(Row("aided", f"{label}{start}, aided: median time to < 2 deg", "s",
+                        {c: ev.median_hold_s(res, a)[0] for c, a in aided.items()},
+                        {c: standard_error([h for h in holds[a] if math.isfinite(h)])
+                         for c, a in aided.items()}))
+        if family != "euroc":
+            continue
+        for at in MIDAIR_STARTS_S:
+            mid = ev.run_midair(flights, base, at, (), jobs=jobs, velocity=vin)
+            key = ev.MIDAIR_SCORES[1]
+            rows.append(Row("aided", f"{label}, aided, mid-air start {at:g} s: 12 s-end", "deg",
+                            {c: mid.mean(a, key) for c, a in aided.items()},
+                            {c: noise(mid, a, key) for c, a in aided.items()}))
+    found = run_scenarios(["acceleration"], base, (), jobs=jobs, velocity=True)
+    peak = {r["algorithm"]: r["peak_arcmin"] for r in found}
+    rows.append(Row("aided", "thesis acceleration, aided: peak (limit 90')", "arcmin",
+                    {"cf_estimator": peak.get("cf_estimator_aided", math.nan)}))
+    return rows, notes
 
 
 def _scenario_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> list[Row]:
@@ -224,6 +326,11 @@ def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = 
         if family == "compass":
             result.rows += _compass_rows(params, peers, jobs)
             continue
+        if family == "aided":
+            rows, notes = _aided_rows(root, params, jobs)
+            result.rows += rows
+            result.notes += notes
+            continue
         folder = root / family
         if not folder.is_dir():
             result.notes.append(f"{family}: {folder} not found, left out")
@@ -247,7 +354,7 @@ def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = 
 
 
 def format_table(result: CrossResult) -> str:
-    """Rows × the four columns, two decimals (arcmin and % one), '-' where not applicable."""
+    """Rows × the four columns, two decimals (arcmin, s and % one), '-' where not applicable."""
     w = max([len(r.label) for r in result.rows] + [6])
     cw = max(len(c) for c in COLUMNS)
     lines = [f"  {'row':<{w}}  {'unit':<6}" + "".join(f"  {c:>{cw}}" for c in COLUMNS)]
@@ -255,7 +362,7 @@ def format_table(result: CrossResult) -> str:
         cells = []
         for c in COLUMNS:
             v = r.values.get(c, math.nan)
-            text = "-" if not math.isfinite(v) else (f"{v:.1f}" if r.unit in ("arcmin", "%")
+            text = "-" if not math.isfinite(v) else (f"{v:.1f}" if r.unit in ("arcmin", "s", "%")
                                                      else f"{v:.2f}")
             cells.append(f"  {text:>{cw}}")
         lines.append(f"  {r.label:<{w}}  {r.unit:<6}" + "".join(cells))

@@ -55,7 +55,15 @@
 #define MAG_TURN_FRACTION 0.05
 #define MAG_DRIFT_SIGMAS 3.0
 #define MAG_CANDIDATE_NORM_TOLERANCE 0.05
-#define SMALL_ANGLE_RAD 1e-6
+#define SMALL_ANGLE_RAD 1e-6 /* ops.SMALL_ANGLE_RAD */
+#define TINY 1e-300 /* ops.TINY */
+#define RECOVERY_EXIT_FRACTION 0.5
+#define MAG_RECOVERY_EXIT_FRACTION 0.1
+#define MAG_QUICK_LIMIT_RAD 4.0
+#define MAG_MIN_HORIZONTAL 1e-3
+#define REST_MIN_VARIANCE 1e-12
+#define SQRT3 1.7320508075688772
+#define BIAS_LEARNING_MIN_K1 1e-3
 #define EXTRA_COLUMNS 15
 #define GYRO_LIMIT_RAD_S 1e9 /* filter.GYRO_LIMIT_RAD_S */
 /* extra columns: e(3), b(3), clipped, phase, at_rest, mag_status, bias sigma, l_x, l_y (the
@@ -162,13 +170,15 @@ static void toward_unit(double *vx, double *vy, double *vz, double ux, double uy
                         double a)
 {
     double x = *vx + a * (ux - *vx), y = *vy + a * (uy - *vy), z = *vz + a * (uz - *vz);
-    double n = maxd(sqrt(x * x + y * y + z * z), 1e-300);
+    double n = maxd(sqrt(x * x + y * y + z * z), TINY);
     *vx = x / n;
     *vy = y / n;
     *vz = z / n;
 }
 
-static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int fast, int learn)
+/* heading() of step.py: one magnetometer sample checked against the field reference, then the
+   heading correction ('yaw' or 'full' mode) */
+static void heading(cf_state *s, const cf_params *p, const double *mag, int fast, int learn)
 {
     double mx = mag[0], my = mag[1], mz = mag[2];
     double mn = sqrt(mx * mx + my * my + mz * mz);
@@ -202,8 +212,8 @@ static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int
         s->mag_ref_dip = s->mag_ref_dip + (dip - s->mag_ref_dip) / n;
         s->mag_ref_count = n;
     }
-    double off_norm = maxd(mn / maxd(s->mag_ref_norm, 1e-300) - 1.0,
-                           1.0 - mn / maxd(s->mag_ref_norm, 1e-300));
+    double off_norm = maxd(mn / maxd(s->mag_ref_norm, TINY) - 1.0,
+                           1.0 - mn / maxd(s->mag_ref_norm, TINY));
     double off_dip = maxd(dip - s->mag_ref_dip, s->mag_ref_dip - dip);
     double a = fresh ? 1.0 : dt_s / (MAG_SMOOTH_TIME_CONSTANT_S + dt_s);
     toward_unit(&s->mmx, &s->mmy, &s->mmz, ux, uy, uz, a);
@@ -234,7 +244,7 @@ static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int
     a = fresh ? 1.0 : dt_s / (MAG_TURN_TIME_CONSTANT_S + dt_s);
     toward_unit(&s->mvx, &s->mvy, &s->mvz, ux, uy, uz, disturbed ? 0.0 : a);
 
-    int usable = p->use_mag && !disturbed && (horizontal > 1e-3);
+    int usable = p->use_mag && !disturbed && (horizontal > MAG_MIN_HORIZONTAL);
     s->mag_status = p->use_mag ? (disturbed ? MAG_REJECTED : MAG_USED) : MAG_DISABLED;
     if (usable) s->mag_last_time_s = s->time_s;
     int first = usable && !s->heading_initialized;
@@ -247,14 +257,15 @@ static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int
     else if (disturbed)
         s->mag_clip_timer_s = 0.0;
     int enter = (p->recovery_trigger_s > 0.0) && (s->mag_clip_timer_s >= p->recovery_trigger_s);
-    int leave = usable && (maxd(yaw_error, -yaw_error) < 0.1 * p->mag_saturation_limit_rad);
+    int leave = usable && (maxd(yaw_error, -yaw_error) <
+                           MAG_RECOVERY_EXIT_FRACTION * p->mag_saturation_limit_rad);
     s->mag_recovering = (char)(s->mag_recovering ? !leave : enter);
     if (enter) s->mag_clip_timer_s = 0.0;
     int quick = fast || s->mag_recovering;
     double r1 = quick ? maxd(p->r1, p->startup_k1) : p->r1;
     double gain = usable ? r1 * dt_m / (1.0 + r1 * dt_m) : 0.0;
     double ldt = (usable && learn) ? dt_m : 0.0;
-    double limit = quick ? 4.0 : p->mag_saturation_limit_rad;
+    double limit = quick ? MAG_QUICK_LIMIT_RAD : p->mag_saturation_limit_rad;
 
     s->yaw_error_rad = usable ? yaw_error : 0.0;
     double yaw_c = mind(maxd(yaw_error, -limit), limit);
@@ -270,7 +281,7 @@ static void magnetometer(cf_state *s, const cf_params *p, const double *mag, int
            -sin(s->mag_ref_dip), pr);
     double ex = uy * pr[2] - uz * pr[1], ey = uz * pr[0] - ux * pr[2], ez = ux * pr[1] - uy * pr[0];
     double en = sqrt(ex * ex + ey * ey + ez * ez);
-    double scale = mind(1.0, limit / maxd(en, 1e-300));
+    double scale = mind(1.0, limit / maxd(en, TINY));
     ex = ex * scale;
     ey = ey * scale;
     ez = ez * scale;
@@ -343,15 +354,15 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
                                             REST_NOISE_CAP * p->rest_accel_threshold_m_s2);
     int mag_seen = (s->blk_mn > 0.0) && (s->pm_n > 0.0);
     double bm = maxd(sqrt(s->blk_mx * s->blk_mx + s->blk_my * s->blk_my + s->blk_mz * s->blk_mz),
-                     1e-300);
+                     TINY);
     double umx = s->blk_mx / bm, umy = s->blk_my / bm, umz = s->blk_mz / bm;
     double dm = sqrt(pow(umx - s->pmx, 2.0) + pow(umy - s->pmy, 2.0) + pow(umz - s->pmz, 2.0));
     int turned = mag_seen &&
                  (dm > REST_MAG_TOLERANCE_RAD + p->rest_gyro_threshold_rad_s * s->blk_t);
     int steady = has_prev && (dg < tol_g) && (da < tol_a) && !turned &&
                  (sqrt(mgx * mgx + mgy * mgy + mgz * mgz) <
-                  p->bias_limit_rad_s * 1.7320508075688772);
-    double r = maxd(noise_g2 / (3.0 * n), 1e-12);
+                  p->bias_limit_rad_s * SQRT3);
+    double r = maxd(noise_g2 / (3.0 * n), REST_MIN_VARIANCE);
     double gate = p->rest_gyro_threshold_rad_s + REST_GATE_SIGMAS * sqrt(s->bias_var + r);
     int consistent = (maxd(mgx - s->bx, s->bx - mgx) < gate) &&
                      (maxd(mgy - s->by, s->by - mgy) < gate) &&
@@ -397,18 +408,10 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
     s->blk_g2 = s->blk_a2 = 0.0;
 }
 
-static void cf_step(cf_state *s, const cf_params *p, const double *g, const double *acc,
-                    const double *mag, double dt)
+/* predict() of step.py: q <- Exp_z(z_m dt) q Exp((w - b) dt); the field directions turn along */
+static void predict(cf_state *s, const double *g, double dt)
 {
     double gx = g[0], gy = g[1], gz = g[2], d[4], w[3];
-    s->time_s = s->time_s + dt;
-    s->bias_var = (s->bias_var < 0.0 ? pow(p->bias_prior_sigma_rad_s, 2.0) : s->bias_var) +
-                  pow(BIAS_RANDOM_WALK_RAD_S_SQRT_S, 2.0) * dt;
-    int startup = s->time_s <= p->startup_duration_s;
-    int fast = startup || s->recovering || (s->time_s <= s->quick_until_s);
-    int learn = !fast;
-
-    /* 1. predict */
     expmap((gx - s->bx) * dt, (gy - s->by) * dt, (gz - s->bz) * dt, d);
     mul_into(s, d);
     turn_heading(s, s->z_m * dt);
@@ -424,103 +427,163 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
     s->mmx = w[0];
     s->mmy = w[1];
     s->mmz = w[2];
+}
 
+/* classify_motion() of step.py: stillness blocks, quick, the linear-acceleration detector,
+   the rotation-rate low-pass; returns quick, *accelerating */
+static int classify_motion(cf_state *s, const cf_params *p, const double *g, const double *acc,
+                           const double *mag, int fast, double dt, int *accelerating)
+{
+    double gx = g[0], gy = g[1], gz = g[2];
+    double ax = acc[0], ay = acc[1], az = acc[2];
+    double an = sqrt(ax * ax + ay * ay + az * az);
+    s->g_ref = s->g_ref > 0.0 ? s->g_ref : p->gravity_m_s2;
+    double deviation = maxd(an - s->g_ref, s->g_ref - an);
+    int spike = deviation > p->acceleration_threshold_m_s2 + ACCEL_SPIKE_SIGMAS * sqrt(s->noise_a2);
+    stillness(s, p, g, acc, mag, dt);
+    double steady_g = sqrt(s->pax * s->pax + s->pay * s->pay + s->paz * s->paz);
+    int quick = fast || (s->at_rest &&
+                         (maxd(steady_g - s->g_ref, s->g_ref - steady_g) <
+                          p->acceleration_threshold_m_s2) &&
+                         (s->noise_a2 < pow(p->acceleration_threshold_m_s2, 2.0)));
+    double aw = s->last_n <= 1.0 ? 1.0 : dt / (ACCEL_LOWPASS_TIME_CONSTANT_S + dt);
+    double acx = s->acx + aw * (ax - s->acx), acy = s->acy + aw * (ay - s->acy),
+           acz = s->acz + aw * (az - s->acz);
+    s->acx = acx;
+    s->acy = acy;
+    s->acz = acz;
+    double an_lp = sqrt(s->acx * s->acx + s->acy * s->acy + s->acz * s->acz);
+    double level = spike ? deviation : maxd(an_lp - s->g_ref, s->g_ref - an_lp);
+    double decayed = s->accel_hold * (p->acceleration_hold_s / (p->acceleration_hold_s + dt));
+    s->accel_hold = maxd(level, decayed);
+    double lp_sigma = sqrt(s->noise_a2 / 3.0 * dt / (2.0 * ACCEL_LOWPASS_TIME_CONSTANT_S + dt));
+    *accelerating =
+        s->accel_hold > p->acceleration_threshold_m_s2 + ACCEL_DETECT_SIGMAS * lp_sigma;
+    double rate = sqrt(pow(gx - s->bx, 2.0) + pow(gy - s->by, 2.0) + pow(gz - s->bz, 2.0));
+    double lw = dt / (RATE_LOWPASS_TIME_CONSTANT_S + dt);
+    s->rate_lp = s->rate_lp + lw * (rate - s->rate_lp);
+    return quick;
+}
+
+/* tilt_error() of step.py: e = (a/|g|) x g_hat into s->ex.., s->error_norm; u = a/|g|,
+   v = g_hat (third row of R); returns |e| */
+static double tilt_error(cf_state *s, const double *acc, double *u, double *v)
+{
+    double ux = acc[0] / s->g_ref, uy = acc[1] / s->g_ref, uz = acc[2] / s->g_ref;
+    double vx = 2.0 * (s->qx * s->qz - s->qw * s->qy);
+    double vy = 2.0 * (s->qy * s->qz + s->qw * s->qx);
+    double vz = 1.0 - 2.0 * (s->qx * s->qx + s->qy * s->qy);
+    double ex = uy * vz - uz * vy, ey = uz * vx - ux * vz, ez = ux * vy - uy * vx;
+    double en = sqrt(ex * ex + ey * ey + ez * ez);
+    s->ex = ex;
+    s->ey = ey;
+    s->ez = ez;
+    s->error_norm = en;
+    u[0] = ux;
+    u[1] = uy;
+    u[2] = uz;
+    v[0] = vx;
+    v[1] = vy;
+    v[2] = vz;
+    return en;
+}
+
+/* saturate() of step.py: returns the scale of e; *limit, *tight, *clipped */
+static double saturate(const cf_state *s, const cf_params *p, double en, int quick,
+                       int accelerating, double *limit, int *tight, int *clipped)
+{
+    *tight = accelerating && (s->rate_lp < p->rotation_threshold_rad_s);
+    *limit = *tight ? p->saturation_limit_rad : p->wide_saturation_limit_rad;
+    *clipped = p->use_saturation && !quick && (en > *limit);
+    return *clipped ? *limit / maxd(en, TINY) : 1.0;
+}
+
+/* aperiodic() of step.py: the unit in the world frame on the saturated error; f into s->fx.. */
+static void aperiodic(cf_state *s, const cf_params *p, double scale, int quick, double dt,
+                      double *f)
+{
+    double w[3];
+    rotate(s->qw, s->qx, s->qy, s->qz, s->ex * scale, s->ey * scale, s->ez * scale, w);
+    double lag = s->aided ? AIDED_LAG_TIME_CONSTANT_S : p->aperiodic_time_constant_s;
+    double weight = dt / ((quick ? QUICK_LAG_TIME_CONSTANT_S : lag) + dt);
+    s->lx = s->lx + weight * (w[0] - s->lx);
+    s->ly = s->ly + weight * (w[1] - s->ly);
+    s->lz = s->lz + weight * (w[2] - s->lz);
+    if (quick)
+        rotate(s->qw, -s->qx, -s->qy, -s->qz, w[0], w[1], w[2], f);
+    else
+        rotate(s->qw, -s->qx, -s->qy, -s->qz, s->lx, s->ly, s->lz, f);
+    s->fx = f[0];
+    s->fy = f[1];
+    s->fz = f[2];
+}
+
+/* regulate() of step.py (bias.learning_gains and bias.integrate inlined) */
+static void regulate(cf_state *s, const cf_params *p, const double *f, double en,
+                     const double *u, const double *v, int quick, int tight, int learn,
+                     double dt)
+{
+    double d[4];
+    double share = mind(s->bias_var / pow(p->bias_prior_sigma_rad_s, 2.0), 1.0);
+    double k2 = maxd(p->k2, p->bias_learning_k2 * share);
+    double k1 = maxd(p->k1, 2.0 * sqrt(k2));
+    double k3dt = learn ? p->k3 * dt : 0.0;
+    s->cx = s->cx + k3dt * f[0];
+    s->cy = s->cy + k3dt * f[1];
+    s->cz = s->cz + k3dt * f[2];
+    int small = (en < BIAS_LEARNING_MAX_ERROR_RAD) && (u[0] * v[0] + u[1] * v[1] + u[2] * v[2] > 0.0);
+    double ldt = (learn && small) ? dt : 0.0;
+    s->bx = s->bx - ldt * (k2 * f[0] + s->cx);
+    s->by = s->by - ldt * (k2 * f[1] + s->cy);
+    s->bz = s->bz - ldt * (k2 * f[2] + s->cz);
+    s->bias_var = s->bias_var / (1.0 + ldt * k2 / maxd(k1, BIAS_LEARNING_MIN_K1));
+    k1 = quick ? maxd(k1, p->startup_k1) : k1;
+    double gain = k1 * dt / (1.0 + k1 * dt);
+    expmap(gain * f[0], gain * f[1], gain * f[2], d);
+    mul_into(s, d);
+    double dec = gain * (quick ? 1.0 : (tight ? 0.0 : p->prefilter));
+    s->lx = s->lx - dec * s->lx;
+    s->ly = s->ly - dec * s->ly;
+    s->lz = s->lz - dec * s->lz;
+}
+
+/* recover() of step.py: a clip unbroken for recovery_trigger_s is a real attitude error */
+static void recover(cf_state *s, const cf_params *p, int clipped, double en, double limit,
+                    int learn, double dt)
+{
+    s->clip_timer_s = clipped ? s->clip_timer_s + dt : 0.0;
+    int enter = (p->recovery_trigger_s > 0.0) && (s->clip_timer_s >= p->recovery_trigger_s) &&
+                learn;
+    int leave = s->recovering && (en < RECOVERY_EXIT_FRACTION * limit);
+    if (enter) s->recovery_count = s->recovery_count + 1;
+    s->recovering = (char)(s->recovering ? !leave : enter);
+    if (enter) s->clip_timer_s = 0.0;
+    s->clipped = (char)clipped;
+}
+
+/* step() of step.py: the same stages in the same order */
+static void cf_step(cf_state *s, const cf_params *p, const double *g, const double *acc,
+                    const double *mag, double dt)
+{
+    s->time_s = s->time_s + dt;
+    s->bias_var = (s->bias_var < 0.0 ? pow(p->bias_prior_sigma_rad_s, 2.0) : s->bias_var) +
+                  pow(BIAS_RANDOM_WALK_RAD_S_SQRT_S, 2.0) * dt;
+    int startup = s->time_s <= p->startup_duration_s;
+    int fast = startup || s->recovering || (s->time_s <= s->quick_until_s);
+    int learn = !fast;
+
+    predict(s, g, dt);
     s->clipped = 0;
     s->accel_used = acc != NULL;
     if (acc != NULL) {
-        double ax = acc[0], ay = acc[1], az = acc[2];
-        double an = sqrt(ax * ax + ay * ay + az * az);
-        s->g_ref = s->g_ref > 0.0 ? s->g_ref : p->gravity_m_s2;
-        double deviation = maxd(an - s->g_ref, s->g_ref - an);
-        int spike = deviation > p->acceleration_threshold_m_s2 +
-                                    ACCEL_SPIKE_SIGMAS * sqrt(s->noise_a2);
-        stillness(s, p, g, acc, mag, dt);
-        double steady_g = sqrt(s->pax * s->pax + s->pay * s->pay + s->paz * s->paz);
-        int quick = fast || (s->at_rest &&
-                             (maxd(steady_g - s->g_ref, s->g_ref - steady_g) <
-                              p->acceleration_threshold_m_s2) &&
-                             (s->noise_a2 < pow(p->acceleration_threshold_m_s2, 2.0)));
-        double aw = s->last_n <= 1.0 ? 1.0 : dt / (ACCEL_LOWPASS_TIME_CONSTANT_S + dt);
-        double acx = s->acx + aw * (ax - s->acx), acy = s->acy + aw * (ay - s->acy),
-               acz = s->acz + aw * (az - s->acz);
-        s->acx = acx;
-        s->acy = acy;
-        s->acz = acz;
-        double an_lp = sqrt(s->acx * s->acx + s->acy * s->acy + s->acz * s->acz);
-        double level = spike ? deviation : maxd(an_lp - s->g_ref, s->g_ref - an_lp);
-        double decayed =
-            s->accel_hold * (p->acceleration_hold_s / (p->acceleration_hold_s + dt));
-        s->accel_hold = maxd(level, decayed);
-        double lp_sigma =
-            sqrt(s->noise_a2 / 3.0 * dt / (2.0 * ACCEL_LOWPASS_TIME_CONSTANT_S + dt));
-        int accelerating = s->accel_hold > p->acceleration_threshold_m_s2 +
-                                               ACCEL_DETECT_SIGMAS * lp_sigma;
-        double rate =
-            sqrt(pow(gx - s->bx, 2.0) + pow(gy - s->by, 2.0) + pow(gz - s->bz, 2.0));
-        double lw = dt / (RATE_LOWPASS_TIME_CONSTANT_S + dt);
-        s->rate_lp = s->rate_lp + lw * (rate - s->rate_lp);
-        double ux = ax / s->g_ref, uy = ay / s->g_ref, uz = az / s->g_ref;
-        /* 2. error */
-        double vx = 2.0 * (s->qx * s->qz - s->qw * s->qy);
-        double vy = 2.0 * (s->qy * s->qz + s->qw * s->qx);
-        double vz = 1.0 - 2.0 * (s->qx * s->qx + s->qy * s->qy);
-        double ex = uy * vz - uz * vy, ey = uz * vx - ux * vz, ez = ux * vy - uy * vx;
-        double en = sqrt(ex * ex + ey * ey + ez * ez);
-        s->ex = ex;
-        s->ey = ey;
-        s->ez = ez;
-        s->error_norm = en;
-        /* 3. saturation by norm */
-        int tight = accelerating && (s->rate_lp < p->rotation_threshold_rad_s);
-        double limit = tight ? p->saturation_limit_rad : p->wide_saturation_limit_rad;
-        int clipped = p->use_saturation && !quick && (en > limit);
-        double scale = clipped ? limit / maxd(en, 1e-300) : 1.0;
-        /* 4. aperiodic unit in the world frame */
-        rotate(s->qw, s->qx, s->qy, s->qz, ex * scale, ey * scale, ez * scale, w);
-        double lag = s->aided ? AIDED_LAG_TIME_CONSTANT_S : p->aperiodic_time_constant_s;
-        double weight = dt / ((quick ? QUICK_LAG_TIME_CONSTANT_S : lag) + dt);
-        s->lx = s->lx + weight * (w[0] - s->lx);
-        s->ly = s->ly + weight * (w[1] - s->ly);
-        s->lz = s->lz + weight * (w[2] - s->lz);
-        double f[3];
-        if (quick)
-            rotate(s->qw, -s->qx, -s->qy, -s->qz, w[0], w[1], w[2], f);
-        else
-            rotate(s->qw, -s->qx, -s->qy, -s->qz, s->lx, s->ly, s->lz, f);
-        s->fx = f[0];
-        s->fy = f[1];
-        s->fz = f[2];
-        /* 5. regulator (k1, k2 raised while the bias is uncertain) */
-        double share = mind(s->bias_var / pow(p->bias_prior_sigma_rad_s, 2.0), 1.0);
-        double k2 = maxd(p->k2, p->bias_learning_k2 * share);
-        double k1 = maxd(p->k1, 2.0 * sqrt(k2));
-        double k3dt = learn ? p->k3 * dt : 0.0;
-        s->cx = s->cx + k3dt * f[0];
-        s->cy = s->cy + k3dt * f[1];
-        s->cz = s->cz + k3dt * f[2];
-        int small = (en < BIAS_LEARNING_MAX_ERROR_RAD) && (ux * vx + uy * vy + uz * vz > 0.0);
-        double ldt = (learn && small) ? dt : 0.0;
-        s->bx = s->bx - ldt * (k2 * f[0] + s->cx);
-        s->by = s->by - ldt * (k2 * f[1] + s->cy);
-        s->bz = s->bz - ldt * (k2 * f[2] + s->cz);
-        s->bias_var = s->bias_var / (1.0 + ldt * k2 / maxd(k1, 1e-3));
-        k1 = quick ? maxd(k1, p->startup_k1) : k1;
-        double gain = k1 * dt / (1.0 + k1 * dt);
-        expmap(gain * f[0], gain * f[1], gain * f[2], d);
-        mul_into(s, d);
-        double dec = gain * (quick ? 1.0 : (tight ? 0.0 : p->prefilter));
-        s->lx = s->lx - dec * s->lx;
-        s->ly = s->ly - dec * s->ly;
-        s->lz = s->lz - dec * s->lz;
-        /* recovery */
-        s->clip_timer_s = clipped ? s->clip_timer_s + dt : 0.0;
-        int enter = (p->recovery_trigger_s > 0.0) && (s->clip_timer_s >= p->recovery_trigger_s) &&
-                    learn;
-        int leave = s->recovering && (en < 0.5 * limit);
-        if (enter) s->recovery_count = s->recovery_count + 1;
-        s->recovering = (char)(s->recovering ? !leave : enter);
-        if (enter) s->clip_timer_s = 0.0;
-        s->clipped = (char)clipped;
+        int accelerating, tight, clipped;
+        double u[3], v[3], f[3], limit;
+        int quick = classify_motion(s, p, g, acc, mag, fast, dt, &accelerating);
+        double en = tilt_error(s, acc, u, v);
+        double scale = saturate(s, p, en, quick, accelerating, &limit, &tight, &clipped);
+        aperiodic(s, p, scale, quick, dt, f);
+        regulate(s, p, f, en, u, v, quick, tight, learn, dt);
+        recover(s, p, clipped, en, limit, learn, dt);
     }
     double lim = p->bias_limit_rad_s;
     s->bx = mind(maxd(s->bx, -lim), lim);
@@ -528,7 +591,7 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
     s->bz = mind(maxd(s->bz, -lim), lim);
 
     s->mag_status = p->use_mag ? MAG_NONE : MAG_DISABLED;
-    if (mag != NULL) magnetometer(s, p, mag, fast, learn);
+    if (mag != NULL) heading(s, p, mag, fast, learn);
     double qn = sqrt(s->qw * s->qw + s->qx * s->qx + s->qy * s->qy + s->qz * s->qz);
     s->qw = s->qw / qn;
     s->qx = s->qx / qn;

@@ -34,6 +34,8 @@ BIAS_LEARNING_MAX_ERROR_RAD = 0.35
 BIAS_RANDOM_WALK_RAD_S_SQRT_S = 2e-4
 #: The bias estimate counts as converged below this standard deviation [rad/s].
 BIAS_CONVERGED_SIGMA_RAD_S = 0.005
+#: Smallest k1 [1/s] in the integral's learning time constant k1/k2 (k1 = 0 learns at once).
+BIAS_LEARNING_MIN_K1 = 1e-3
 
 
 def add_process_noise(s: StepState, p: Any, dt: Any, o: Any) -> None:
@@ -75,7 +77,7 @@ def integrate(s: StepState, p: Any, f: tuple, k1: Any, k2: Any, learn: Any, smal
     s.by = s.by - ldt * (k2 * fy + s.cy)
     s.bz = s.bz - ldt * (k2 * fz + s.cz)
     # the integral learns the bias with time constant ~k1/k2: its variance shrinks so
-    s.bias_var = s.bias_var / (1.0 + ldt * k2 / o.maximum(k1, 1e-3))
+    s.bias_var = s.bias_var / (1.0 + ldt * k2 / o.maximum(k1, BIAS_LEARNING_MIN_K1))
 
 
 def clamp(s: StepState, p: Any, o: Any) -> None:

@@ -12,6 +12,8 @@ from typing import Any
 import numpy as np
 
 SMALL_ANGLE_RAD = 1e-6
+#: Smallest divisor of a norm [1]: a zero vector divides by this, never by zero.
+TINY = 1e-300
 
 
 class FloatOps:

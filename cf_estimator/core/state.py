@@ -7,7 +7,7 @@ Four parts, each a module of its own, update their own fields (and read the othe
 - **rest/motion classifier** (:mod:`cf_estimator.core.stillness`): block statistics, rest,
   the learned gravity norm;
 - **bias estimator** (:mod:`cf_estimator.core.bias`): the gyro-bias estimate and its variance;
-- **heading channel** (``_magnetometer`` in :mod:`cf_estimator.core.step`): field reference,
+- **heading channel** (``heading`` in :mod:`cf_estimator.core.step`): field reference,
   yaw-rate correction, heading recovery;
 
 plus the **signals** of the last step (what diagnostics and ``estimate()`` report).

@@ -1,16 +1,18 @@
 """The 3-D compensation-scheme step: the filter's equations, written once for floats and arrays.
 
-One sample, in the order the code runs (world frame ENU inside; q = q_world_from_sensor)::
+One sample, in the order the code runs (world frame ENU inside; q = q_world_from_sensor); each
+stage is a function of its name here and a static function of the same name in core/_kernel.c::
 
-    1. predict    q⁻ = Exp_z(z_m·dt) ⊗ q ⊗ Exp((ω − b)·dt)
+    1. predict()  q⁻ = Exp_z(z_m·dt) ⊗ q ⊗ Exp((ω − b)·dt)
                   (gyro ω, bias estimate b; z_m: heading channel's world-vertical rate)
-    2. error      e = (a/‖g‖) × ĝ,  ĝ = R⁻ᵀ·ẑ   (Ryzhkov & Karpenko: scaled by gravity, not |a|)
+    .  classify_motion(): stillness blocks (rest → bias measurement), quick, linear acceleration
+    2. tilt_error() e = (a/‖g‖) × ĝ,  ĝ = R⁻ᵀ·ẑ   (Ryzhkov & Karpenko: scaled by gravity, not |a|)
                   (≈ small-angle tilt error; linear in the linear acceleration)
-    3. saturate   e_s = e·min(1, L/|e|)                     (by norm, keeps the direction)
+    3. saturate() e_s = e·min(1, L/|e|)                     (by norm, keeps the direction)
                   L = saturation_limit_rad while a linear acceleration is present and the gyro
                   is still (impacts, vibration, manoeuvres), else wide_saturation_limit_rad
-    4. aperiodic  l ← l + dt/(T+dt)·(R⁻·e_s − l);  f = R⁻ᵀ·l  (1/(T s+1) in the world frame)
-    5. regulator  c ← c + k3·dt·f;  b ← b − dt·(k2'·f + c);  q ← q⁻ ⊗ Exp(g(k1')·f)
+    4. aperiodic() l ← l + dt/(T+dt)·(R⁻·e_s − l);  f = R⁻ᵀ·l  (1/(T s+1) in the world frame)
+    5. regulate() c ← c + k3·dt·f;  b ← b − dt·(k2'·f + c);  q ← q⁻ ⊗ Exp(g(k1')·f)
                   (W1 = k1 + k2/s + k3/s²; g(k) = k·dt/(1+k·dt), the backward-Euler gain;
                   b, the integral state, is the gyro-bias estimate; k2' = max(k2,
                   bias_learning_k2·σ_b²/σ_0²) and k1' = max(k1, 2√k2') while the bias is
@@ -18,7 +20,8 @@ One sample, in the order the code runs (world frame ENU inside; q = q_world_from
                   the tight clip is on): the correction also turns the unit's memory (p = 1: a
                   pre-filter of the specific force in the world frame, as VQF's; p = 0: the
                   thesis's unit on the error)
-    6. magnetom.  'yaw':  e_ψ = atan2(m_E, m_N) of the measured field in the world frame,
+    .  recover()  a clip unbroken for recovery_trigger_s: RECOVERING (as start-up)
+    6. heading()  'yaw':  e_ψ = atan2(m_E, m_N) of the measured field in the world frame,
                   saturated; q ← Exp_z(g(r1)·e_ψ) ⊗ q; z_m ← z_m + r2·dt_m·e_ψ (heading only:
                   a rotation about the world vertical never changes roll/pitch); saturated
                   for recovery_trigger_s: heading recovery with startup_k1 (as the tilt's)
@@ -61,6 +64,7 @@ from cf_estimator.core.bias import (  # noqa: F401 - the constants of the whole 
     BIAS_LEARNING_MAX_ERROR_RAD,
     BIAS_RANDOM_WALK_RAD_S_SQRT_S,
 )
+from cf_estimator.core.ops import TINY
 from cf_estimator.core.state import StepState
 from cf_estimator.core.stillness import (  # noqa: F401
     GRAVITY_TIME_CONSTANT_S,
@@ -132,6 +136,16 @@ MAG_DRIFT_SIGMAS = 3.0
 MAG_CANDIDATE_NORM_TOLERANCE = 0.05
 #: Longest time [s] one magnetometer sample's correction may stand for (sparse magnetometers).
 MAG_MAX_DT_S = 1.0
+#: Recovery ends once the error is below this share of the clip level [1] (tilt).
+RECOVERY_EXIT_FRACTION = 0.5
+#: Heading recovery ends once the heading error is below this share of
+#: mag_saturation_limit_rad [1].
+MAG_RECOVERY_EXIT_FRACTION = 0.1
+#: Clip level of the heading error while the heading channel is quick (start-up, recovery) [rad]:
+#: above π, i.e. no clip.
+MAG_QUICK_LIMIT_RAD = 4.0
+#: A unit field whose horizontal component in the world frame is below this gives no heading [1].
+MAG_MIN_HORIZONTAL = 1e-3
 
 
 def _mul(aw: Any, ax: Any, ay: Any, az: Any, bw: Any, bx: Any, by: Any, bz: Any) -> tuple:
@@ -181,7 +195,7 @@ def turn_heading(s: StepState, angle: Any, o: Any) -> None:
 def _toward_unit(v: tuple, u: tuple, a: Any, o: Any) -> tuple:
     """A unit vector low-pass: v + a·(u − v), renormalised (weight ``a`` in [0, 1])."""
     x, y, z = v[0] + a * (u[0] - v[0]), v[1] + a * (u[1] - v[1]), v[2] + a * (u[2] - v[2])
-    n = o.maximum(o.sqrt(x * x + y * y + z * z), 1e-300)
+    n = o.maximum(o.sqrt(x * x + y * y + z * z), TINY)
     return x / n, y / n, z / n
 
 
@@ -199,13 +213,13 @@ def step(
     dt: float,
     o: Any,
 ) -> None:
-    """Advance the state one sample (see the module docstring).
+    """Advance the state one sample (see the module docstring), stage after stage.
 
     ``p`` has the FilterParams field names (floats, or arrays for a batch) plus ``mag_full``.
     ``accel``/``mag`` are None when absent or invalid at this sample (the caller checks
-    finiteness and non-zero norm). ``dt`` > 0 [s].
+    finiteness and non-zero norm). ``dt`` > 0 [s]. The C twin's cf_step() (core/_kernel.c)
+    calls the same stages, of the same names, in the same order.
     """
-    gx, gy, gz = gyro
     s.time_s = s.time_s + dt
     bias.add_process_noise(s, p, dt, o)
     startup = s.time_s <= p.startup_duration_s
@@ -214,127 +228,183 @@ def step(
     fast = startup | s.recovering | (s.time_s <= s.quick_until_s)
     learn = o.not_(fast)
 
-    # 1. predict with the bias-corrected gyro, then the magnetometer's yaw-rate correction
-    dw, dx, dy, dz = _exp((gx - s.bx) * dt, (gy - s.by) * dt, (gz - s.bz) * dt, o)
-    qw, qx, qy, qz = _mul(s.qw, s.qx, s.qy, s.qz, dw, dx, dy, dz)
-    s.qw, s.qx, s.qy, s.qz = qw, qx, qy, qz
-    turn_heading(s, s.z_m * dt, o)
-    # the field directions the heading channel checks samples against turn with the body
-    s.mvx, s.mvy, s.mvz = _rotate(dw, -dx, -dy, -dz, s.mvx, s.mvy, s.mvz)
-    s.mcx, s.mcy, s.mcz = _rotate(dw, -dx, -dy, -dz, s.mcx, s.mcy, s.mcz)
-    s.mmx, s.mmy, s.mmz = _rotate(dw, -dx, -dy, -dz, s.mmx, s.mmy, s.mmz)
-
+    predict(s, gyro, dt, o)
     s.clipped = s.clipped & False
     s.accel_used = accel is not None
     if accel is not None:
-        ax, ay, az = accel
-        an = o.sqrt(ax * ax + ay * ay + az * az)
-        s.g_ref = o.where(s.g_ref > 0.0, s.g_ref, p.gravity_m_s2)  # ‖g‖: prior, learned below
-        deviation = o.maximum(an - s.g_ref, s.g_ref - an)  # | |a| - ‖g‖ |
-        # an impact: a single sample far above the noise of the last block (see the detector)
-        spike = deviation > p.acceleration_threshold_m_s2 + ACCEL_SPIKE_SIGMAS * o.sqrt(
-            s.noise_a2)
-        bias.fuse_rest(s, classify(s, p, gyro, accel, mag, dt, o), o)
-        # at rest the block mean of the gyro is the bias, whatever the accelerometer says; but
-        # the error path trusts the accelerometer only if |a| = ‖g‖: a steady linear
-        # acceleration (constant accelerometer, still gyro: the 25 m/s manoeuvre) is not gravity
-        steady_g = o.sqrt(s.pax * s.pax + s.pay * s.pay + s.paz * s.paz)  # last block's |a|
-        # ... and only without strong vibration: at startup_k1 it would pass into the attitude
-        quick = fast | (s.at_rest & (o.maximum(steady_g - s.g_ref, s.g_ref - steady_g)
-                                     < p.acceleration_threshold_m_s2)
-                        & (s.noise_a2 < p.acceleration_threshold_m_s2 ** 2))
-        # linear-acceleration detector: peak hold of | |a| - ‖g‖ |
-        # linear-acceleration detector, blind to vibration: | |a| - ‖g‖ | of the accelerometer
-        # low-passed over ACCEL_LOWPASS_TIME_CONSTANT_S, or of this very sample when it is a
-        # spike far above the noise measured by the stillness blocks (an impact)
-        aw = o.where(s.last_n <= 1.0, 1.0, dt / (ACCEL_LOWPASS_TIME_CONSTANT_S + dt))
-        s.acx, s.acy, s.acz = (s.acx + aw * (ax - s.acx), s.acy + aw * (ay - s.acy),
-                               s.acz + aw * (az - s.acz))
-        an_lp = o.sqrt(s.acx * s.acx + s.acy * s.acy + s.acz * s.acz)
-        level = o.where(spike, deviation, o.maximum(an_lp - s.g_ref, s.g_ref - an_lp))
-        decayed = s.accel_hold * (p.acceleration_hold_s / (p.acceleration_hold_s + dt))
-        s.accel_hold = o.maximum(level, decayed)
-        # vibration left in the low-pass (white-noise approximation of the 1st-order low-pass,
-        # per axis, from the stillness blocks' noise): not a manoeuvre
-        lp_sigma = o.sqrt(s.noise_a2 / 3.0 * dt / (2.0 * ACCEL_LOWPASS_TIME_CONSTANT_S + dt))
-        accelerating = s.accel_hold > p.acceleration_threshold_m_s2 + ACCEL_DETECT_SIGMAS * lp_sigma
-        rate = o.sqrt((gx - s.bx) ** 2 + (gy - s.by) ** 2 + (gz - s.bz) ** 2)
-        lw = dt / (RATE_LOWPASS_TIME_CONSTANT_S + dt)
-        s.rate_lp = s.rate_lp + lw * (rate - s.rate_lp)
-        # Ryzhkov & Karpenko: e = (a/‖g‖) × ĝ — scaled by gravity, not by |a|, so the error stays
-        # linear in the linear acceleration and the aperiodic unit averages zero-mean
-        # accelerations out
-        ux, uy, uz = ax / s.g_ref, ay / s.g_ref, az / s.g_ref
-        # 2. predicted gravity (up) direction in the sensor frame: third row of R
-        vx = 2.0 * (s.qx * s.qz - s.qw * s.qy)
-        vy = 2.0 * (s.qy * s.qz + s.qw * s.qx)
-        vz = 1.0 - 2.0 * (s.qx * s.qx + s.qy * s.qy)
-        ex, ey, ez = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-        en = o.sqrt(ex * ex + ey * ey + ez * ez)
-        s.ex, s.ey, s.ez, s.error_norm = ex, ey, ez, en
-        # 3. saturation by norm
-        # tight clip only for linear acceleration on a still gyro (impacts, vibration, manoeuvres)
-        tight = accelerating & (s.rate_lp < p.rotation_threshold_rad_s)
-        limit = o.where(tight, p.saturation_limit_rad, p.wide_saturation_limit_rad)
-        clipped = p.use_saturation & o.not_(quick) & (en > limit)
-        scale = o.where(clipped, limit / o.maximum(en, 1e-300), 1.0)
-        # 4. aperiodic unit in the world frame (weight 1 = unit bypassed)
-        wx, wy, wz = _rotate(s.qw, s.qx, s.qy, s.qz, ex * scale, ey * scale, ez * scale)
-        # aided (velocity aiding took the vehicle's acceleration out): nothing slow to average
-        lag = o.where(s.aided, AIDED_LAG_TIME_CONSTANT_S, p.aperiodic_time_constant_s)
-        weight = dt / (o.where(quick, QUICK_LAG_TIME_CONSTANT_S, lag) + dt)
-        s.lx = s.lx + weight * (wx - s.lx)
-        s.ly = s.ly + weight * (wy - s.ly)
-        s.lz = s.lz + weight * (wz - s.lz)
-        # quick (start-up, recovery, rest): the error bypasses the unit, which follows it with a
-        # short lag and is turned by every quick correction (below), so that when the bypass
-        # ends it holds the recent error as the current estimate sees it: not the last noisy
-        # sample, nor a memory of errors the quick loop has already removed
-        lx, ly, lz = o.where(quick, wx, s.lx), o.where(quick, wy, s.ly), o.where(quick, wz, s.lz)
-        fx, fy, fz = _rotate(s.qw, -s.qx, -s.qy, -s.qz, lx, ly, lz)
-        s.fx, s.fy, s.fz = fx, fy, fz
-        # 5. PI(+k3) regulator: integral states are the bias estimate. While the bias is
-        # uncertain (no still phase yet) the loop runs faster: k2 up to bias_learning_k2 in
-        # proportion to the bias variance, k1 kept at least critically damping it
-        k1, k2 = bias.learning_gains(s, p, o)
-        # an error beyond BIAS_LEARNING_MAX_ERROR_RAD is an attitude error (a gyro over range, a
-        # glitch), not a bias: the integral does not learn from it (anti-windup; beyond 90° the
-        # cross product shrinks again, hence the sign of the dot product too)
-        small = (en < BIAS_LEARNING_MAX_ERROR_RAD) & (ux * vx + uy * vy + uz * vz > 0.0)
-        bias.integrate(s, p, (fx, fy, fz), k1, k2, learn, small, dt, o)
-        k1 = o.where(quick, o.maximum(k1, p.startup_k1), k1)
-        gain = k1 * dt / (1.0 + k1 * dt)
-        dw, dx, dy, dz = _exp(gain * fx, gain * fy, gain * fz, o)
-        s.qw, s.qx, s.qy, s.qz = _mul(s.qw, s.qx, s.qy, s.qz, dw, dx, dy, dz)
-        # the correction also turns, by the share aperiodic_prefilter (quick: fully), the
-        # filtered error the unit holds (1: a pre-filter of the specific force whose memory
-        # matches the current estimate, as VQF's; 0: the thesis's unit on the error). Not while
-        # a linear acceleration is detected (the tight clip): what the unit holds then is the
-        # disturbance, and the thesis's unit rejects it best (impacts 18.9' -> 17.8')
-        dec = gain * o.where(quick, 1.0, o.where(tight, 0.0, p.prefilter))
-        s.lx, s.ly, s.lz = s.lx - dec * s.lx, s.ly - dec * s.ly, s.lz - dec * s.lz
-        # recovery: a long unbroken clip is a real attitude error, not a disturbance
-        s.clip_timer_s = o.where(clipped, s.clip_timer_s + dt, 0.0)
-        enter = (p.recovery_trigger_s > 0.0) & (s.clip_timer_s >= p.recovery_trigger_s) & learn
-        leave = s.recovering & (en < 0.5 * limit)
-        s.recovery_count = s.recovery_count + o.where(enter, 1, 0)
-        s.recovering = o.where(s.recovering, o.not_(leave), enter)
-        s.clip_timer_s = o.where(enter, 0.0, s.clip_timer_s)
-        s.clipped = clipped
-
+        quick, accelerating = classify_motion(s, p, gyro, accel, mag, fast, dt, o)
+        u, v, en = tilt_error(s, accel, o)
+        scale, limit, tight, clipped = saturate(s, p, en, quick, accelerating, o)
+        f = aperiodic(s, p, scale, quick, dt, o)
+        regulate(s, p, f, en, u, v, quick, tight, learn, dt, o)
+        recover(s, p, clipped, en, limit, learn, dt, o)
     bias.clamp(s, p, o)
 
     s.mag_status = o.where(p.use_mag, MAG_NONE, MAG_DISABLED)
     if mag is not None:
-        _magnetometer(s, p, mag, fast, learn, o)
+        heading(s, p, mag, fast, learn, o)
     _normalize(s, o)
     s.phase = o.where(
         s.recovering, PHASE_RECOVERING, o.where(startup, PHASE_STARTUP, PHASE_RUNNING)
     )
 
 
-def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: Any) -> None:
-    """Step 6: heading correction from one magnetometer sample (any unit)."""
+def predict(s: StepState, gyro: tuple, dt: Any, o: Any) -> None:
+    """Stage 1: q ← Exp_z(z_m·dt) ⊗ q ⊗ Exp((ω − b)·dt) [gyro rad/s, dt s]; the field
+    directions the heading channel checks samples against turn with the body."""
+    gx, gy, gz = gyro
+    dw, dx, dy, dz = _exp((gx - s.bx) * dt, (gy - s.by) * dt, (gz - s.bz) * dt, o)
+    qw, qx, qy, qz = _mul(s.qw, s.qx, s.qy, s.qz, dw, dx, dy, dz)
+    s.qw, s.qx, s.qy, s.qz = qw, qx, qy, qz
+    turn_heading(s, s.z_m * dt, o)
+    s.mvx, s.mvy, s.mvz = _rotate(dw, -dx, -dy, -dz, s.mvx, s.mvy, s.mvz)
+    s.mcx, s.mcy, s.mcz = _rotate(dw, -dx, -dy, -dz, s.mcx, s.mcy, s.mcz)
+    s.mmx, s.mmy, s.mmz = _rotate(dw, -dx, -dy, -dz, s.mmx, s.mmy, s.mmz)
+
+
+def classify_motion(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple | None,
+                    fast: Any, dt: Any, o: Any) -> tuple[Any, Any]:
+    """Before the error: rest or motion, and is there a linear acceleration → (quick, accelerating).
+
+    The stillness blocks (``stillness.classify``) and their bias measurement at rest; quick: the
+    error bypasses the clip and the unit (``fast``, or at rest with |a| = ‖g‖ and no strong
+    vibration); the linear-acceleration detector (peak hold of the 50 ms low-passed
+    | |a| − ‖g‖ | [m/s²], or of a spike: an impact); the rotation-rate low-pass [rad/s].
+    """
+    gx, gy, gz = gyro
+    ax, ay, az = accel
+    an = o.sqrt(ax * ax + ay * ay + az * az)
+    s.g_ref = o.where(s.g_ref > 0.0, s.g_ref, p.gravity_m_s2)  # ‖g‖: prior, learned below
+    deviation = o.maximum(an - s.g_ref, s.g_ref - an)  # | |a| - ‖g‖ |
+    # an impact: a single sample far above the noise of the last block (see the detector)
+    spike = deviation > p.acceleration_threshold_m_s2 + ACCEL_SPIKE_SIGMAS * o.sqrt(s.noise_a2)
+    bias.fuse_rest(s, classify(s, p, gyro, accel, mag, dt, o), o)
+    # at rest the block mean of the gyro is the bias, whatever the accelerometer says; but
+    # the error path trusts the accelerometer only if |a| = ‖g‖: a steady linear
+    # acceleration (constant accelerometer, still gyro: the 25 m/s manoeuvre) is not gravity
+    steady_g = o.sqrt(s.pax * s.pax + s.pay * s.pay + s.paz * s.paz)  # last block's |a|
+    # ... and only without strong vibration: at startup_k1 it would pass into the attitude
+    quick = fast | (s.at_rest & (o.maximum(steady_g - s.g_ref, s.g_ref - steady_g)
+                                 < p.acceleration_threshold_m_s2)
+                    & (s.noise_a2 < p.acceleration_threshold_m_s2 ** 2))
+    # linear-acceleration detector, blind to vibration: | |a| - ‖g‖ | of the accelerometer
+    # low-passed over ACCEL_LOWPASS_TIME_CONSTANT_S, or of this very sample when it is a
+    # spike far above the noise measured by the stillness blocks (an impact)
+    aw = o.where(s.last_n <= 1.0, 1.0, dt / (ACCEL_LOWPASS_TIME_CONSTANT_S + dt))
+    s.acx, s.acy, s.acz = (s.acx + aw * (ax - s.acx), s.acy + aw * (ay - s.acy),
+                           s.acz + aw * (az - s.acz))
+    an_lp = o.sqrt(s.acx * s.acx + s.acy * s.acy + s.acz * s.acz)
+    level = o.where(spike, deviation, o.maximum(an_lp - s.g_ref, s.g_ref - an_lp))
+    decayed = s.accel_hold * (p.acceleration_hold_s / (p.acceleration_hold_s + dt))
+    s.accel_hold = o.maximum(level, decayed)
+    # vibration left in the low-pass (white-noise approximation of the 1st-order low-pass,
+    # per axis, from the stillness blocks' noise): not a manoeuvre
+    lp_sigma = o.sqrt(s.noise_a2 / 3.0 * dt / (2.0 * ACCEL_LOWPASS_TIME_CONSTANT_S + dt))
+    accelerating = s.accel_hold > p.acceleration_threshold_m_s2 + ACCEL_DETECT_SIGMAS * lp_sigma
+    rate = o.sqrt((gx - s.bx) ** 2 + (gy - s.by) ** 2 + (gz - s.bz) ** 2)
+    lw = dt / (RATE_LOWPASS_TIME_CONSTANT_S + dt)
+    s.rate_lp = s.rate_lp + lw * (rate - s.rate_lp)
+    return quick, accelerating
+
+
+def tilt_error(s: StepState, accel: tuple, o: Any) -> tuple[tuple, tuple, Any]:
+    """Stage 2: e = (a/‖g‖) × ĝ (into s.ex, s.ey, s.ez, s.error_norm) → (a/‖g‖, ĝ, |e|).
+
+    Ryzhkov & Karpenko: scaled by gravity, not by |a|, so the error stays linear in the linear
+    acceleration and the aperiodic unit averages zero-mean accelerations out. ĝ: the predicted
+    gravity (up) direction in the sensor frame, the third row of R.
+    """
+    ax, ay, az = accel
+    ux, uy, uz = ax / s.g_ref, ay / s.g_ref, az / s.g_ref
+    vx = 2.0 * (s.qx * s.qz - s.qw * s.qy)
+    vy = 2.0 * (s.qy * s.qz + s.qw * s.qx)
+    vz = 1.0 - 2.0 * (s.qx * s.qx + s.qy * s.qy)
+    ex, ey, ez = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+    en = o.sqrt(ex * ex + ey * ey + ez * ez)
+    s.ex, s.ey, s.ez, s.error_norm = ex, ey, ez, en
+    return (ux, uy, uz), (vx, vy, vz), en
+
+
+def saturate(s: StepState, p: Any, en: Any, quick: Any, accelerating: Any,
+             o: Any) -> tuple[Any, Any, Any, Any]:
+    """Stage 3: saturation by norm → (scale of e, clip level L [rad], tight, clipped).
+
+    The tight clip only for a linear acceleration on a still gyro (impacts, vibration,
+    manoeuvres); never while quick."""
+    tight = accelerating & (s.rate_lp < p.rotation_threshold_rad_s)
+    limit = o.where(tight, p.saturation_limit_rad, p.wide_saturation_limit_rad)
+    clipped = p.use_saturation & o.not_(quick) & (en > limit)
+    scale = o.where(clipped, limit / o.maximum(en, TINY), 1.0)
+    return scale, limit, tight, clipped
+
+
+def aperiodic(s: StepState, p: Any, scale: Any, quick: Any, dt: Any, o: Any) -> tuple:
+    """Stage 4: the aperiodic unit 1/(T s+1) in the world frame on the saturated error →
+    f = R⁻ᵀ·l in the sensor frame [rad] (quick: the error bypasses the unit)."""
+    ex, ey, ez = s.ex * scale, s.ey * scale, s.ez * scale
+    wx, wy, wz = _rotate(s.qw, s.qx, s.qy, s.qz, ex, ey, ez)
+    # aided (velocity aiding took the vehicle's acceleration out): nothing slow to average
+    lag = o.where(s.aided, AIDED_LAG_TIME_CONSTANT_S, p.aperiodic_time_constant_s)
+    weight = dt / (o.where(quick, QUICK_LAG_TIME_CONSTANT_S, lag) + dt)
+    s.lx = s.lx + weight * (wx - s.lx)
+    s.ly = s.ly + weight * (wy - s.ly)
+    s.lz = s.lz + weight * (wz - s.lz)
+    # quick (start-up, recovery, rest): the error bypasses the unit, which follows it with a
+    # short lag and is turned by every quick correction (regulate), so that when the bypass
+    # ends it holds the recent error as the current estimate sees it: not the last noisy
+    # sample, nor a memory of errors the quick loop has already removed
+    lx, ly, lz = o.where(quick, wx, s.lx), o.where(quick, wy, s.ly), o.where(quick, wz, s.lz)
+    fx, fy, fz = _rotate(s.qw, -s.qx, -s.qy, -s.qz, lx, ly, lz)
+    s.fx, s.fy, s.fz = fx, fy, fz
+    return fx, fy, fz
+
+
+def regulate(s: StepState, p: Any, f: tuple, en: Any, u: tuple, v: tuple, quick: Any,
+             tight: Any, learn: Any, dt: Any, o: Any) -> None:
+    """Stage 5: the PI(+k3) regulator on f; its integral states are the bias estimate.
+
+    While the bias is uncertain (no still phase yet) the loop runs faster: k2 up to
+    bias_learning_k2 in proportion to the bias variance, k1 kept at least critically damping
+    it. The correction q ← q ⊗ Exp(g(k1)·f) also turns the unit's memory by the share
+    aperiodic_prefilter (quick: fully; tight clip: not at all).
+    """
+    fx, fy, fz = f
+    ux, uy, uz = u
+    vx, vy, vz = v
+    k1, k2 = bias.learning_gains(s, p, o)
+    # an error beyond BIAS_LEARNING_MAX_ERROR_RAD is an attitude error (a gyro over range, a
+    # glitch), not a bias: the integral does not learn from it (anti-windup; beyond 90° the
+    # cross product shrinks again, hence the sign of the dot product too)
+    small = (en < BIAS_LEARNING_MAX_ERROR_RAD) & (ux * vx + uy * vy + uz * vz > 0.0)
+    bias.integrate(s, p, (fx, fy, fz), k1, k2, learn, small, dt, o)
+    k1 = o.where(quick, o.maximum(k1, p.startup_k1), k1)
+    gain = k1 * dt / (1.0 + k1 * dt)
+    dw, dx, dy, dz = _exp(gain * fx, gain * fy, gain * fz, o)
+    s.qw, s.qx, s.qy, s.qz = _mul(s.qw, s.qx, s.qy, s.qz, dw, dx, dy, dz)
+    # 1: a pre-filter of the specific force whose memory matches the current estimate, as
+    # VQF's; 0: the thesis's unit on the error. Not while a linear acceleration is detected
+    # (the tight clip): what the unit holds then is the disturbance, and the thesis's unit
+    # rejects it best (impacts 18.9' -> 17.8')
+    dec = gain * o.where(quick, 1.0, o.where(tight, 0.0, p.prefilter))
+    s.lx, s.ly, s.lz = s.lx - dec * s.lx, s.ly - dec * s.ly, s.lz - dec * s.lz
+
+
+def recover(s: StepState, p: Any, clipped: Any, en: Any, limit: Any, learn: Any, dt: Any,
+            o: Any) -> None:
+    """After the regulator: a clip unbroken for recovery_trigger_s [s] is a real attitude
+    error, not a disturbance: recovery (as start-up) until |e| < RECOVERY_EXIT_FRACTION · L."""
+    s.clip_timer_s = o.where(clipped, s.clip_timer_s + dt, 0.0)
+    enter = (p.recovery_trigger_s > 0.0) & (s.clip_timer_s >= p.recovery_trigger_s) & learn
+    leave = s.recovering & (en < RECOVERY_EXIT_FRACTION * limit)
+    s.recovery_count = s.recovery_count + o.where(enter, 1, 0)
+    s.recovering = o.where(s.recovering, o.not_(leave), enter)
+    s.clip_timer_s = o.where(enter, 0.0, s.clip_timer_s)
+    s.clipped = clipped
+
+
+def heading(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: Any) -> None:
+    """Stage 6: the heading channel: one magnetometer sample (any unit) checked against the
+    field reference, then the heading correction ('yaw' or 'full' mode)."""
     mx, my, mz = mag
     mn = o.sqrt(mx * mx + my * my + mz * mz)
     ux, uy, uz = mx / mn, my / mn, mz / mn
@@ -367,7 +437,7 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
     s.mag_ref_dip = o.where(learning, s.mag_ref_dip + (dip - s.mag_ref_dip) / n, s.mag_ref_dip)
     s.mag_ref_count = o.where(learning, n, s.mag_ref_count)
     off_norm = o.maximum(
-        mn / o.maximum(s.mag_ref_norm, 1e-300) - 1.0, 1.0 - mn / o.maximum(s.mag_ref_norm, 1e-300)
+        mn / o.maximum(s.mag_ref_norm, TINY) - 1.0, 1.0 - mn / o.maximum(s.mag_ref_norm, TINY)
     )
     off_dip = o.maximum(dip - s.mag_ref_dip, s.mag_ref_dip - dip)
     # the measured direction, low-passed (every sample; turned by the gyro between samples)
@@ -407,7 +477,7 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
     s.mvx, s.mvy, s.mvz = _toward_unit((s.mvx, s.mvy, s.mvz), (ux, uy, uz),
                                        o.where(disturbed, 0.0, a), o)
 
-    usable = p.use_mag & o.not_(disturbed) & (horizontal > 1e-3)
+    usable = p.use_mag & o.not_(disturbed) & (horizontal > MAG_MIN_HORIZONTAL)
     s.mag_status = o.where(p.use_mag, o.where(disturbed, MAG_REJECTED, MAG_USED), MAG_DISABLED)
     s.mag_last_time_s = o.where(usable, s.time_s, s.mag_last_time_s)
     first = usable & o.not_(s.heading_initialized)
@@ -422,14 +492,15 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
                                                  s.mag_clip_timer_s + dt_m, 0.0),
                                  o.where(disturbed, 0.0, s.mag_clip_timer_s))
     enter = (p.recovery_trigger_s > 0.0) & (s.mag_clip_timer_s >= p.recovery_trigger_s)
-    leave = usable & (o.maximum(yaw_error, -yaw_error) < 0.1 * p.mag_saturation_limit_rad)
+    leave = usable & (o.maximum(yaw_error, -yaw_error)
+                      < MAG_RECOVERY_EXIT_FRACTION * p.mag_saturation_limit_rad)
     s.mag_recovering = o.where(s.mag_recovering, o.not_(leave), enter)
     s.mag_clip_timer_s = o.where(enter, 0.0, s.mag_clip_timer_s)
     quick = fast | s.mag_recovering
     r1 = o.where(quick, o.maximum(p.r1, p.startup_k1), p.r1)
     gain = o.where(usable, r1 * dt_m / (1.0 + r1 * dt_m), 0.0)
     ldt = o.where(usable & learn, dt_m, 0.0)
-    limit = o.where(quick, 4.0, p.mag_saturation_limit_rad)
+    limit = o.where(quick, MAG_QUICK_LIMIT_RAD, p.mag_saturation_limit_rad)
 
     # 'yaw' mode (and the first heading fix of either mode): rotate about the world vertical
     s.yaw_error_rad = o.where(usable, yaw_error, 0.0)
@@ -445,7 +516,7 @@ def _magnetometer(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: An
     px, py, pz = _rotate(s.qw, -s.qx, -s.qy, -s.qz, rx, ry, rz)
     ex, ey, ez = uy * pz - uz * py, uz * px - ux * pz, ux * py - uy * px
     en = o.sqrt(ex * ex + ey * ey + ez * ez)
-    scale = o.where(full, o.minimum(1.0, limit / o.maximum(en, 1e-300)), 0.0)
+    scale = o.where(full, o.minimum(1.0, limit / o.maximum(en, TINY)), 0.0)
     ex, ey, ez = ex * scale, ey * scale, ez * scale
     s.bx, s.by, s.bz = s.bx - p.r2 * ldt * ex, s.by - p.r2 * ldt * ey, s.bz - p.r2 * ldt * ez
     dw, dx, dy, dz = _exp(gain * ex, gain * ey, gain * ez, o)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from typing import Any, NamedTuple
 
+from cf_estimator.core.ops import TINY
 from cf_estimator.core.state import StepState
 
 #: Stillness: a change of the block means within this many standard deviations of the observed
@@ -36,6 +37,11 @@ REST_GATE_SIGMAS = 3.0
 #: Time constant [s] with which ‖g‖ follows |a| while the sensor is steady: slow enough that a
 #: steady linear acceleration of a few seconds (the thesis's 25 m/s in 5 s) is not absorbed.
 GRAVITY_TIME_CONSTANT_S = 10.0
+#: Smallest variance [(rad/s)²] of a block's gyro mean as a bias measurement (a noiseless gyro).
+REST_MIN_VARIANCE = 1e-12
+#: √3: the norm of a gyro mean with every component at bias_limit_rad_s (a block whose mean is
+#: beyond it cannot be a bias).
+SQRT3 = 1.7320508075688772
 
 
 class RestMeasurement(NamedTuple):
@@ -114,7 +120,7 @@ def classify(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple | None,
     # the field direction of this block against the previous one (both with samples)
     mag_seen = (s.blk_mn > 0.0) & (s.pm_n > 0.0)
     bm = o.maximum(o.sqrt(s.blk_mx * s.blk_mx + s.blk_my * s.blk_my + s.blk_mz * s.blk_mz),
-                   1e-300)
+                   TINY)
     umx, umy, umz = s.blk_mx / bm, s.blk_my / bm, s.blk_mz / bm
     dm = o.sqrt((umx - s.pmx) ** 2 + (umy - s.pmy) ** 2 + (umz - s.pmz) ** 2)
     turned = mag_seen & (dm > REST_MAG_TOLERANCE_RAD + p.rest_gyro_threshold_rad_s * s.blk_t)
@@ -123,12 +129,12 @@ def classify(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple | None,
         & (dg < tol_g)
         & (da < tol_a)
         & o.not_(turned)
-        & (o.sqrt(mgx * mgx + mgy * mgy + mgz * mgz) < p.bias_limit_rad_s * 1.7320508075688772)
+        & (o.sqrt(mgx * mgx + mgy * mgy + mgz * mgz) < p.bias_limit_rad_s * SQRT3)
     )
     # a steady turn at a constant rate looks still; a block whose gyro mean is far from the bias
     # estimate on any axis (beyond REST_GATE_SIGMAS of the estimate's and the block's spread) is
     # motion however long it lasts
-    r = o.maximum(noise_g2 / (3.0 * n), 1e-12)
+    r = o.maximum(noise_g2 / (3.0 * n), REST_MIN_VARIANCE)
     gate = p.rest_gyro_threshold_rad_s + REST_GATE_SIGMAS * o.sqrt(s.bias_var + r)
     consistent = ((o.maximum(mgx - s.bx, s.bx - mgx) < gate)
                   & (o.maximum(mgy - s.by, s.by - mgy) < gate)
