@@ -512,15 +512,12 @@ class _Run:
             if t >= next_bias:
                 marks.append(k)
                 next_bias = t + _BIAS_SAMPLE_PERIOD_S
-        flt = self.pipe.filter
-
-        def on_mark(k: int) -> None:
-            self.bias_t.append(ts[k])
-            self.bias.append(tuple(float(c) for c in flt.gyro_bias_rad_s))
-            self.bias_sigma.append(bias_sigma(flt._state))  # noqa: SLF001 - read-only
-
-        c = bulk.commit(self.pipe, run, marks, on_mark)
+        c = bulk.commit(self.pipe, run)
         self.next_bias_t = next_bias
+        if marks:  # the bias estimate after each marked row, as imu() samples it
+            self.bias_t.extend(ts[k] for k in marks)
+            self.bias.extend(tuple(r) for r in c.extra[marks, 15:18].tolist())
+            self.bias_sigma.extend(c.extra[marks, 10].tolist())
         bag = self.bag
         if bag is not None:  # every output message of the run encoded and written at once
             sec, nsec = np.asarray(run.sec, dtype=np.int64), np.asarray(run.nsec, dtype=np.int64)

@@ -64,12 +64,13 @@
 #define REST_MIN_VARIANCE 1e-12
 #define SQRT3 1.7320508075688772
 #define BIAS_LEARNING_MIN_K1 1e-3
-#define EXTRA_COLUMNS 15
+#define EXTRA_COLUMNS 18
 #define GYRO_LIMIT_RAD_S 1e9 /* filter.GYRO_LIMIT_RAD_S */
 /* extra columns: e(3), b(3), clipped, phase, at_rest, mag_status, bias sigma, l_x, l_y (the
  * aperiodic unit's world-frame state, horizontal: what the accelerometer channel corrects by),
  * yaw_error_rad (the heading channel's last error, 0 when no sample was used), noise_a2 (the
- * stillness blocks' accelerometer noise): what the covariance model (core/covariance.py) reads */
+ * stillness blocks' accelerometer noise): what the covariance model (core/covariance.py) reads;
+ * then the gyro-bias estimate b - up*z_m (3, filter.gyro_bias_rad_s): what the replay samples */
 
 /* ------------------------------------------------------------------------------------------ */
 typedef struct {
@@ -910,6 +911,13 @@ static PyObject *State_run(StateObject *self, PyObject *args)
             x[12] = s->ly;
             x[13] = s->yaw_error_rad;
             x[14] = s->noise_a2;
+            /* the gyro-bias estimate b - up*z_m (filter.gyro_bias_rad_s), sensor frame */
+            const double upx = 2.0 * (s->qx * s->qz - s->qw * s->qy);
+            const double upy = 2.0 * (s->qy * s->qz + s->qw * s->qx);
+            const double upz = 1.0 - 2.0 * (s->qx * s->qx + s->qy * s->qy);
+            x[15] = s->bx - s->z_m * upx;
+            x[16] = s->by - s->z_m * upy;
+            x[17] = s->bz - s->z_m * upz;
         }
     }
     Py_END_ALLOW_THREADS

@@ -54,6 +54,7 @@ the unreferenced variance) if larger. Plain floats: it runs per message.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 from cf_estimator.core.step import AIDED_LAG_TIME_CONSTANT_S, PHASE_RECOVERING, PHASE_STARTUP
 
@@ -155,3 +156,41 @@ class OrientationCovariance:
         else:
             yaw = self.yaw_unref
         return (tilt, 0.0, 0.0, 0.0, tilt, 0.0, 0.0, 0.0, yaw)
+
+    def steps(self, dt_s: Sequence[float], clipped: Sequence[bool],
+              bias_sigma_rad_s: Sequence[float], phase: Sequence[float],
+              error_norm_rad: Sequence[float], lx_rad: Sequence[float], ly_rad: Sequence[float],
+              noise_a2: Sequence[float], heading_initialized: bool,
+              yaw_error_rad: Sequence[float], mag_used: Sequence[bool],
+              mag_age_s: Sequence[float | None]) -> tuple[list[float], list[float]]:
+        """:meth:`step` over rows (not aided), the same operations in the same order, as
+        (tilt, yaw) variances per row [rad²] (the bulk pipeline: one call per run instead of one
+        per row). ``bias_sigma_rad_s`` NaN: no estimate yet (the prior is used)."""
+        clip_s, ms, yaw_err = self._clip_s, self._ms, self._yaw_err
+        k1, prior, inv_6g2 = self.k1, self.bias_prior, self._inv_6g2
+        tilt0, yaw0, yaw_unref = self.tilt0, self.yaw0, self.yaw_unref
+        tilt_cap, yaw_cap = max(_PI2, tilt0), max(_PI2, yaw_unref, yaw0)
+        settling = _SETTLING
+        tilts: list[float] = []
+        yaws: list[float] = []
+        for dt, clip, sb, ph, en, lx, ly, na2, ye, used, age in zip(
+                dt_s, clipped, bias_sigma_rad_s, phase, error_norm_rad, lx_rad, ly_rad,
+                noise_a2, yaw_error_rad, mag_used, mag_age_s, strict=True):
+            clip_s = clip_s + dt if clip else 0.0
+            sigma_b = sb if sb == sb else prior
+            kdt = k1 * dt
+            ms += kdt / (1.0 + kdt) * (lx * lx + ly * ly - ms)
+            e_t = en if ph in settling else 0.0
+            drift = sigma_b * clip_s
+            noise = na2 * inv_6g2 * dt
+            tilts.append(min(tilt0 + e_t * e_t + drift * drift + 0.5 * (ms + noise * k1),
+                             tilt_cap))
+            if heading_initialized:
+                if used:
+                    yaw_err = abs(ye)
+                yd = sigma_b * (age or 0.0)
+                yaws.append(min(yaw0 + yaw_err**2 + yd * yd, yaw_cap))
+            else:
+                yaws.append(yaw_unref)
+        self._clip_s, self._ms, self._yaw_err = clip_s, ms, yaw_err
+        return tilts, yaws

@@ -136,15 +136,27 @@ class FilterStatus:
 #: aperiodic unit's world-frame state l_x, l_y [rad] (ENU inside: the horizontal error the
 #: accelerometer channel corrects the tilt by; the covariance model averages it), the heading
 #: channel's last error [rad] (0 when the step used no magnetometer sample) and the stillness
-#: blocks' accelerometer noise noise_a2 [(m/s²)²]: what core/covariance.py reads.
-EXTRA_COLUMNS = 15
+#: blocks' accelerometer noise noise_a2 [(m/s²)²]: what core/covariance.py reads; then the
+#: gyro-bias estimate (3, rad/s, sensor: :attr:`ComplementaryFilter.gyro_bias_rad_s`, b minus
+#: the heading channel's rate on the sensor axes): what the replay samples.
+EXTRA_COLUMNS = 18
 
 
 def state_extras(s: Any) -> tuple:
     """One ``extra_out`` row (EXTRA_COLUMNS values) from a filter state (_kernel.c writes the
     same columns in ``State.run``)."""
+    bx, by, bz = gyro_bias_of(s)
     return (s.ex, s.ey, s.ez, s.bx, s.by, s.bz, s.clipped, s.phase, s.at_rest, s.mag_status,
-            bias_sigma(s), s.lx, s.ly, s.yaw_error_rad, s.noise_a2)
+            bias_sigma(s), s.lx, s.ly, s.yaw_error_rad, s.noise_a2, bx, by, bz)
+
+
+def gyro_bias_of(s: Any) -> tuple[float, float, float]:
+    """The gyro-bias estimate [rad/s, sensor] of a state: the integral b minus the heading
+    channel's world-vertical rate z_m on the sensor axes (b − Rᵀ·ẑ·z_m)."""
+    upx = 2.0 * (s.qx * s.qz - s.qw * s.qy)
+    upy = 2.0 * (s.qy * s.qz + s.qw * s.qx)
+    upz = 1.0 - 2.0 * (s.qx * s.qx + s.qy * s.qy)
+    return (s.bx - s.z_m * upx, s.by - s.z_m * upy, s.bz - s.z_m * upz)
 
 
 def bias_sigma(s: Any) -> float:
@@ -357,13 +369,7 @@ class ComplementaryFilter:
         The regulator's integral state b plus the heading channel's world-vertical rate
         correction z_m seen on the sensor axes at the current attitude: b − Rᵀ·ẑ·z_m.
         """
-        s = self._state
-        up = (
-            2.0 * (s.qx * s.qz - s.qw * s.qy),
-            2.0 * (s.qy * s.qz + s.qw * s.qx),
-            1.0 - 2.0 * (s.qx * s.qx + s.qy * s.qy),
-        )
-        return np.array([s.bx, s.by, s.bz]) - s.z_m * np.array(up)
+        return np.array(gyro_bias_of(self._state))
 
     def status(self) -> FilterStatus:
         """The internal decisions of the last step (see :class:`FilterStatus`)."""

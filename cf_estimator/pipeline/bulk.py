@@ -327,13 +327,9 @@ class Committed:
     accel: np.ndarray  #: (n, 3) [m/s²]
 
 
-def commit(pipe: ImuPipeline, run: Scan, marks: Sequence[int] = (),
-           on_mark: Callable[[int], None] | None = None) -> Committed:
-    """Run the filter over ``run`` and update ``pipe`` as the per-message calls would.
-
-    ``marks``: row indices after which ``on_mark(row)`` is called with the filter in the state
-    it has after that row (the replay samples the bias estimate there).
-    """
+def commit(pipe: ImuPipeline, run: Scan) -> Committed:
+    """Run the filter over ``run`` and update ``pipe`` as the per-message calls would (the
+    state after each row, the bias estimate among it, is in ``Committed.extra``)."""
     t0 = perf_counter()
     p = pipe
     n = run.n
@@ -353,20 +349,10 @@ def commit(pipe: ImuPipeline, run: Scan, marks: Sequence[int] = (),
     dt = np.array(run.dt, dtype=np.float64)
     q = np.empty((n, 4))
     extra = np.empty((n, EXTRA_COLUMNS))
-    # the filter in pieces ending at each of the caller's marks (the covariance model's inputs,
-    # the heading error among them, are columns of extra)
-    marked = set(marks)
-    a = 0
+    # the filter over the run (the covariance model's inputs and the bias estimate after each
+    # row are columns of extra)
+    f.run_rows(gyro, acc, mag, dt, 0, q, extra)
     state = f._state  # noqa: SLF001 - read-only
-    for b in sorted({*(m + 1 for m in marks), n}):
-        if b <= a:
-            continue
-        f.run_rows(gyro[a:b], acc[a:b], None if mag is None else mag[a:b], dt[a:b], 0,
-                   q[a:b], extra[a:b])
-        state = f._state  # noqa: SLF001
-        if on_mark is not None and b - 1 in marked:
-            on_mark(b - 1)
-        a = b
     # -- counters, statistics and the covariance model, row by row ------------------------------
     st = run.state
     status = extra[:, 9].tolist()
@@ -380,24 +366,29 @@ def commit(pipe: ImuPipeline, run: Scan, marks: Sequence[int] = (),
     heading = bool(state.heading_initialized)  # constant over the run
     model = p._cov_model
     last_mag = p._last_mag_used_ns
-    covs: list[tuple[float, ...]] = []
     t_ns = run.t_ns
-    for k in range(n):
-        used = False
-        if run.mag[k] is not None:
-            ms = status[k]
-            if ms == MAG_USED:
-                p._mag_used += 1
-                used = True
-                last_mag = run.mag_t_ns[k]
-            elif ms == MAG_REJECTED:
-                p._mag_rejected += 1
-            elif ms == MAG_DISABLED:
-                p._mag_disabled += 1
-        sb = sigma[k]
-        covs.append(model.step(run.dt[k], clipped[k], None if sb != sb else sb, phase[k], en[k],
-                               lx[k], ly[k], noise_a2[k], heading, yaw_err[k] if used else 0.0,
-                               used, None if last_mag is None else (t_ns[k] - last_mag) * 1e-9))
+    used = [False] * n
+    ages: list[float | None] = [None] * n
+    if mag_rows or last_mag is not None:
+        for k in range(n):
+            if run.mag[k] is not None:
+                ms = status[k]
+                if ms == MAG_USED:
+                    p._mag_used += 1
+                    used[k] = True
+                    last_mag = run.mag_t_ns[k]
+                elif ms == MAG_REJECTED:
+                    p._mag_rejected += 1
+                elif ms == MAG_DISABLED:
+                    p._mag_disabled += 1
+            if last_mag is not None:
+                ages[k] = (t_ns[k] - last_mag) * 1e-9
+    tilts, yaws = model.steps(run.dt, clipped, sigma, phase, en, lx, ly, noise_a2, heading,
+                              yaw_err, used, ages)
+    cov = np.zeros((n, 9))
+    cov[:, 0] = tilts
+    cov[:, 4] = tilts
+    cov[:, 8] = yaws
     p._last_mag_used_ns = last_mag
     p._mag_dropped += st["dropped"]
     p._mag_stale += st["stale"]
@@ -445,5 +436,5 @@ def commit(pipe: ImuPipeline, run: Scan, marks: Sequence[int] = (),
     w.proc_sum += elapsed
     if elapsed / n > w.proc_max:
         w.proc_max = elapsed / n
-    return Committed(q, rpy, extra, en, np.array(covs, dtype=np.float64).reshape(n, 9),
+    return Committed(q, rpy, extra, en, cov,
                      p._av_cov.value, p._la_cov.value, gyro, acc)
