@@ -130,15 +130,53 @@ def describe_unknown(names: Sequence[str]) -> str:
 
 
 def _read_doc(path: Path) -> Mapping:
+    """The parsed file; ParameterError (one line naming the file, and for bad YAML the line and
+    column) when it cannot be read, is not YAML, or is not a mapping of node sections."""
     try:
-        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, yaml.YAMLError) as exc:
-        raise ParameterError(f"{path}: cannot read parameter file: {exc}".splitlines()[0]) from None
-    if doc is None:
-        raise ParameterError(f"{path}: empty parameter file")
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        why = getattr(exc, "strerror", None) or str(exc).splitlines()[0]
+        raise ParameterError(f"{path}: cannot read the parameter file: {why}") from None
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark else ""
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise ParameterError(f"{path}: not valid YAML{where}: {problem}") from None
     if not isinstance(doc, Mapping):
-        raise ParameterError(f"{path}: not a ROS 2 parameter file (top level is not a mapping)")
+        raise ParameterError(f"{path}: not a ROS 2 parameter file (expected '/**:' or "
+                             "'<node name>:' then 'ros__parameters:')")
     return doc
+
+
+def check_params_file(path: str | Path) -> str | None:
+    """None if ``path`` is a readable YAML mapping (what rcl can load), else the problem (one
+    line naming the file)."""
+    try:
+        _read_doc(Path(path))
+    except ParameterError as exc:
+        return str(exc)
+    return None
+
+
+def params_files(args: Sequence[str]) -> list[str]:
+    """The ``--params-file`` paths among ROS arguments (after ``--ros-args``, up to ``--``)."""
+    files: list[str] = []
+    in_ros = False
+    it = iter(args)
+    for arg in it:
+        if arg == "--ros-args":
+            in_ros = True
+        elif arg == "--":
+            in_ros = False
+        elif in_ros and arg == "--params-file":
+            path = next(it, None)
+            if path is not None:
+                files.append(path)
+        elif in_ros and arg.startswith("--params-file="):
+            files.append(arg.partition("=")[2])
+    return files
 
 
 def _applicable_values(

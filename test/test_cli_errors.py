@@ -375,7 +375,7 @@ def test_usual_topic_names_with_the_wrong_types(tmp_path, capsys):
         for k in range(50):
             t = 10**9 + k * 10**7
             bag.write("/imu/data_raw", io.VECTOR3_STAMPED_TYPE, t,
-                      io._types()[io.VECTOR3_STAMPED_TYPE](  # noqa: SLF001
+                      io.typestore().types[io.VECTOR3_STAMPED_TYPE](
                           header=io.header(1, k * 10**7, "imu"), vector=io.vector3((0, 0, 9.8))))
     _replay_fails(capsys, src, tmp_path, 1, "no IMU messages",
                   "/imu/data_raw [geometry_msgs/msg/Vector3Stamped]")

@@ -171,6 +171,19 @@ def aided(label: str) -> bool:
     return ", aided" in label
 
 
+def consistency(label: str) -> bool:
+    """A covariance consistency row (ours only; issue 27): held by its own target test, not by
+    a baseline (closer to consistent is better, in either direction)."""
+    return "beyond 2σ" in label or "mean(e²/σ²)" in label
+
+
+def _row(rows: dict, start: str) -> dict:
+    """The values of the one row whose label starts with ``start``."""
+    found = [v["values"] for k, v in rows.items() if k.startswith(start)]
+    assert len(found) == 1, (start, list(rows))
+    return found[0]
+
+
 def test_the_guards_share_the_run_benchmarks_md_quotes():
     assert f"<!-- output of: {CROSS_COMMAND} -->" in (REPO / "BENCHMARKS.md").read_text()
 
@@ -178,10 +191,11 @@ def test_the_guards_share_the_run_benchmarks_md_quotes():
 def test_every_row_has_a_baseline_and_vqf_beside(table):
     rows, doc = table
     assert doc["columns"] == ["cf_estimator", "cf_estimator_offline", "vqf", "vqf_offline"]
-    assert list(rows) == list(BASELINE), "a row was added, removed or renamed: set BASELINE"
+    guarded = [label for label in rows if not consistency(label)]
+    assert guarded == list(BASELINE), "a row was added, removed or renamed: set BASELINE"
     for label, row in rows.items():
         assert math.isfinite(row["values"]["cf_estimator"]), label
-        if aided(label):
+        if aided(label) or consistency(label):
             assert math.isnan(row["values"]["vqf"]), label
         else:
             assert math.isfinite(row["values"]["vqf"]), label
@@ -256,7 +270,7 @@ def test_target_broad_9d_at_most_2_deg(table):
 
 def test_target_no_broad_group_more_than_10_percent_behind_vqf_online(table):
     rows, _ = table
-    groups = [k for k in rows if k.startswith("BROAD")]
+    groups = [k for k in rows if k.startswith("BROAD") and not consistency(k)]
     assert len(groups) == 28
     behind = {k: _ours(rows, k) / _ours(rows, k, "vqf") for k in groups}
     assert max(behind.values()) <= 1.10, behind
@@ -287,6 +301,24 @@ def test_target_magnet_on_a_turning_sensor_heading_below_5_deg_on_every_seed(tab
     for column in OURS:
         bound = row["values"][column] + (n - 1) * row["noise"][column]
         assert bound < 5.0, (column, bound)
+
+
+def test_covariance_consistency_rows(table):
+    """Issue 27: the reported orientation covariance against the real errors (σ² = cov[0] +
+    cov[4] for the tilt, cov[8] for the heading). Fitted on phantom4 (vertical) only; mean(e²/σ²)
+    in [0.5, 2] on every family it can be held on, the beyond-2σ share within the issue's
+    25 %. BROAD's lab-grade IMU and optical reference have errors below the fitted floor: its
+    tilt is conservative (reported, not asserted in range) but never overconfident."""
+    rows, _ = table
+    for label in ("EuRoC MH: tilt", "phantom4: tilt", "phantom4 horizontal: tilt",
+                  "BROAD all 9-D: heading"):
+        ratio = _row(rows, f"{label} mean(e²/σ²)")["cf_estimator"]
+        beyond = _row(rows, f"{label} beyond 2σ")["cf_estimator"]
+        assert 0.5 <= ratio <= 2.0, (label, ratio)
+        assert beyond <= 25.0, (label, beyond)
+    assert _row(rows, "BROAD all: tilt mean(e²/σ²)")["cf_estimator"] <= 2.0
+    for f in ("0.3", "0.5", "1"):  # the compass: conservative while a magnet is on
+        assert _row(rows, f"magnet {f}x on a turning sensor: heading mean")["cf_estimator"] <= 2.0
 
 
 def test_unknown_family_is_refused_in_one_line(capsys):

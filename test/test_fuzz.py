@@ -721,16 +721,25 @@ def test_valid_parameter_changes_apply_at_the_next_sample_without_reset(changes,
         # the published frame: the core's, turned by declination and yaw offset (frames.py)
         w, x, y, z = pipe.output_frame.apply(ref.update(gyro, accel, dt, None))
         assert out.orientation_xyzw == (x, y, z, w)
-    # the covariance model (docs/ros_interface.md) with the new floors: tilt = floor + the
-    # error norm squared while settling (+ the clipped drift while clipped)
+    # the covariance model (docs/ros_interface.md, core/covariance.py) with the new floors and
+    # gains: tilt = floor + the error norm squared while settling + half the mean square of the
+    # accelerometer channel's disagreement (the model's state) and of the vibration term
+    # (+ the clipped drift while clipped)
     cov = out.orientation_covariance
     status = pipe.filter.status()
     settling = status.phase in ("startup", "recovering")
     floor = pp_new.orientation_covariance_rad2
-    tilt = min(floor + (status.error_norm_rad**2 if settling else 0.0), max(math.pi**2, floor))
+    model = pipe._cov_model  # noqa: SLF001 - the mean square it holds after this step
+    assert model.tilt0 == floor and model.k1 == fp_new.k1 and model.lag_s == (
+        fp_new.aperiodic_time_constant_s)
+    tilt = floor + (status.error_norm_rad**2 if settling else 0.0)
+    if dt is not None:
+        noise = pipe.filter._state.noise_a2 / (6.0 * fp_new.gravity_m_s2**2) * dt  # noqa: SLF001
+        tilt += 0.5 * (model._ms + noise * fp_new.k1)  # noqa: SLF001
+    tilt = min(tilt, max(math.pi**2, floor))
     assert cov[0] == cov[4]
-    if status.clipped:
-        assert cov[0] >= tilt * (1.0 - 1e-12)
+    if status.clipped or dt is None:
+        assert cov[0] >= min(floor, math.pi**2) * (1.0 - 1e-12)
     else:
         assert cov[0] == pytest.approx(tilt, rel=1e-12, abs=0.0)
     if status.heading_initialized:

@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from cf_estimator.node.cf_estimator_node import check_params_file, params_files
+from cf_estimator.params_file import check_params_file, params_files
 
 WITHOUT_RCLPY = (
     "import sys; sys.modules['rclpy'] = None; "  # import rclpy now fails as on a ROS-less machine

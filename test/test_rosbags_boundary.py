@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cf_estimator.bag import cdr, io
+from cf_estimator.bag import cdr, io, writer
 
 SETUP = Path(__file__).resolve().parents[1] / "setup.py"
 
@@ -65,7 +65,7 @@ def test_past_the_pin_the_public_writer_writes_the_same_file(tmp_path, monkeypat
     (tmp_path / "public").mkdir()
     direct = _write(tmp_path / "direct" / "bag", 6000)  # same name: it is inside the file
     assert len(direct) > 2**20
-    monkeypatch.setattr(io, "rosbags_version", lambda: (0, 12, 0))
+    monkeypatch.setattr(writer, "rosbags_version", lambda: (0, 12, 0))
     with io.OutputBag(tmp_path / "probe") as bag:
         assert bag._mcap is None
     public = _write(tmp_path / "public" / "bag", 6000)

@@ -27,6 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from cf_estimator.bag.types import IMU_TYPE
+
 IMU_DOUBLES = 37
 MAG_DOUBLES = 12
 _CDR_LE = b"\x00\x01\x00\x00"
@@ -130,9 +132,7 @@ def decode_block(raws: Sequence[bytes], msgtype: str, ros2: bool,
                  fallback: Callable[[bytes, str], Any]) -> Block:
     """Decode ``raws`` (one type) into a :class:`Block`: NumPy views where the layout is the
     plain one, ``fallback(raw, msgtype)`` (rosbags' deserializer) for the others."""
-    from cf_estimator.bag import io
-
-    imu = msgtype == io.IMU_TYPE
+    imu = msgtype == IMU_TYPE
     n_doubles = IMU_DOUBLES if imu else MAG_DOUBLES
     block = Block(len(raws), imu)
     if _decode_uniform(block, raws, ros2, n_doubles):

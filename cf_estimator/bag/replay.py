@@ -95,6 +95,10 @@ class ReplaySeries:
     ref_q_wxyz: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     #: offline replay: (N, 3) the online filter's roll, pitch, yaw [rad] beside the offline ones
     online_rpy_rad: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    #: (N,) reported tilt variance cov[0] + cov[4] [rad²] (the online filter's; NaN before init)
+    tilt_var_rad2: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: (N,) reported yaw variance cov[8] [rad²]
+    yaw_var_rad2: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 @dataclass
@@ -226,6 +230,37 @@ def error_statistics(
     stats["rpy_max_deg"] = {k: _deg_max(errs[k]) for k in ("roll", "pitch", "yaw")}
     scored = {"t_s": t_s, "q_ref": qr, "q_est_aligned": qe, **errs}
     return stats, scored
+
+
+def covariance_consistency(series: ReplaySeries, scored: dict[str, np.ndarray],
+                           heading: bool) -> dict[str, Any]:
+    """Is the reported orientation covariance honest against the reference? (issue 27)
+
+    At each scored reference sample from :data:`cf_estimator.bench.consistency.SETTLE_S` after
+    the first estimate on: the inclination error against the reported tilt variance
+    ``cov[0] + cov[4]`` (and, with ``heading``: the magnetometer references it, the heading
+    error against ``cov[8]``), the variance interpolated to the reference stamp. ``{"tilt":
+    figures, "heading": figures | None}`` with the figures of
+    :func:`cf_estimator.bench.consistency.consistency` (share beyond 2σ [%], mean(e²/σ²)).
+    """
+    from cf_estimator.bench.consistency import SETTLE_S, consistency
+
+    t = series.t_s
+    out: dict[str, Any] = {"settle_s": SETTLE_S, "tilt": None, "heading": None}
+    ok = np.isfinite(series.tilt_var_rad2) if series.tilt_var_rad2.size == t.size else None
+    if ok is None or not ok.any():
+        return out
+    t_ok = t[ok]
+    ts = scored["t_s"]
+    keep = ts >= t_ok[0] + SETTLE_S
+    pairs = [("tilt", "inclination", series.tilt_var_rad2)]
+    if heading:
+        pairs.append(("heading", "heading", series.yaw_var_rad2))
+    for name, err, var in pairs:
+        v = np.interp(ts, t_ok, var[ok])
+        c = consistency(scored[err][keep], v[keep])
+        out[name] = c if c["samples"] else None
+    return out
 
 
 def _deg_rms(x: np.ndarray) -> float:
@@ -398,6 +433,8 @@ class _Run:
         self.bias: list[tuple[float, float, float]] = []
         self.bias_sigma: list[float] = []
         self.rest: list[bool] = []
+        self.tilt_var: list[float] = []
+        self.yaw_var: list[float] = []
         self.next_bias_t = -math.inf
         self.warnings: list[str] = []
         self._seen: set[str] = set()
@@ -501,6 +538,8 @@ class _Run:
         self.clipped.extend((c.extra[:, 6] != 0.0).tolist())
         self.enorm.extend(c.error_norm)
         self.rest.extend((c.extra[:, 8] != 0.0).tolist())
+        self.tilt_var.extend((c.covariance[:, 0] + c.covariance[:, 4]).tolist())
+        self.yaw_var.extend(c.covariance[:, 8].tolist())
 
     def imu(self, log_ns: int, msg: Any) -> None:
         out = self.pipe.on_imu(msg)
@@ -529,6 +568,9 @@ class _Run:
         self.clipped.append(bool(s.clipped) and out.initialized)
         self.enorm.append(float(s.error_norm))
         self.rest.append(bool(s.at_rest) and out.initialized)
+        oc = out.orientation_covariance
+        self.tilt_var.append(oc[0] + oc[4] if out.initialized else math.nan)
+        self.yaw_var.append(oc[8] if out.initialized else math.nan)
         if t >= self.next_bias_t and out.initialized:
             self.bias_t.append(t)
             self.bias.append(tuple(float(c) for c in flt.gyro_bias_rad_s))
@@ -823,6 +865,9 @@ def replay_variants(
                 if px4_in is not None and ref_topic == ulog.ATTITUDE_TOPIC:
                     stats["kind"] = "autopilot"
                     stats["label"] = AUTOPILOT_LABEL
+                if not r.offline and scored and stats.get("kind") != "autopilot":
+                    # the reported sigma against a ground truth (not against another estimate)
+                    stats["covariance"] = covariance_consistency(series, scored, mag_in_use)
                 summary["reference"] = stats
                 summary["rmse_deg"] = stats.get("rmse_deg")
             if px4_in is not None:
@@ -959,4 +1004,6 @@ def _series(r: _Run, ref_t: Sequence[float], ref_q: Sequence[Any]) -> ReplaySeri
                                 dtype=float).reshape(-1, 3),
         ref_t_s=np.asarray(ref_t, dtype=float),
         ref_q_wxyz=np.asarray(ref_q, dtype=float).reshape(-1, 4),
+        tilt_var_rad2=np.asarray(r.tilt_var, dtype=float),
+        yaw_var_rad2=np.asarray(r.yaw_var, dtype=float),
     )

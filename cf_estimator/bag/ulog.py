@@ -214,9 +214,9 @@ class UlogBag(io.InputBag):
                     log = ULog(io_.BytesIO(data))  # type: ignore[arg-type]
                 cut = None if log.file_corruption else _cut_at(data)
         except ULogException as exc:
-            raise io.BagError(f"{path}: not a readable PX4 ulog: {io._short(exc)}") from exc
+            raise io.BagError(f"{path}: not a readable PX4 ulog: {io.one_line(exc)}") from exc
         except Exception as exc:  # noqa: BLE001 - pyulog on garbage raises anything
-            raise io.BagError(f"{path}: not a readable PX4 ulog: {io._short(exc)}") from exc
+            raise io.BagError(f"{path}: not a readable PX4 ulog: {io.one_line(exc)}") from exc
         self.log_start_us = int(log.start_timestamp)
         self.log_last_us = int(log.last_timestamp)
         size = len(data)

@@ -10,6 +10,11 @@ offline (its own offline mode). Rows (inclination [deg] unless marked):
   acceleration): RMS after the first 10 s, mean and worst recording;
 - BROAD: 6-D inclination RMSE and 9-D total RMSE per trial group;
 - thesis scenarios (simulated, 6-D): peak tilt error [arcmin] in the disturbance windows;
+- covariance consistency (issue 27), per data family, our online filter only: the share of
+  samples whose error is beyond 2σ [%] and mean(e²/σ²) [1], σ the reported orientation
+  covariance (tilt: √(cov[0] + cov[4]), 6-D; heading: √cov[8], BROAD 9-D), after 10 s
+  (:mod:`cf_estimator.bench.consistency`; a consistent Gaussian: tilt 1.8 %, heading 4.6 %,
+  mean 1);
 - compass (simulated, 9-D): a magnet of 0.3, 0.5 and 1x the Earth field fixed to a turning
   sensor for 60 s (:mod:`cf_estimator.scenarios.compass`): heading error [deg] while it is on,
   peak and RMS, mean over COMPASS_SEEDS;
@@ -53,6 +58,8 @@ COMPASS_FRACTIONS = (0.3, 0.5, 1.0)
 COMPASS_SEEDS = (0, 1, 2, 3)
 MIDAIR_STARTS_S = (20.0, 40.0, 60.0)
 SCENARIOS = ("impacts", "vibration", "acceleration")
+#: A consistent Gaussian's share beyond 2σ (tilt 2-D with σ² = cov[0] + cov[4]; heading 1-D).
+CONSISTENT_BEYOND = {"tilt": "1.8 %", "heading": "4.6 %"}
 
 
 def _euroc_gnss() -> VelocityInput:
@@ -174,9 +181,13 @@ def _compass_case(args: tuple[float, int, FilterParams, tuple[str, ...]]
     params = dataclasses.replace(params, use_mag=True)
     c = magnet_on_turning_sensor(seed, fraction)
     qs = {}
+    var = None
     for col, offline in (("cf_estimator", False), ("cf_estimator_offline", True)):
-        qs[col] = estimate(c.gyro_rad_s, c.accel_m_s2, c.mag_T, rate_hz=c.rate_hz,
-                           params=params, offline=offline).quaternion
+        r = estimate(c.gyro_rad_s, c.accel_m_s2, c.mag_T, rate_hz=c.rate_hz, params=params,
+                     offline=offline)
+        qs[col] = r.quaternion
+        if not offline:  # the reported heading variance, for the consistency rows
+            var = r.orientation_covariance()[:, 8][c.magnet_on]
     if "vqf" in peers:
         qs["vqf"] = peer_mod.run_vqf(c.gyro_rad_s, c.accel_m_s2, c.mag_T, c.rate_hz)["9d"]
         qs["vqf_offline"] = peer_mod.run_vqf_offline(c.gyro_rad_s, c.accel_m_s2, c.mag_T,
@@ -185,10 +196,14 @@ def _compass_case(args: tuple[float, int, FilterParams, tuple[str, ...]]
     for col, q in qs.items():
         e = heading_error_deg(q, c.q_true)[c.magnet_on]
         out[col] = (float(np.max(e)), float(np.sqrt(np.mean(e * e))))
+        if col == "cf_estimator":
+            out["_consistency"] = (np.radians(e), var)
     return fraction, out
 
 
 def _compass_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> list[Row]:
+    import numpy as np
+
     from cf_estimator.bench.parallel import run_tasks
 
     work = [(f, s, params, tuple(peers)) for f in COMPASS_FRACTIONS for s in COMPASS_SEEDS]
@@ -201,6 +216,17 @@ def _compass_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> list
             rows.append(Row("compass", f"magnet {fraction:g}x on a turning sensor: heading {what}",
                             "deg", {c: sum(r[c][i] for r in runs) / len(runs) for c in cols},
                             {c: standard_error([r[c][i] for r in runs]) for c in cols}))
+    from cf_estimator.bench.consistency import consistency
+
+    for fraction in COMPASS_FRACTIONS:  # the reported heading sigma while the magnet is on
+        parts = [out["_consistency"] for f, out in found if f == fraction]
+        k = consistency(np.concatenate([p[0] for p in parts]),
+                        np.concatenate([p[1] for p in parts]))
+        label = f"magnet {fraction:g}x on a turning sensor: heading"
+        rows.append(Row("compass", f"{label} beyond 2σ (consistent 4.6 %)", "%",
+                        {"cf_estimator": k["beyond_2sigma_pct"]}))
+        rows.append(Row("compass", f"{label} mean(e²/σ²) (consistent 1)", "1",
+                        {"cf_estimator": k["mean_ratio"]}))
     return rows
 
 
@@ -264,6 +290,23 @@ def _scenario_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> lis
     return rows
 
 
+def _consistency_rows(folder: Path, family: str, label: str, params: FilterParams,
+                      jobs: int) -> list[Row]:
+    from cf_estimator.bench.consistency import family_consistency
+
+    found = family_consistency(folder, family, params, jobs)
+    rows = []
+    for what, head in (("tilt", f"{label}: tilt"), ("heading", f"{label} 9-D: heading")):
+        if what not in found:
+            continue
+        c = found[what]
+        rows.append(Row(family, f"{head} beyond 2σ (consistent {CONSISTENT_BEYOND[what]})", "%",
+                        {"cf_estimator": c["beyond_2sigma_pct"]}))
+        rows.append(Row(family, f"{head} mean(e²/σ²) (consistent 1)", "1",
+                        {"cf_estimator": c["mean_ratio"]}))
+    return rows
+
+
 def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = FAMILIES,
               jobs: int = 1, progress: Callable[[str], None] | None = None) -> CrossResult:
     """The table over the families below ``data`` (``euroc/``, ``phantom4/``, ``broad/``)."""
@@ -295,20 +338,23 @@ def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = 
         if family == "euroc":
             result.rows += _euroc_rows(folder, params, peers, jobs, "euroc", "EuRoC MH",
                                        midair=True)
+            result.rows += _consistency_rows(folder, family, "EuRoC MH", params, jobs)
         elif family in ("phantom4", "phantom4_horizontal"):
             label = "phantom4" if family == "phantom4" else "phantom4 horizontal"
             result.rows += _euroc_rows(folder, params, peers, jobs, family, label,
                                        midair=False)
+            result.rows += _consistency_rows(folder, family, label, params, jobs)
         elif family == "broad":
             # BROAD's evaluation runs VQF's offline mode with VQF itself
             result.rows += _broad_rows(folder, params, [p for p in peers if p == "vqf"], jobs)
+            result.rows += _consistency_rows(folder, family, "BROAD all", params, jobs)
         else:
             raise ValueError(f"unknown family {family!r}; valid: {', '.join(FAMILIES)}")
     return result
 
 
 def format_table(result: CrossResult) -> str:
-    """Rows × the four columns, two decimals (arcmin and s one), '-' where not applicable."""
+    """Rows × the four columns, two decimals (arcmin, s and % one), '-' where not applicable."""
     w = max([len(r.label) for r in result.rows] + [6])
     cw = max(len(c) for c in COLUMNS)
     lines = [f"  {'row':<{w}}  {'unit':<6}" + "".join(f"  {c:>{cw}}" for c in COLUMNS)]
@@ -316,7 +362,7 @@ def format_table(result: CrossResult) -> str:
         cells = []
         for c in COLUMNS:
             v = r.values.get(c, math.nan)
-            text = "-" if not math.isfinite(v) else (f"{v:.1f}" if r.unit in ("arcmin", "s")
+            text = "-" if not math.isfinite(v) else (f"{v:.1f}" if r.unit in ("arcmin", "s", "%")
                                                      else f"{v:.2f}")
             cells.append(f"  {text:>{cw}}")
         lines.append(f"  {r.label:<{w}}  {r.unit:<6}" + "".join(cells))

@@ -186,6 +186,25 @@ def _fmt(value: Any, spec: str, missing: str = "n/a") -> str:
     return format(value, spec)
 
 
+def covariance_line(cov: dict[str, Any]) -> str | None:
+    """``covariance`` line of the summary: the reported σ against the reference's errors after
+    settle_s (share beyond 2σ, mean(e²/σ²); a consistent Gaussian: tilt 1.8 %, heading 4.6 %,
+    mean 1), or None when nothing was scored."""
+    parts = []
+    for name, sigma2, consistent in (("tilt", "cov[0]+cov[4]", "1.8"),
+                                     ("heading", "cov[8]", "4.6")):
+        c = cov.get(name)
+        if c:
+            share = _fmt(c.get("beyond_2sigma_pct"), ".1f")
+            parts.append(f"{name} (σ² = {sigma2}) beyond 2σ {share} % (consistent "
+                         f"{consistent} %), mean(e²/σ²) "
+                         f"{_fmt(c.get('mean_ratio'), '.2f')} (consistent 1)")
+    if not parts:
+        return None
+    return (f"covariance vs reference after {_fmt(cov.get('settle_s'), '.0f')} s: "
+            + "; ".join(parts))
+
+
 def print_summary(s: dict[str, Any], out: Any = None) -> None:
     """The human summary of one replay (to ``out``, default stdout). Every figure that may be
     None or NaN in the JSON prints as ``n/a``."""
@@ -238,6 +257,10 @@ def print_summary(s: dict[str, Any], out: Any = None) -> None:
         else:
             print(f"error   vs {ref['topic']}: no reference sample overlaps the estimate",
                   file=out)
+    if ref and ref.get("covariance"):
+        line = covariance_line(ref["covariance"])
+        if line:
+            print(line, file=out)
     print(f"speed   {_fmt(s.get('messages_per_s'), '.0f')} messages/s "
           f"({_fmt(s.get('wall_time_s'), '.2f')} s)", file=out)
 

@@ -64,9 +64,12 @@
 #define REST_MIN_VARIANCE 1e-12
 #define SQRT3 1.7320508075688772
 #define BIAS_LEARNING_MIN_K1 1e-3
-#define EXTRA_COLUMNS 11
+#define EXTRA_COLUMNS 15
 #define GYRO_LIMIT_RAD_S 1e9 /* filter.GYRO_LIMIT_RAD_S */
-/* extra columns: e(3), b(3), clipped, phase, at_rest, mag_status, bias sigma */
+/* extra columns: e(3), b(3), clipped, phase, at_rest, mag_status, bias sigma, l_x, l_y (the
+ * aperiodic unit's world-frame state, horizontal: what the accelerometer channel corrects by),
+ * yaw_error_rad (the heading channel's last error, 0 when no sample was used), noise_a2 (the
+ * stillness blocks' accelerometer noise): what the covariance model (core/covariance.py) reads */
 
 /* ------------------------------------------------------------------------------------------ */
 typedef struct {
@@ -903,6 +906,10 @@ static PyObject *State_run(StateObject *self, PyObject *args)
             x[8] = s->at_rest;
             x[9] = s->mag_status;
             x[10] = sqrt(s->bias_var);
+            x[11] = s->lx;
+            x[12] = s->ly;
+            x[13] = s->yaw_error_rad;
+            x[14] = s->noise_a2;
         }
     }
     Py_END_ALLOW_THREADS

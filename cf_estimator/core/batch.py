@@ -9,19 +9,26 @@ before that are NaN. Row k is integrated over dt_k = t_k − t_{k−1} with samp
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from cf_estimator.core import quaternion as quat
 from cf_estimator.core.batched import BatchedFilter
+from cf_estimator.core.covariance import (
+    TILT_FLOOR_RAD2,
+    UNREFERENCED_YAW_RAD2,
+    YAW_FLOOR_RAD2,
+    OrientationCovariance,
+)
 from cf_estimator.core.filter import EXTRA_COLUMNS, ComplementaryFilter, state_extras
 from cf_estimator.core.input_checks import warn_units
 from cf_estimator.core.kernel import resolve_backend
 from cf_estimator.core.params import FilterParams
-from cf_estimator.core.step import BIAS_CONVERGED_SIGMA_RAD_S
+from cf_estimator.core.step import BIAS_CONVERGED_SIGMA_RAD_S, MAG_USED
 from cf_estimator.core.velocity import (
     VelocityAiding,
     VelocityStatus,
@@ -47,6 +54,11 @@ class EstimateResult:
     velocity_aided: np.ndarray | None = None
     #: the velocity aiding's counters and heading offset at the end (None: no velocity given)
     velocity_status: VelocityStatus | None = None
+    #: the parameters the filter ran with (the covariance model reads k1, gravity, bias prior)
+    params: FilterParams | None = None
+    #: (N, EXTRA_COLUMNS) the (forward) pass's signals the covariance model reads
+    extra: np.ndarray | None = field(default=None, repr=False)
+    _cov: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def gyro_bias_converged(self) -> np.ndarray:
@@ -54,9 +66,87 @@ class EstimateResult:
         :data:`~cf_estimator.core.step.BIAS_CONVERGED_SIGMA_RAD_S`."""
         return self.gyro_bias_sigma_rad_s < BIAS_CONVERGED_SIGMA_RAD_S
 
+    def orientation_covariance(self, tilt0_rad2: float = TILT_FLOOR_RAD2,
+                               yaw0_rad2: float = YAW_FLOOR_RAD2,
+                               unreferenced_yaw_rad2: float = UNREFERENCED_YAW_RAD2
+                               ) -> np.ndarray:
+        """(N, 9) ``orientation_covariance`` per sample [rad²] (row-major 3×3 about the world
+        x, y, z axes; NaN before initialisation): the node's model
+        (:mod:`cf_estimator.core.covariance`) on this run's signals; the floors default to the
+        node's (``orientation_covariance_rad2``, ``yaw_covariance_rad2``,
+        ``unreferenced_yaw_covariance_rad2``). A magnetometer sample counts as the IMU
+        sample's stamp. With ``offline=True`` it describes the causal pass (the acausal
+        estimate is at least as good)."""
+        defaults = (tilt0_rad2, yaw0_rad2, unreferenced_yaw_rad2) == (
+            TILT_FLOOR_RAD2, YAW_FLOOR_RAD2, UNREFERENCED_YAW_RAD2)
+        if defaults and self._cov is not None:
+            return self._cov
+        if self.extra is None or self.params is None:
+            raise ValueError("this result carries no filter signals (built by hand?)")
+        cov = covariance_rows(self.extra, self.t_s, self.quaternion, self.params, tilt0_rad2,
+                              yaw0_rad2, unreferenced_yaw_rad2, self.velocity_aided)
+        if defaults:
+            self._cov = cov
+        return cov
+
+    @property
+    def tilt_sigma_rad(self) -> np.ndarray:
+        """(N,) σ of the inclination error [rad]: √(cov[0] + cov[4]) of
+        :meth:`orientation_covariance` (default floors): the expected e² of a 2-D error."""
+        c = self.orientation_covariance()
+        return np.sqrt(c[:, 0] + c[:, 4])
+
+    @property
+    def heading_sigma_rad(self) -> np.ndarray:
+        """(N,) σ of the heading error [rad]: √cov[8] of :meth:`orientation_covariance`
+        (``unreferenced_yaw_covariance_rad2`` while no magnetometer sample has fixed it)."""
+        return np.sqrt(self.orientation_covariance()[:, 8])
+
     def euler_rad(self) -> np.ndarray:
         """(N, 3) roll, pitch, yaw [rad] (aerospace ZYX) of :attr:`quaternion`."""
         return quat.to_euler(self.quaternion)
+
+
+def covariance_rows(extra: np.ndarray, t_s: np.ndarray, q: np.ndarray, params: FilterParams,
+                    tilt0_rad2: float = TILT_FLOOR_RAD2, yaw0_rad2: float = YAW_FLOOR_RAD2,
+                    unreferenced_yaw_rad2: float = UNREFERENCED_YAW_RAD2,
+                    aided: np.ndarray | None = None) -> np.ndarray:
+    """(N, 9) orientation covariance [rad²] of a run from its ``extra`` rows (the node's model,
+    :class:`~cf_estimator.core.covariance.OrientationCovariance`, row by row from the first
+    row with a finite ``q``; NaN before); ``aided``: (N,) bool, the velocity-aided samples."""
+    n = extra.shape[0]
+    out = np.full((n, 9), np.nan)
+    ok = np.flatnonzero(np.isfinite(q[:, 0]))
+    if ok.size == 0:
+        return out
+    model = OrientationCovariance(tilt0_rad2, yaw0_rad2, unreferenced_yaw_rad2,
+                                  params.bias_prior_sigma_rad_s, params.k1, params.gravity_m_s2,
+                                  params.aperiodic_time_constant_s)
+    start = int(ok[0])
+    x = extra[start:]
+    ts = t_s[start:].tolist()
+    dts = np.diff(t_s[start:], prepend=t_s[start]).tolist()
+    en = np.sqrt(x[:, 0] ** 2 + x[:, 1] ** 2 + x[:, 2] ** 2).tolist()
+    clipped = (x[:, 6] != 0.0).tolist()
+    phase, sigma, status = x[:, 7].tolist(), x[:, 10].tolist(), x[:, 9].tolist()
+    lx, ly = x[:, 11].tolist(), x[:, 12].tolist()
+    yaw_err, na2 = x[:, 13].tolist(), x[:, 14].tolist()
+    ad = [False] * (n - start) if aided is None else aided[start:].tolist()
+    heading = False
+    last: float | None = None
+    rows = []
+    step = model.step
+    for k in range(n - start):
+        used = status[k] == MAG_USED
+        if used:
+            heading = True
+            last = ts[k]
+        sb = sigma[k]
+        rows.append(step(dts[k], clipped[k], None if sb != sb else sb, phase[k], en[k], lx[k],
+                         ly[k], na2[k], heading, yaw_err[k] if used else 0.0, used,
+                         None if last is None else ts[k] - last, ad[k]))
+    out[start:] = rows
+    return out
 
 
 def sample_times(n: int, rate_hz: float | None, timestamps_s: ArrayLike | None) -> np.ndarray:
@@ -129,8 +219,18 @@ def _run_filter(f: ComplementaryFilter, gyro: np.ndarray, acc: np.ndarray, mg: n
             start = 1
         q_out[start - 1] = f.orientation_tuple()
         if extra_out is not None:
-            extra_out[start - 1] = state_extras(f._state)  # noqa: SLF001 - read-only
+            extra_out[start - 1] = _init_extras(f, mg is not None and start - 1 >= 0
+                                                and bool(np.all(np.isfinite(mg[start - 1]))))
         f.run_rows(gyro, acc, mg, np.diff(t, prepend=t[0]), start, q_out, extra_out)
+
+
+def _init_extras(f: ComplementaryFilter, with_mag: bool) -> tuple:
+    """The extra row of the initialising sample: its magnetometer sample, when it set the
+    heading, counts as used (as the pipeline counts it for the covariance)."""
+    row = list(state_extras(f._state))  # noqa: SLF001 - read-only
+    if with_mag and f._state.heading_initialized:  # noqa: SLF001
+        row[9] = MAG_USED
+    return tuple(row)
 
 
 def velocity_arrays(velocity: tuple[ArrayLike, ArrayLike]) -> tuple[np.ndarray, np.ndarray]:
@@ -162,6 +262,7 @@ def run_aided(f: ComplementaryFilter, aiding: VelocityAiding, gyro: np.ndarray, 
     arrival = (t_v + latency_s)[order].tolist()
     tv_rows, v_rows = t_v[order].tolist(), v[order].tolist()
     nv, jv = len(arrival), 0
+    init_row = -1
     g_rows, a_rows = gyro.tolist(), acc.tolist()
     m_rows = mg.tolist() if mg is not None else None
     ts = t.tolist()
@@ -176,6 +277,7 @@ def run_aided(f: ComplementaryFilter, aiding: VelocityAiding, gyro: np.ndarray, 
                 f.update(g_rows[i], a_rows[i], 1.0, m)
             if not f.initialized:
                 continue
+            init_row = i
             a_in = a_rows[i]
             aiding.aided_accel(ts[i], g_rows[i], a_in, 1e-9, f.orientation_tuple(),
                                filter_bias(f))
@@ -189,7 +291,8 @@ def run_aided(f: ComplementaryFilter, aiding: VelocityAiding, gyro: np.ndarray, 
         if accel_out is not None:
             accel_out[i] = a_in
         if extra_out is not None:
-            extra_out[i] = state_extras(f._state)  # noqa: SLF001 - read-only
+            extra_out[i] = (_init_extras(f, m is not None and all(math.isfinite(c) for c in m))
+                            if i == init_row else state_extras(f._state))  # noqa: SLF001
 
 
 def estimate(
@@ -252,7 +355,7 @@ def estimate(
     return EstimateResult(
         t, out_q, extra[:, 0:3], extra[:, 6] != 0.0, extra[:, 3:6],
         extra[:, 7].astype(np.int8), extra[:, 8] != 0.0, extra[:, 9].astype(np.int8),
-        extra[:, 10], aided, status,
+        extra[:, 10], aided, status, f.params, extra,
     )
 
 

@@ -132,15 +132,19 @@ class FilterStatus:
 
 
 #: Columns of :meth:`ComplementaryFilter.run_rows`'s ``extra_out``: raw error e (3, rad, sensor),
-#: bias b (3, rad/s, sensor), clipped, phase, at_rest, mag_status, bias sigma [rad/s].
-EXTRA_COLUMNS = 11
+#: bias b (3, rad/s, sensor), clipped, phase, at_rest, mag_status, bias sigma [rad/s], and the
+#: aperiodic unit's world-frame state l_x, l_y [rad] (ENU inside: the horizontal error the
+#: accelerometer channel corrects the tilt by; the covariance model averages it), the heading
+#: channel's last error [rad] (0 when the step used no magnetometer sample) and the stillness
+#: blocks' accelerometer noise noise_a2 [(m/s²)²]: what core/covariance.py reads.
+EXTRA_COLUMNS = 15
 
 
 def state_extras(s: Any) -> tuple:
     """One ``extra_out`` row (EXTRA_COLUMNS values) from a filter state (_kernel.c writes the
     same columns in ``State.run``)."""
     return (s.ex, s.ey, s.ez, s.bx, s.by, s.bz, s.clipped, s.phase, s.at_rest, s.mag_status,
-            bias_sigma(s))
+            bias_sigma(s), s.lx, s.ly, s.yaw_error_rad, s.noise_a2)
 
 
 def bias_sigma(s: Any) -> float:

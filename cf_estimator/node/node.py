@@ -41,6 +41,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import Imu, MagneticField
 
+from cf_estimator.node.errors import StartError
 from cf_estimator.params_file import (
     all_specs,
     build_params,
@@ -103,10 +104,6 @@ def descriptor_for(spec: ParamSpec) -> ParameterDescriptor:
             constraints.append(f"range {spec.range_text()}")
     d.additional_constraints = "; ".join(constraints)
     return d
-
-
-class StartError(RuntimeError):
-    """The node cannot start as configured (one line; ``main`` exits with code 2)."""
 
 
 def _type_hint(spec: ParamSpec, text: str) -> str:
@@ -501,7 +498,7 @@ def run(args: list[str]) -> int:
         text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         print(f"{NODE_NAME}: cannot start: {text}", file=sys.stderr)
         return 2
-    from cf_estimator.node.cf_estimator_node import params_files
+    from cf_estimator.params_file import params_files
 
     node = None
     code = 0

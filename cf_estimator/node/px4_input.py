@@ -32,6 +32,7 @@ from geometry_msgs.msg import TwistStamped
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu, MagneticField
 
+from cf_estimator.node.errors import StartError
 from cf_estimator.pipeline import px4
 from cf_estimator.schema import ParamSpec
 
@@ -77,8 +78,6 @@ class Px4Input:
         try:
             from px4_msgs.msg import SensorCombined, VehicleLocalPosition, VehicleMagnetometer
         except ImportError:
-            from cf_estimator.node.node import StartError
-
             raise StartError(MISSING) from None
         self._node = node
         self._invalid = SensorCombined.RELATIVE_TIMESTAMP_INVALID

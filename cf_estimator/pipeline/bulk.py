@@ -14,11 +14,12 @@ threshold, first samples, warnings.
 Equality with the per-message path (same outputs, counters, diagnostics, bit for bit) is tested
 on real and hostile bags (test/test_bulk_decode.py). It relies on: ``run_rows`` = repeated
 ``update`` (a magnetometer row of NaN = no sample), the extra columns of
-:func:`cf_estimator.core.filter.state_extras` (clipped, phase, bias sigma, magnetometer status
-per row: what the orientation covariance model needs, with the heading error read after each
-magnetometer row), and the error norm being ``sqrt(ex² + ey² + ez²)`` of the error vector
-(core/step.py). body_frame's half turn is applied as ``on_imu``/``on_mag`` apply it; with
-velocity aiding the pipeline runs per message.
+:func:`cf_estimator.core.filter.state_extras` (clipped, phase, bias sigma,
+magnetometer status, the aperiodic unit's world-frame state, the heading error and the
+accelerometer noise per row: what the orientation covariance model needs), and the error norm
+being ``sqrt(ex² + ey² + ez²)`` of the error vector (core/step.py). body_frame's half turn
+is applied as ``on_imu``/``on_mag`` apply it; with velocity aiding the pipeline runs per
+message.
 """
 
 from __future__ import annotations
@@ -352,20 +353,17 @@ def commit(pipe: ImuPipeline, run: Scan, marks: Sequence[int] = (),
     dt = np.array(run.dt, dtype=np.float64)
     q = np.empty((n, 4))
     extra = np.empty((n, EXTRA_COLUMNS))
-    # the filter in pieces ending at each magnetometer row (its heading error is read there,
-    # for the covariance) and at each of the caller's marks
-    marked, mag_set = set(marks), set(mag_rows)
-    yaw_err: dict[int, float] = {}
+    # the filter in pieces ending at each of the caller's marks (the covariance model's inputs,
+    # the heading error among them, are columns of extra)
+    marked = set(marks)
     a = 0
     state = f._state  # noqa: SLF001 - read-only
-    for b in sorted({*(m + 1 for m in marks), *(k + 1 for k in mag_rows), n}):
+    for b in sorted({*(m + 1 for m in marks), n}):
         if b <= a:
             continue
         f.run_rows(gyro[a:b], acc[a:b], None if mag is None else mag[a:b], dt[a:b], 0,
                    q[a:b], extra[a:b])
         state = f._state  # noqa: SLF001
-        if b - 1 in mag_set:
-            yaw_err[b - 1] = float(state.yaw_error_rad)
         if on_mark is not None and b - 1 in marked:
             on_mark(b - 1)
         a = b
@@ -377,6 +375,8 @@ def commit(pipe: ImuPipeline, run: Scan, marks: Sequence[int] = (),
     clipped = (extra[:, 6] != 0.0).tolist()
     phase = extra[:, 7].tolist()
     sigma = extra[:, 10].tolist()
+    lx, ly, yaw_err, noise_a2 = (extra[:, 11].tolist(), extra[:, 12].tolist(),
+                                 extra[:, 13].tolist(), extra[:, 14].tolist())
     heading = bool(state.heading_initialized)  # constant over the run
     model = p._cov_model
     last_mag = p._last_mag_used_ns
@@ -396,8 +396,8 @@ def commit(pipe: ImuPipeline, run: Scan, marks: Sequence[int] = (),
                 p._mag_disabled += 1
         sb = sigma[k]
         covs.append(model.step(run.dt[k], clipped[k], None if sb != sb else sb, phase[k], en[k],
-                               heading, yaw_err.get(k, 0.0) if used else 0.0, used,
-                               None if last_mag is None else (t_ns[k] - last_mag) * 1e-9))
+                               lx[k], ly[k], noise_a2[k], heading, yaw_err[k] if used else 0.0,
+                               used, None if last_mag is None else (t_ns[k] - last_mag) * 1e-9))
     p._last_mag_used_ns = last_mag
     p._mag_dropped += st["dropped"]
     p._mag_stale += st["stale"]

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from cf_estimator.core.covariance import TILT_FLOOR_RAD2, UNREFERENCED_YAW_RAD2, YAW_FLOOR_RAD2
 from cf_estimator.schema import ParameterError, param, validate_fields
 
 #: ``body_frame`` choices: the message axes as they are, or one of the two conventions.
@@ -50,21 +51,25 @@ class PipelineParams:
         read_only=True, group="frames",
     )
     orientation_covariance_rad2: float = param(
-        0.0003, "rad^2", "Floor of the variance reported for roll and pitch (diagonal "
-        "of orientation_covariance, rotation about the world x/y axes) once the filter has "
-        "converged, about (1 deg)^2; start-up, recovery and clipped stretches add to it (see "
-        "docs/ros_interface.md, Covariance).",
+        TILT_FLOOR_RAD2, "rad^2", "Floor v0 of the variance reported for roll and pitch "
+        "(diagonal of orientation_covariance, rotation about the world x/y axes): what the "
+        "filter cannot see (accelerometer bias, mounting). Start-up, recovery, clipped "
+        "stretches, the accelerometer channel's disagreement (accelerations) and vibration add "
+        "to it (docs/ros_interface.md, Covariance); the default is fitted on the phantom4 "
+        "vertical campaign.",
         minimum=0.0, maximum=100.0, minimum_exclusive=True, group="output",
     )
     yaw_covariance_rad2: float = param(
-        0.003, "rad^2", "Floor of the variance reported for yaw while the heading is "
-        "referenced by the magnetometer, about (3 deg)^2; the last measured heading error and "
-        "the gyro drift since the last used sample add to it.",
+        YAW_FLOOR_RAD2, "rad^2", "Floor of the variance reported for yaw while the heading is "
+        "referenced by the magnetometer, about (1.1 deg)^2 (fitted on BROAD's undisturbed "
+        "trials); the last measured heading error and the gyro drift since the last used "
+        "sample add to it.",
         minimum=0.0, maximum=100.0, minimum_exclusive=True, group="output",
     )
     unreferenced_yaw_covariance_rad2: float = param(
-        10.0, "rad^2", "Variance reported for yaw while no magnetometer has fixed the heading "
-        "(use_mag false, or no usable sample yet): yaw is then only integrated gyro.",
+        UNREFERENCED_YAW_RAD2, "rad^2", "Variance reported for yaw while no magnetometer has "
+        "fixed the heading (use_mag false, or no usable sample yet): yaw is then only "
+        "integrated gyro.",
         minimum=0.0, maximum=1000.0, minimum_exclusive=True, group="output",
     )
     publish_rpy: bool = param(

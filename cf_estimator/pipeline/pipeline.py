@@ -144,7 +144,8 @@ class ImuPipeline:
         self._la_cov = _CovarianceCache()
         self._cov_model = OrientationCovariance(
             self._pp.orientation_covariance_rad2, self._pp.yaw_covariance_rad2,
-            self._pp.unreferenced_yaw_covariance_rad2, self._fp.bias_prior_sigma_rad_s)
+            self._pp.unreferenced_yaw_covariance_rad2, self._fp.bias_prior_sigma_rad_s,
+            self._fp.k1, self._fp.gravity_m_s2, self._fp.aperiodic_time_constant_s)
         self._apply_derived()
         self._clear_time_state()
 
@@ -213,6 +214,9 @@ class ImuPipeline:
         cov.yaw0 = pp.yaw_covariance_rad2
         cov.yaw_unref = pp.unreferenced_yaw_covariance_rad2
         cov.bias_prior = self._fp.bias_prior_sigma_rad_s
+        cov.k1 = self._fp.k1
+        cov.lag_s = self._fp.aperiodic_time_constant_s
+        cov.set_gravity(self._fp.gravity_m_s2)
         self._max_dt_ns = int(round(pp.max_dt_s * 1e9))
         # 0 = never; a positive value below 0.5 ns must not round to "never"
         self._reset_gap_on = pp.reset_after_gap_s > 0.0

@@ -16,7 +16,14 @@ import numpy as np
 
 from cf_estimator.core.quaternion import from_euler as quat_from_euler_zyx
 from cf_estimator.scenarios import disturbances as dist
-from cf_estimator.scenarios.motion import Truth, hover, multirotor_flight, static, uav_flight
+from cf_estimator.scenarios.motion import (
+    Truth,
+    hover,
+    multirotor_flight,
+    multirotor_zigzag,
+    static,
+    uav_flight,
+)
 from cf_estimator.scenarios.sensors import ImuData, SensorModel, measure
 
 Window = tuple[float, float, str]
@@ -69,18 +76,19 @@ ScenarioFactory = Callable[..., Scenario]
 DEFAULT_RATE_HZ = {
     "static": 200.0, "static_150": 200.0, "flight": 200.0, "impacts": 1000.0,
     "vibration": 1000.0, "acceleration": 200.0, "thesis": 1000.0, "uav": 200.0,
+    "zigzag": 120.0,
 }
 """Default sample rate [Hz] of each scenario (impacts and vibration need ≥ 500/480 Hz)."""
 
 DEFAULT_DURATION_S = {
     "static": 60.0, "static_150": 60.0, "flight": 120.0, "impacts": 70.0, "vibration": 55.0,
-    "acceleration": 45.0, "thesis": 120.0, "uav": 120.0,
+    "acceleration": 45.0, "thesis": 120.0, "uav": 120.0, "zigzag": 45.0,
 }
 """Default duration [s] of each scenario."""
 
 _MIN_DURATION_S = {
     "static": 1.0, "static_150": 1.0, "flight": 20.0, "impacts": 60.0, "vibration": 45.0,
-    "acceleration": 20.0, "thesis": 110.0, "uav": 40.0,
+    "acceleration": 20.0, "thesis": 110.0, "uav": 40.0, "zigzag": 15.0,
 }
 
 # Thesis disturbance layout [s]
@@ -267,6 +275,42 @@ def scenario_uav(
     return Scenario("uav", flight.truth, imu, sensor, text, windows, rate, seed, dict(ev))
 
 
+#: Default constant gyro bias of the ``zigzag`` scenario [rad/s]: a consumer IMU's (the Xsens
+#: DOTs' residual bias is of this size, ≈ 0.3–0.6 °/s).
+ZIGZAG_GYRO_BIAS_RAD_S = (0.008, -0.006, 0.01)
+
+
+def scenario_zigzag(
+    rate_hz: float | None, duration_s: float | None, seed: int, *,
+    gyro_bias_rad_s: tuple[float, float, float] = ZIGZAG_GYRO_BIAS_RAD_S,
+    accel_m_s2: float = 4.0, leg_speed_m_s: float = 6.0, vibration_m_s2: float = 3.0,
+    gyro_vibration_rad_s: float = 0.03, model: SensorModel | None = None,
+) -> Scenario:
+    """Horizontal zig-zags (:func:`~cf_estimator.scenarios.motion.multirotor_zigzag`), in the
+    air from the first sample, 120 Hz like the Phantom's DOTs, rotor vibration."""
+    rate, duration = _setup("zigzag", rate_hz, duration_s)
+    rng = np.random.default_rng(seed)
+    flight = multirotor_zigzag(duration, rate, rng, leg_speed_m_s=leg_speed_m_s,
+                               accel_m_s2=accel_m_s2)
+    acc_vib, gyro_vib = dist.rotor_vibration(flight.truth.t_s, flight.rotor_speed, rng,
+                                             accel_rms_m_s2=vibration_m_s2,
+                                             gyro_rms_rad_s=gyro_vibration_rad_s)
+    base = SensorModel() if model is None else model
+    sensor = dataclasses.replace(base, gyro_bias_rad_s=tuple(float(b) for b in gyro_bias_rad_s))
+    bias = ", ".join(f"{b:g}" for b in sensor.gyro_bias_rad_s or ())
+    text = (f"Multirotor horizontal zig-zags, in the air from the first sample: back and forth "
+            f"between ±{leg_speed_m_s:g} m/s along the heading at {accel_m_s2:g} m/s^2 mean "
+            "acceleration, legs held 0-0.5 s, hovers and heading changes now and then; thrust "
+            f"along body z plus rotor drag; constant gyro bias ({bias}) rad/s; rotor vibration "
+            f"{vibration_m_s2:g} m/s^2 and {gyro_vibration_rad_s:g} rad/s RMS; default MEMS "
+            "noise.")
+    imu = measure(flight.truth, sensor, rng)
+    imu = imu.with_accel_disturbance(acc_vib).with_gyro_disturbance(gyro_vib)
+    windows = [(float(flight.truth.t_s[0]), float(flight.truth.t_s[-1]), "acceleration")]
+    return Scenario("zigzag", flight.truth, imu, sensor, text, windows, rate, seed,
+                    dict(flight.events))
+
+
 SCENARIOS: dict[str, ScenarioFactory] = {
     "static": scenario_static,
     "static_150": scenario_static_150,
@@ -276,6 +320,7 @@ SCENARIOS: dict[str, ScenarioFactory] = {
     "acceleration": scenario_acceleration,
     "thesis": scenario_thesis,
     "uav": scenario_uav,
+    "zigzag": scenario_zigzag,
 }
 """Scenario factories ``(rate_hz | None, duration_s | None, seed) -> Scenario`` by name."""
 

@@ -512,6 +512,21 @@ def multirotor_flight(
         touchdown = descent + descent_dur
         events.update(landing=float(descent), touchdown=float(touchdown),
                       rotors_off=float(touchdown + 2.0))
+    truth, rotor = _thrust_flight(t, d, drag_per_s, gravity)
+    airborne = _smoothstep(t, takeoff_s - 0.5, 0.5)[0]
+    if land:
+        airborne = airborne - _smoothstep(t, touchdown, 0.5)[0]
+    spin = _smoothstep(t, rotors_on_s, 0.5)[0]
+    if land:
+        spin = spin - _smoothstep(t, events["rotors_off"], 0.5)[0]
+    rotor_speed = spin * (idle_speed + (rotor - idle_speed) * airborne)
+    return MultirotorFlight(truth, rotor_speed, events)
+
+
+def _thrust_flight(t: FloatArray, d: _Design, drag_per_s: float, gravity: float
+                   ) -> tuple[Truth, FloatArray]:
+    """The truth of a design flown by thrust along body z (see :func:`multirotor_flight`) and
+    the rotor speed relative to hover (√(‖f_T‖/g))."""
     (_, _, _), (_, _, _), (yaw, dyaw, _) = d.ang
     v, dv, _ = d.speed
     heading = np.stack((np.cos(yaw), np.sin(yaw), np.zeros_like(yaw)), axis=-1)
@@ -533,12 +548,54 @@ def multirotor_flight(
     w = np.zeros((t.shape[0], 3))
     w[1:] = quat_log(quat_multiply(quat_conjugate(q[:-1]), q[1:])) / np.diff(t)[:, None]
     truth = from_body_rates(t, w, q[0], acc, vel)
-    rotor = np.sqrt(np.linalg.norm(thrust, axis=1) / gravity)
-    airborne = _smoothstep(t, takeoff_s - 0.5, 0.5)[0]
-    if land:
-        airborne = airborne - _smoothstep(t, touchdown, 0.5)[0]
-    spin = _smoothstep(t, rotors_on_s, 0.5)[0]
-    if land:
-        spin = spin - _smoothstep(t, events["rotors_off"], 0.5)[0]
-    rotor_speed = spin * (idle_speed + (rotor - idle_speed) * airborne)
-    return MultirotorFlight(truth, rotor_speed, events)
+    return truth, np.sqrt(np.linalg.norm(thrust, axis=1) / gravity)
+
+
+def multirotor_zigzag(
+    duration_s: float,
+    rate_hz: float,
+    rng: np.random.Generator,
+    *,
+    leg_speed_m_s: float = 6.0,
+    accel_m_s2: float = 4.0,
+    drag_per_s: float = 0.35,
+    max_yaw_rate_rad_s: float = 0.3,
+    gravity: float = GRAVITY_M_S2,
+) -> MultirotorFlight:
+    """Horizontal zig-zags of a multirotor that is already in the air at t = 0 (the Phantom 4's
+    horizontal campaign): the vehicle flies back and forth along its heading between
+    ±``leg_speed_m_s`` [m/s] without turning round (backwards on every other leg), each speed
+    reversal a min-jerk change whose mean acceleration is ``accel_m_s2`` [m/s²] (peak 1.875×),
+    legs held 0–0.5 s (the vehicle accelerates most of the time, as the Phantom's median
+    horizontal acceleration of 4 m/s² says), and now and then (1 in 10) a stop, a hover of 1–3 s
+    and a slow heading change of up to ±30° (yaw rate ≤ ``max_yaw_rate_rad_s``). Sustained
+    acceleration most of the time: an accelerometer that reads the thrust axis for seconds.
+    Same physics as :func:`multirotor_flight` (thrust along body z, linear drag
+    ``drag_per_s``); events: ``first_leg`` (the first reversal starts)."""
+    t = sample_times(duration_s, rate_hz)
+    d = _Design(t, rng.uniform(-np.pi, np.pi))
+    tc = rng.uniform(0.5, 2.0)
+    events = {"first_leg": float(tc)}
+    d.add_speed(tc, leg_speed_m_s / accel_m_s2, leg_speed_m_s)  # away from the hover
+    speed = leg_speed_m_s
+    tc += leg_speed_m_s / accel_m_s2 + rng.uniform(0.0, 0.5)
+    while tc < t[-1]:
+        if rng.random() < 0.1:  # a pause: stop, hover, go on
+            dur = abs(speed) / accel_m_s2
+            d.add_speed(tc, dur, -speed)
+            hover_s = rng.uniform(1.0, 3.0)
+            turn = np.deg2rad(rng.uniform(-30.0, 30.0))
+            turn_s = max(1.0, 1.875 * abs(turn) / max_yaw_rate_rad_s)
+            if tc + dur + turn_s < t[-1]:
+                d.add_angle(2, True, tc + dur, turn_s, turn)
+            tc += dur + max(hover_s, turn_s)
+            speed = 0.0
+            target = leg_speed_m_s * rng.choice((-1.0, 1.0))
+        else:
+            target = -np.sign(speed) * leg_speed_m_s * rng.uniform(0.7, 1.0)
+        dur = abs(target - speed) / accel_m_s2
+        d.add_speed(tc, dur, target - speed)
+        speed = target
+        tc += dur + rng.uniform(0.0, 0.5)
+    truth, rotor = _thrust_flight(t, d, drag_per_s, gravity)
+    return MultirotorFlight(truth, rotor, events)

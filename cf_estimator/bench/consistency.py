@@ -1,0 +1,119 @@
+"""Is the reported orientation covariance honest? Errors against the σ the filter reported.
+
+Per sample after :data:`SETTLE_S` (the issue-27 measure): the inclination error ``e`` [rad]
+against the reported tilt variance ``σ² = cov[0] + cov[4]`` (the expected e² of a 2-D error; 6-D
+runs), and the heading error against ``σ² = cov[8]`` (9-D runs, where a magnetometer exists).
+Pooled over a family's samples:
+
+- ``beyond_2sigma_pct``: share of samples with ``e > 2σ`` [%]. For a consistent Gaussian error
+  with this σ: tilt (2-D, ``e²/σ²`` ~ χ²₂/2) e⁻⁴ ≈ 1.8 %; heading (1-D) 4.6 %. (13.5 % = e⁻² is
+  the 2-D share beyond twice the *per-axis* σ, √cov[0].)
+- ``mean_ratio``: mean(e²/σ²), 1 when consistent (below: σ too large, above: too small).
+
+The covariance is :meth:`cf_estimator.core.batch.EstimateResult.orientation_covariance` (the
+node's model, shipped floors), the same per message as the node's (tested).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from cf_estimator import metrics
+from cf_estimator.core.params import FilterParams
+
+#: Samples are scored from this long after the first one [s] (as the benchmarks' RMS).
+SETTLE_S = 10.0
+#: e > this many σ counts as beyond.
+SIGMAS = 2.0
+
+
+def consistency(err_rad: np.ndarray, var_rad2: np.ndarray) -> dict[str, float]:
+    """``{samples, rms_deg, median_sigma_deg, beyond_2sigma_pct, mean_ratio}`` of errors [rad]
+    against reported variances [rad²] (non-finite pairs left out; NaN figures when empty)."""
+    e = np.asarray(err_rad, dtype=float).reshape(-1)
+    v = np.asarray(var_rad2, dtype=float).reshape(-1)
+    ok = np.isfinite(e) & np.isfinite(v) & (v > 0.0)
+    e, v = e[ok], v[ok]
+    if e.size == 0:
+        nan = math.nan
+        return {"samples": 0, "rms_deg": nan, "median_sigma_deg": nan, "beyond_2sigma_pct": nan,
+                "mean_ratio": nan}
+    z = e * e / v
+    return {"samples": int(e.size), "rms_deg": math.degrees(math.sqrt(float(np.mean(e * e)))),
+            "median_sigma_deg": math.degrees(math.sqrt(float(np.median(v)))),
+            "beyond_2sigma_pct": 100.0 * float(np.mean(z > SIGMAS * SIGMAS)),
+            "mean_ratio": float(np.mean(z))}
+
+
+def flight_samples(path: str | Path, params: FilterParams) -> tuple[np.ndarray, np.ndarray]:
+    """(e [rad], σ² [rad²]) of the tilt, after SETTLE_S, of one EuRoC-layout flight, 6-D."""
+    from cf_estimator.bench import euroc
+    from cf_estimator.core.batch import estimate
+
+    f = euroc.load_flight(path)
+    p = dataclasses.replace(params, use_mag=False)
+    r = estimate(f.gyro_rad_s, f.accel_m_s2, None, timestamps_s=f.t_s, params=p)
+    c = r.orientation_covariance()
+    keep = f.t_s >= SETTLE_S
+    return metrics.tilt_error_rad(r.quaternion, f.q_ref)[keep], (c[:, 0] + c[:, 4])[keep]
+
+
+def broad_samples(path: str | Path, info: dict, params: FilterParams
+                  ) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """((tilt e, σ²) 6-D, (heading e, σ²) 9-D) of one BROAD trial over its movement samples
+    after SETTLE_S."""
+    from cf_estimator.bench import broad
+    from cf_estimator.core.batch import estimate
+
+    tr = broad.load_trial(path, info)
+    keep = tr.movement & (np.arange(tr.n_samples) / tr.rate_hz >= SETTLE_S)
+    out = []
+    for mag in (None, tr.mag_ut):
+        p = dataclasses.replace(params, use_mag=mag is not None)
+        r = estimate(tr.gyro_rad_s, tr.accel_m_s2, mag, rate_hz=tr.rate_hz, params=p)
+        c = r.orientation_covariance()
+        _total, heading, incl = metrics.error_angles(metrics.error_quaternion(r.quaternion,
+                                                                              tr.quat_ref))
+        if mag is None:
+            out.append((incl[keep], (c[:, 0] + c[:, 4])[keep]))
+        else:
+            out.append((heading[keep], c[:, 8][keep]))
+    return out[0], out[1]
+
+
+def _flight_task(args: tuple[str, FilterParams]) -> tuple[np.ndarray, np.ndarray]:
+    return flight_samples(*args)
+
+
+def _broad_task(args: tuple[str, dict, FilterParams]) -> tuple:
+    return broad_samples(*args)
+
+
+def _pool(parts: Sequence[tuple[np.ndarray, np.ndarray]]) -> dict[str, float]:
+    return consistency(np.concatenate([p[0] for p in parts]),
+                       np.concatenate([p[1] for p in parts]))
+
+
+def family_consistency(folder: str | Path, family: str, params: FilterParams, jobs: int = 1
+                       ) -> dict[str, dict[str, float]]:
+    """``{"tilt": figures}`` (plus ``"heading"`` for BROAD, 9-D) of one family's folder
+    (``broad`` or an EuRoC-layout family), samples pooled over its recordings."""
+    from cf_estimator.bench.parallel import run_tasks
+
+    root = Path(folder)
+    if family == "broad":
+        from cf_estimator.bench import broad
+
+        info = broad.read_trial_info(root)
+        found = run_tasks(_broad_task, [(str(p), info, params) for p in broad.list_trials(root)],
+                          jobs)
+        return {"tilt": _pool([f[0] for f in found]), "heading": _pool([f[1] for f in found])}
+    from cf_estimator.bench import euroc
+
+    found = run_tasks(_flight_task, [(str(p), params) for p in euroc.find_flights(root)], jobs)
+    return {"tilt": _pool(found)}

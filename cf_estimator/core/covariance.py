@@ -1,0 +1,157 @@
+"""Orientation covariance from what the filter knows (what a downstream EKF should weigh).
+
+The filter does not propagate a covariance; this model turns the state it reports after each
+step into variances [rad²] about the world x, y, z axes (diagonal of ``orientation_covariance``,
+row-major 3×3). One model for the node, the bag replay (per message and in bulk) and
+:func:`cf_estimator.core.batch.estimate` (``tilt_sigma_rad``, ``heading_sigma_rad``).
+Documented in docs/ros_interface.md ("Covariance").
+
+Tilt: the variance of the inclination error, ``S = cov[0] + cov[4]`` [rad²] (a 2-D error: the
+expected e² of the angle between the estimated and the true "up"); reported as ``S/2`` on each of
+the world x and y axes::
+
+    S = 2·(v0 + e_t² + (σ_b·t_clip)²) + M + V
+
+- ``v0`` [rad²] = ``orientation_covariance_rad2``: what the filter cannot see (accelerometer
+  bias, mounting), per axis.
+- ``e_t`` [rad] = the raw error norm while the filter is in start-up or recovery (its tilt is
+  still being pulled in: the error is the best evidence of how wrong it is), else 0.
+- ``σ_b·t_clip``: ``t_clip`` [s] = how long the error has been clipped without a break (the
+  accelerometer is distrusted: the tilt is gyro-integrated for that long, its drift bounded by
+  the bias uncertainty ``σ_b`` [rad/s], √bias_var, the prior ``bias_prior_sigma_rad_s`` before
+  the first estimate).
+- ``M`` [rad²] = the mean square, over the loop's own memory ``1/k1`` [s], of the horizontal
+  error the accelerometer channel corrects the tilt by (``|l_h|``: the aperiodic unit's state in
+  the world frame, the low-passed disagreement between the accelerometer and the estimate).
+  While the vehicle accelerates by ``a_h`` the accelerometer points off the vertical by
+  ``|a_h|/g`` and the loop pulls the tilt towards it: the tilt error and the disagreement the
+  channel sees share one magnitude (one in the other's quadrature over a zig-zag, hence the
+  mean square over ``1/k1``), gain 1. When velocity aiding takes the vehicle's acceleration
+  out, or at rest, the disagreement is the real (small) tilt error: ``M`` shrinks by itself.
+  While aided the unit's lag is AIDED_LAG_TIME_CONSTANT_S ``T_a`` instead of
+  ``aperiodic_time_constant_s`` ``T``: the extra accelerometer noise it lets into ``|l_h|²``,
+  ``σ_a²/g²·dt·(1/T_a − 1/T)``, is not a disagreement and is taken off ``M`` (at least 0).
+- ``V`` [rad²] = ``σ_a²/g² · dt · k1`` with ``σ_a² = noise_a2/6`` [(m/s²)²] the accelerometer's
+  white noise per axis (vibration; ``noise_a2`` = the stillness blocks' mean squared
+  sample-to-sample difference summed over the axes) and ``dt`` [s] the sample interval: the
+  variance white noise leaves in the tilt through the loop ``k1/(T s² + s + k1)`` (k1/2 per
+  axis, for any aperiodic time constant T), both axes.
+
+Yaw, heading referenced by the magnetometer: ``y0 + e_y² + (σ_b·t_mag)²``. ``y0`` =
+``yaw_covariance_rad2``; ``e_y`` [rad] = the last heading error the magnetometer channel measured
+(the error it is still correcting: a 120° error reports ≈ 120°, falling as the heading comes
+back); ``t_mag`` [s] = time since the last magnetometer sample the filter used (a dropout, or a
+disturbed field — heading source 'gyro' — grows the variance with the gyro drift). Not
+referenced (``use_mag`` false, or no usable sample yet): ``unreferenced_yaw_covariance_rad2``.
+
+Constants: ``v0`` and ``y0`` are the only fitted ones (maximum likelihood of the errors under the
+model's Gaussian: tilt on the phantom4 vertical campaign, 6-D; yaw on BROAD's undisturbed trials,
+9-D; BENCHMARKS.md "Covariance"); the gain 1 of ``M``, its memory ``1/k1`` and ``V`` follow from
+the loop. Each variance is capped at π² (an angle error is at most π), or at its floor (yaw: also
+the unreferenced variance) if larger. Plain floats: it runs per message.
+"""
+
+from __future__ import annotations
+
+import math
+
+from cf_estimator.core.step import AIDED_LAG_TIME_CONSTANT_S, PHASE_RECOVERING, PHASE_STARTUP
+
+_PI2 = math.pi * math.pi
+_SETTLING = (PHASE_STARTUP, PHASE_RECOVERING)
+
+#: Default ``v0`` [rad²] per tilt axis (``orientation_covariance_rad2``): fitted on the phantom4
+#: vertical campaign (maximum likelihood 1.0e-4; see the module docstring).
+TILT_FLOOR_RAD2 = 1e-4
+#: Default ``y0`` [rad²] (``yaw_covariance_rad2``): fitted on BROAD's undisturbed trials, 9-D
+#: (maximum likelihood 3.8e-4).
+YAW_FLOOR_RAD2 = 4e-4
+#: Default yaw variance [rad²] while no magnetometer references the heading.
+UNREFERENCED_YAW_RAD2 = 10.0
+
+
+class OrientationCovariance:
+    """Per-message covariance model (see the module docstring); ``reset`` with the filter.
+
+    ``k1`` [1/s]: the accelerometer channel's gain (FilterParams.k1); ``gravity_m_s2``: ‖g‖;
+    ``lag_s`` [s]: the aperiodic unit's time constant (aperiodic_time_constant_s).
+    """
+
+    __slots__ = ("_clip_s", "_yaw_err", "_ms", "tilt0", "yaw0", "yaw_unref", "bias_prior", "k1",
+                 "lag_s", "_inv_6g2")
+
+    def __init__(self, tilt0_rad2: float, yaw0_rad2: float, yaw_unreferenced_rad2: float,
+                 bias_prior_sigma_rad_s: float, k1: float = 0.35,
+                 gravity_m_s2: float = 9.80665, lag_s: float = 2.0) -> None:
+        self.tilt0 = tilt0_rad2
+        self.yaw0 = yaw0_rad2
+        self.yaw_unref = yaw_unreferenced_rad2
+        self.bias_prior = bias_prior_sigma_rad_s
+        self.k1 = k1
+        self.lag_s = lag_s
+        self._inv_6g2 = 1.0 / (6.0 * gravity_m_s2 * gravity_m_s2)
+        self.reset()
+
+    def set_gravity(self, gravity_m_s2: float) -> None:
+        """‖g‖ [m/s²] the vibration term divides by."""
+        self._inv_6g2 = 1.0 / (6.0 * gravity_m_s2 * gravity_m_s2)
+
+    def reset(self) -> None:
+        """Forget the clip duration, the mean square of the error channel and the last heading
+        error (a filter reset)."""
+        self._clip_s = 0.0
+        self._yaw_err = 0.0
+        self._ms = 0.0
+
+    def update(self, dt_s: float, state: object, mag_used: bool, mag_age_s: float | None
+               ) -> tuple[float, ...]:
+        """Covariance after one filter step. ``state``: the filter's step state (phase,
+        error_norm, clipped, bias_var, lx, ly, noise_a2, heading_initialized, yaw_error_rad);
+        ``mag_used``: the step used a magnetometer sample; ``mag_age_s``: time since the last
+        used one (None: never)."""
+        s = state
+        bv = s.bias_var  # type: ignore[attr-defined]
+        return self.step(dt_s, bool(s.clipped),  # type: ignore[attr-defined]
+                         math.sqrt(bv) if bv >= 0.0 else None, s.phase,  # type: ignore[attr-defined]
+                         s.error_norm, s.lx, s.ly, s.noise_a2,  # type: ignore[attr-defined]
+                         bool(s.heading_initialized),  # type: ignore[attr-defined]
+                         s.yaw_error_rad if mag_used else 0.0,  # type: ignore[attr-defined]
+                         mag_used, mag_age_s, bool(s.aided))  # type: ignore[attr-defined]
+
+    def step(self, dt_s: float, clipped: bool, bias_sigma_rad_s: float | None, phase: float,
+             error_norm_rad: float, lx_rad: float, ly_rad: float, noise_a2: float,
+             heading_initialized: bool, yaw_error_rad: float, mag_used: bool,
+             mag_age_s: float | None, aided: bool = False) -> tuple[float, ...]:
+        """:meth:`update` from the state's figures (the bulk pipeline and ``estimate`` have them
+        per row): ``bias_sigma_rad_s`` = √bias_var (None: no estimate yet, the prior is used),
+        ``lx_rad``, ``ly_rad`` the aperiodic unit's world-frame state, ``noise_a2``
+        [(m/s²)²] the accelerometer noise of the stillness blocks, ``yaw_error_rad`` read only
+        when ``mag_used``, ``aided``: the sample was velocity-aided (the unit's lag is
+        AIDED_LAG_TIME_CONSTANT_S)."""
+        self._clip_s = self._clip_s + dt_s if clipped else 0.0
+        sigma_b = bias_sigma_rad_s if bias_sigma_rad_s is not None else self.bias_prior
+        kdt = self.k1 * dt_s
+        ms = self._ms
+        ms += kdt / (1.0 + kdt) * (lx_rad * lx_rad + ly_rad * ly_rad - ms)
+        self._ms = ms
+        e_t = error_norm_rad if phase in _SETTLING else 0.0
+        drift = sigma_b * self._clip_s
+        noise = noise_a2 * self._inv_6g2 * dt_s  # σ_a²/g²·dt [rad²·s]
+        if aided:  # the unit's short lag passes more noise into l_h: not a disagreement
+            more = 1.0 / AIDED_LAG_TIME_CONSTANT_S - (1.0 / self.lag_s if self.lag_s > 0.0
+                                                      else math.inf)
+            if more > 0.0:
+                ms -= noise * more
+                if ms < 0.0:
+                    ms = 0.0
+        tilt = min(self.tilt0 + e_t * e_t + drift * drift + 0.5 * (ms + noise * self.k1),
+                   max(_PI2, self.tilt0))
+        if heading_initialized:
+            if mag_used:
+                self._yaw_err = abs(yaw_error_rad)
+            yd = sigma_b * (mag_age_s or 0.0)
+            yaw = min(self.yaw0 + self._yaw_err**2 + yd * yd,
+                      max(_PI2, self.yaw_unref, self.yaw0))
+        else:
+            yaw = self.yaw_unref
+        return (tilt, 0.0, 0.0, 0.0, tilt, 0.0, 0.0, 0.0, yaw)
