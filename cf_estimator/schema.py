@@ -9,6 +9,7 @@ checks an instance against it, and the node, the YAML writer and the CLI all ite
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
@@ -128,13 +129,25 @@ def param(
 
 def specs_of(cls_or_instance: Any) -> tuple[ParamSpec, ...]:
     """The schema entries of a parameter dataclass, in declaration order."""
+    cls = cls_or_instance if isinstance(cls_or_instance, type) else type(cls_or_instance)
+    return _specs_of_class(cls)
+
+
+@functools.cache
+def _specs_of_class(cls: type) -> tuple[ParamSpec, ...]:
+    """specs_of() of a class, built once (ParamSpec is frozen: the tuple is shared safely)."""
     out = []
-    for f in dataclasses.fields(cls_or_instance):
+    for f in dataclasses.fields(cls):
         meta = f.metadata.get("cf_param")
         if meta is None:
             continue
         out.append(ParamSpec(name=f.name, default=f.default, **meta))
     return tuple(out)
+
+
+@functools.cache
+def _names_of_class(cls: type) -> frozenset[str]:
+    return frozenset(s.name for s in _specs_of_class(cls))
 
 
 def validate_fields(instance: Any) -> None:
@@ -173,7 +186,7 @@ def split_by_owner(values: Mapping[str, Any], owners: Iterable[type]) -> list[di
     out: list[dict[str, Any]] = [{} for _ in owners]
     for key, value in values.items():
         for i, cls in enumerate(owners):
-            if key in {s.name for s in specs_of(cls)}:
+            if key in _names_of_class(cls):
                 out[i][key] = value
                 break
         else:

@@ -129,7 +129,11 @@ def test_without_cluster_nothing_of_dask_is_imported(good_dir, tmp_path):
     assert out.stdout.strip().splitlines()[-1] == "[]"
 
 
-def test_cluster_option_errors_are_one_line(good_dir, tmp_path, capsys):
+def test_cluster_option_errors_are_one_line(good_dir, tmp_path, capsys, monkeypatch):
+    from cf_estimator import cluster
+
+    # nothing listens on port 1: the refusal comes at once, the 20 s wait is for slow networks
+    monkeypatch.setattr(cluster, "CONNECT_TIMEOUT_S", 2.0)
     for value, text in (("local:0", "N must be a whole number >= 1"),
                         ("tcp://127.0.0.1:1", "cannot start or reach the cluster")):
         rc = main(["replay", str(good_dir), "--json", str(tmp_path / "x.json"), "--cluster",
