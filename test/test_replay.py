@@ -16,13 +16,12 @@ from ros_test_helpers import read_topics
 from rosbags.convert import convert
 
 from cf_estimator.bag import io
+from cf_estimator.bag.metrics import error_angles, error_statistics
 from cf_estimator.bag.replay import (
     OUT_DIAGNOSTICS_TOPIC,
     OUT_IMU_TOPIC,
     OUT_RPY_TOPIC,
     ReplayOptions,
-    error_angles,
-    error_statistics,
     replay_bag,
 )
 from cf_estimator.bag.simulate import IMU_TOPIC, MAG_TOPIC, TRUTH_TOPIC, write_scenario_bag

@@ -6,12 +6,12 @@
 """
 
 from cf_estimator.bag.io import BagError, InputBag, OutputBag, open_bag
+from cf_estimator.bag.metrics import error_statistics
 from cf_estimator.bag.replay import (
     ReplayError,
     ReplayOptions,
     ReplayResult,
     ReplayVariant,
-    error_statistics,
     replay_bag,
     replay_variants,
 )

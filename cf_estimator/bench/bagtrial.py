@@ -123,7 +123,7 @@ def _finite(values: tuple[float, ...]) -> bool:
 def reference_quaternion(msgtype: str, msg: Any) -> tuple[float, float, float, float] | None:
     """Normalised (w, x, y, z) of a reference message; None when absent or invalid."""
     from cf_estimator.bag import io
-    from cf_estimator.bag.replay import _reference_quaternion
+    from cf_estimator.bag.metrics import reference_quaternion
 
     if msgtype == io.IMU_TYPE:
         if float(msg.orientation_covariance[0]) < 0.0:  # REP-145: orientation unknown
@@ -131,7 +131,7 @@ def reference_quaternion(msgtype: str, msg: Any) -> tuple[float, float, float, f
         o = msg.orientation
         q = (float(o.w), float(o.x), float(o.y), float(o.z))
     else:
-        q = _reference_quaternion(msgtype, msg)
+        q = reference_quaternion(msgtype, msg)
     norm = math.sqrt(sum(c * c for c in q))
     if not (math.isfinite(norm) and norm > 0.5):
         return None
@@ -205,7 +205,7 @@ def _reference_on(c: _Collected, t0_ns: int, t_imu: np.ndarray, path: Path, topi
                   ) -> np.ndarray:
     """(N, 4) reference at the IMU stamps, NaN rows where it cannot be interpolated."""
     from cf_estimator.bag import io
-    from cf_estimator.bag.replay import interpolate_quaternions
+    from cf_estimator.bag.metrics import interpolate_quaternions
 
     if not c.ref_ns:
         raise io.BagError(f"{path}: no valid orientation on reference topic {topic!r}")
