@@ -102,6 +102,35 @@ def test_main_with_the_shipped_params_file_publishes_and_stops_cleanly_on_sigint
     assert "filter step:" in out + err  # the kernel backend in the start-up log
 
 
+class _SpinTornDownBySigint(SingleThreadedExecutor):
+    """An executor whose spin meets what a SIGINT during a take gives: context down, rclpy error."""
+
+    shut_down_first = True
+
+    def spin(self) -> None:
+        if self.shut_down_first:
+            rclpy.shutdown()
+        raise RuntimeError("Unable to convert call argument '0' to Python object")
+
+
+@pytest.mark.parametrize("shut_down_first", [True, False], ids=["after-sigint", "while-running"])
+def test_an_rclpy_error_during_the_sigint_shutdown_is_a_clean_stop_and_only_then(
+        monkeypatch, shut_down_first):
+    from cf_estimator.node import node as node_module
+
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(next_domain_id()))
+    monkeypatch.setattr(_SpinTornDownBySigint, "shut_down_first", shut_down_first)
+    monkeypatch.setattr(node_module, "SingleThreadedExecutor", _SpinTornDownBySigint)
+    monkeypatch.setattr(node_module.signal, "signal", lambda *_: None)  # keep pytest's SIGINT
+    args = ["--ros-args", "--params-file", str(SHIPPED)]
+    if shut_down_first:
+        assert node_module.run(args) == 0
+    else:
+        with pytest.raises(RuntimeError, match="Unable to convert"):
+            node_module.run(args)
+    assert not rclpy.ok()  # the default context is shut down either way
+
+
 BAD_FILES = [
     ("syntax.yaml", "/**:\n  ros__parameters:\n    k1: [0.5\n", ["not valid YAML", "line"]),
     ("list.yaml", "- k1\n- 0.5\n", ["not a ROS 2 parameter file"]),

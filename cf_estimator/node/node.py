@@ -519,6 +519,12 @@ def run(args: list[str]) -> int:
         kind = "cannot start" if isinstance(exc, StartError) else "invalid parameter"
         get_logger(NODE_NAME).fatal(f"{kind}: {text}")
         code = 2
+    except RuntimeError:
+        # a SIGINT shuts the context down while the executor may be inside a take on a
+        # subscription being torn down (rclpy: "Unable to convert call argument"): that is the
+        # requested stop, not a failure. With the context still up it is a real error.
+        if rclpy.ok():
+            raise
     finally:
         # `ros2 launch` signals the node and Ctrl-C the whole process group: a second SIGINT
         # must not interrupt the clean-up (a traceback from destroy_node, "exit code -2")
