@@ -87,7 +87,7 @@ typedef struct {
     double qw, qx, qy, qz, bx, by, bz, cx, cy, cz, lx, ly, lz, z_m, time_s, clip_timer_s,
         rest_timer_s, blk_n, blk_t, blk_gx, blk_gy, blk_gz, blk_ax, blk_ay, blk_az, blk_g2, blk_a2,
         prev_n, pgx, pgy, pgz, pax, pay, paz, blk_d, last_n, lgx, lgy, lgz, lax, lay, laz,
-        noise_g2, noise_a2, bias_var, error_var, blk_mx, blk_my, blk_mz, blk_mn, pmx, pmy, pmz, pm_n,
+        noise_g2, noise_a2, bias_var, blk_mx, blk_my, blk_mz, blk_mn, pmx, pmy, pmz, pm_n,
         mag_clip_timer_s, mag_ref_norm, mag_ref_dip, mag_ref_count,
         mag_last_time_s, mvx, mvy, mvz, mcx, mcy, mcz, mmx, mmy, mmz, mag_cand_norm, mag_seen_time_s,
         mag_ok_timer_s, mag_cand_timer_s, mag_ref_time_s, g_ref, accel_hold, acx, acy, acz, rate_lp, ex, ey,
@@ -519,21 +519,15 @@ static void aperiodic(cf_state *s, const cf_params *p, double scale, int quick, 
     s->fz = f[2];
 }
 
-/* regulate() of step.py (bias.track_error, bias.learning_gains and bias.integrate inlined) */
+/* regulate() of step.py (bias.learning_gains and bias.integrate inlined) */
 static void regulate(cf_state *s, const cf_params *p, const double *f, double en,
                      const double *u, const double *v, int quick, int tight, int learn,
                      double dt)
 {
     double d[4];
-    double ew = dt / (p->aperiodic_time_constant_s + dt);
-    s->error_var = s->error_var + ew * (f[0] * f[0] + f[1] * f[1] + f[2] * f[2] - s->error_var);
     double share = mind(s->bias_var / pow(p->bias_prior_sigma_rad_s, 2.0), 1.0);
     double k2 = maxd(p->k2, p->bias_learning_k2 * share);
     double k1 = maxd(p->k1, 2.0 * sqrt(k2));
-    double bias_error2 = s->bias_var / (k1 * k1);
-    double trust = bias_error2 / (bias_error2 + s->error_var);
-    k2 = maxd(p->k2, p->bias_learning_k2 * share * trust);
-    k1 = maxd(p->k1, 2.0 * sqrt(k2));
     double k3dt = learn ? p->k3 * dt : 0.0;
     s->cx = s->cx + k3dt * f[0];
     s->cy = s->cy + k3dt * f[1];
@@ -978,7 +972,7 @@ static PyMemberDef State_members[] = {
     SD(blk_d), SD(blk_mx), SD(blk_my), SD(blk_mz), SD(blk_mn), SD(prev_n), SD(pgx), SD(pgy),
     SD(pgz), SD(pax), SD(pay), SD(paz), SD(pmx), SD(pmy), SD(pmz), SD(pm_n), SD(last_n), SD(lgx),
     SD(lgy), SD(lgz), SD(lax), SD(lay), SD(laz), SD(noise_g2), SD(noise_a2), SD(g_ref), SD(bx),
-    SD(by), SD(bz), SD(bias_var), SD(error_var), SB(bias_unverified), SD(z_m), SD(mag_ref_norm), SD(mag_ref_dip),
+    SD(by), SD(bz), SD(bias_var), SB(bias_unverified), SD(z_m), SD(mag_ref_norm), SD(mag_ref_dip),
     SD(mag_ref_count), SB(mag_disturbed), SD(mag_last_time_s), SB(heading_initialized),
     SD(mag_clip_timer_s), SB(mag_recovering), SD(mvx), SD(mvy), SD(mvz), SD(mcx), SD(mcy),
     SD(mcz), SD(mmx), SD(mmy), SD(mmz), SD(mag_cand_norm), SD(mag_seen_time_s), SD(mag_ok_timer_s), SD(mag_cand_timer_s),

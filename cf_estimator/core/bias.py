@@ -9,9 +9,7 @@ The estimate b (sensor frame, rad/s) is the PI regulator's integral state; its v
   measurement of b: scalar Kalman update per axis;
 - :func:`learning_gains` — in motion, while b is uncertain, k2 is raised towards
   ``bias_learning_k2`` in proportion to the variance and k1 to at least 2√k2 (critically damped):
-  learned within about 20 s of any start, in the air too — weighed by the share of the
-  measured error (:func:`track_error`) a bias could explain, so that a sustained
-  acceleration's tilt is not learned as bias;
+  learned within about 20 s of any start, in the air too;
 - :func:`integrate` — the integral itself (k2 and the k3 path on the processed error), except
   from an error too large to be a bias (BIAS_LEARNING_MAX_ERROR_RAD, anti-windup); the variance
   shrinks as it learns (time constant k1/k2);
@@ -58,32 +56,12 @@ def fuse_rest(s: StepState, m: RestMeasurement, o: Any) -> None:
     s.bias_var = s.bias_var - k * s.bias_var
 
 
-def track_error(s: StepState, p: Any, f: tuple, dt: Any, o: Any) -> None:
-    """The innovation's variance: |f|² [rad²] of the processed error, low-passed over
-    ``aperiodic_time_constant_s`` (the unit's own memory)."""
-    fx, fy, fz = f
-    w = dt / (p.aperiodic_time_constant_s + dt)
-    s.error_var = s.error_var + w * (fx * fx + fy * fy + fz * fz - s.error_var)
-
-
 def learning_gains(s: StepState, p: Any, o: Any) -> tuple[Any, Any]:
-    """(k1 [1/s], k2 [1/s²]) of the regulator at this step: raised while b is uncertain.
-
-    The raise is a Kalman gain's: by the share of the error a bias could explain. A bias of
-    σ_b = √bias_var leaves an error of σ_b/k1 in the loop; the error measured
-    (``error_var``, :func:`track_error`) is that plus whatever else the accelerometer reads
-    — a multirotor's thrust axis in a sustained acceleration, a turn. The learning gain is
-    scaled by (σ_b/k1)² / ((σ_b/k1)² + error_var): full where the error is as small as a
-    bias makes it (the vertical zig-zags), a tenth where it is the tilt of the acceleration
-    (the horizontal ones); k1 follows the scaled k2 (critically damped).
-    """
+    """(k1 [1/s], k2 [1/s²]) of the regulator at this step: raised while b is uncertain."""
     share = o.minimum(s.bias_var / (p.bias_prior_sigma_rad_s ** 2), 1.0)
     k2 = o.maximum(p.k2, p.bias_learning_k2 * share)
     k1 = o.maximum(p.k1, 2.0 * o.sqrt(k2))
-    bias_error2 = s.bias_var / (k1 * k1)
-    trust = bias_error2 / (bias_error2 + s.error_var)
-    k2 = o.maximum(p.k2, p.bias_learning_k2 * share * trust)
-    return o.maximum(p.k1, 2.0 * o.sqrt(k2)), k2
+    return k1, k2
 
 
 def integrate(s: StepState, p: Any, f: tuple, k1: Any, k2: Any, learn: Any, small: Any,

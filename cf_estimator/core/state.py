@@ -90,8 +90,6 @@ CLASSIFIER: tuple[Field, ...] = (
 BIAS: tuple[Field, ...] = (
     *_vec("b", "rad/s", "gyro-bias estimate (the regulator's integral), sensor frame"),
     _f("bias_var", "(rad/s)^2", "variance of the bias estimate per axis (< 0: not set yet)"),
-    _f("error_var", "rad^2", "mean square of the processed error f over "
-       "aperiodic_time_constant_s: the innovation the bias learning weighs its gain by"),
     _f("bias_unverified", "", "last rest measurement came from a power-on still phase without "
        "a magnetometer (a steady turn cannot be told from rest then)", "bool"),
 )

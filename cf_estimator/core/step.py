@@ -371,7 +371,6 @@ def regulate(s: StepState, p: Any, f: tuple, en: Any, u: tuple, v: tuple, quick:
     fx, fy, fz = f
     ux, uy, uz = u
     vx, vy, vz = v
-    bias.track_error(s, p, f, dt, o)
     k1, k2 = bias.learning_gains(s, p, o)
     # an error beyond BIAS_LEARNING_MAX_ERROR_RAD is an attitude error (a gyro over range, a
     # glitch), not a bias: the integral does not learn from it (anti-windup; beyond 90° the
