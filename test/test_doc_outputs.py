@@ -93,7 +93,7 @@ def _missing_peers(command: str) -> list[str]:
     argv = shlex.split(command)
     if argv[1:2] != ["bench"]:
         return []
-    names = ["vqf"] if argv[2:3] == ["cross"] else []  # cross: VQF beside, always
+    names = ["vqf"] if argv[2:3] in (["cross"], ["sustained"]) else []  # VQF beside, always
     if "--peers" in argv:
         names = argv[argv.index("--peers") + 1].split(",")
     if names in (["none"], []):

@@ -1,0 +1,231 @@
+"""What an IMU-only filter can know on a multirotor in sustained acceleration (issue 22).
+
+The accelerometer measures the specific force ``a − g``. A filter that takes its direction as
+"up" is off the vertical by ``atan(|a_h|/g)`` while the vehicle accelerates horizontally by
+``a_h`` [m/s²] — on a multirotor that is most of the time, since it accelerates by tilting its
+thrust axis, which the accelerometer then reads. No IMU-only filter can separate the two; it can
+only average. A filter whose memory (accelerometer averaging) is ``T`` [s], with a perfect gyro,
+is off the vertical by the vehicle's *mean* horizontal acceleration over its memory::
+
+    e_acc(T) = atan(|v_h(t) − v_h(t − T)| / (g·T))        [rad]
+
+(exactly, for a moving average; about, for the filter's exponential memory). A long memory
+averages a zig-zag out, but the gyro has to carry the attitude over it: a bias residual δb
+[rad/s] — what an in-flight start has not learned yet — tilts the estimate by about δb·T/2
+on average over the memory, and the bias can only be learned from the same accelerometer.
+Velocity aiding removes ``e_acc`` altogether: with the velocity known, ``a_h`` is known and
+taken out of the specific force (what is left is the velocity noise, σ_v·√2/(g·T)).
+
+:func:`analyse` computes these floors from each recording's reference velocity (world ENU,
+m/s) and scores ours online, ours velocity-aided and VQF online on the same samples; the
+numbers are ``cf-estimator bench sustained``'s (BENCHMARKS.md, "Sustained acceleration"), the
+figure :func:`plot`'s (docs/img/sustained_acceleration.png).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from cf_estimator import metrics
+from cf_estimator.bench.euroc import Flight
+from cf_estimator.bench.euroc_eval import SETTLE_S, VelocityInput, aided_algorithms
+from cf_estimator.core.batch import estimate
+from cf_estimator.core.params import FilterParams
+
+#: Memories T [s] of the floor table (0.5 s: about the accelerometer's own disagreement).
+MEMORIES_S = (0.5, 1.0, 2.0, 5.0, 10.0)
+#: Gyro-bias residual [deg/s] for the drift column: about what an in-flight start has left
+#: after 10 s on the Phantom 4 (BENCHMARKS.md, issue 22).
+BIAS_RESIDUAL_DEG_S = 0.5
+GRAVITY_M_S2 = 9.80665
+
+
+def mean_acceleration_tilt_deg(flight: Flight, memory_s: float) -> np.ndarray:
+    """Per IMU sample: ``atan(|v_h(t) − v_h(t − T)|/(g·T))`` [deg], the tilt a perfect-gyro
+    filter averaging the accelerometer over ``memory_s`` = T [s] cannot avoid (NaN before
+    the reference velocity covers ``t − T``)."""
+    if flight.velocity_t_s is None or flight.velocity_m_s is None:
+        raise ValueError(f"{flight.name}: no reference velocity")
+    tv, v = flight.velocity_t_s, flight.velocity_m_s
+    t = flight.t_s
+    now = np.stack([np.interp(t, tv, v[:, i]) for i in range(2)], axis=1)
+    then = np.stack([np.interp(t - memory_s, tv, v[:, i]) for i in range(2)], axis=1)
+    dv = np.linalg.norm(now - then, axis=1)
+    out = np.degrees(np.arctan2(dv, GRAVITY_M_S2 * memory_s))
+    out[(t - memory_s < tv[0]) | (t > tv[-1])] = np.nan
+    return out
+
+
+def reference_bias_rad_s(flight: Flight) -> np.ndarray:
+    """The gyro's bias (3,) [rad/s, sensor frame] the reference shows: the median over the
+    recording of gyro − the reference's rate (from consecutive reference quaternions)."""
+    q = flight.q_ref
+    w1, x1, y1, z1 = q[:-1, 0], -q[:-1, 1], -q[:-1, 2], -q[:-1, 3]  # conjugate of q[i]
+    w2, x2, y2, z2 = q[1:, 0], q[1:, 1], q[1:, 2], q[1:, 3]
+    dw = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2
+    d = np.stack([w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2, w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+                  w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2], axis=1)
+    rate = 2.0 * d * np.sign(dw)[:, None] / np.diff(flight.t_s)[:, None]
+    ok = np.all(np.isfinite(rate), axis=1)
+    return np.median(flight.gyro_rad_s[:-1][ok] - rate[ok], axis=0)
+
+
+def learned_bias_error_deg_s(flight: Flight, params: FilterParams, at_s: float = SETTLE_S
+                             ) -> float:
+    """|b − b_ref| [deg/s] of ours online at ``at_s`` [s] (b_ref: :func:`reference_bias_rad_s`)."""
+    p = dataclasses.replace(params, use_mag=False)
+    r = estimate(flight.gyro_rad_s, flight.accel_m_s2, None, timestamps_s=flight.t_s, params=p)
+    i = min(int(np.searchsorted(flight.t_s, at_s)), flight.n_samples - 1)
+    return math.degrees(float(np.linalg.norm(r.gyro_bias_rad_s[i] - reference_bias_rad_s(flight))))
+
+
+@dataclass(frozen=True)
+class FamilyFloors:
+    """One family's figures [deg, RMS after SETTLE_S, mean over recordings]."""
+
+    family: str
+    n: int
+    median_horizontal_accel_m_s2: float
+    floor_deg: dict[float, float]  # memory T [s] -> e_acc(T)
+    measured_deg: dict[str, float]  # estimator -> inclination error
+    reference_bias_deg_s: float  # |b_ref|, the bias the reference shows
+    bias_error_deg_s: float  # |b − b_ref| of ours online at SETTLE_S
+
+
+def _rms(x: np.ndarray, mask: np.ndarray) -> float:
+    m = mask & np.isfinite(x)
+    return float(np.sqrt(np.mean(x[m] ** 2))) if m.any() else math.nan
+
+
+def estimators(params: FilterParams, with_vqf: bool) -> dict[str, Callable[[Flight], np.ndarray]]:
+    """Name → f(flight) → q_world_from_sensor (N, 4): ours online, ours aided, VQF online."""
+    p = dataclasses.replace(params, use_mag=False)
+    aided = aided_algorithms(VelocityInput())[0]
+    out: dict[str, Callable[[Flight], np.ndarray]] = {
+        "cf_estimator": lambda f: estimate(f.gyro_rad_s, f.accel_m_s2, None,
+                                           timestamps_s=f.t_s, params=p).quaternion,
+        "cf_estimator_aided": lambda f: aided.run(f, p),
+    }
+    if with_vqf:
+        from cf_estimator.bench.peers import run_vqf
+
+        out["vqf"] = lambda f: run_vqf(f.gyro_rad_s, f.accel_m_s2, None,
+                                       1.0 / float(np.median(np.diff(f.t_s))))["6d"]
+    return out
+
+
+def analyse(family: str, flights: Sequence[Flight], params: FilterParams,
+            with_vqf: bool = True) -> FamilyFloors:
+    """The floors e_acc(T) for :data:`MEMORIES_S` and the measured inclination errors, each
+    the mean over ``flights`` of its RMS over the scored samples (t ≥ SETTLE_S, reference)."""
+    flights = [f for f in flights if f.velocity_t_s is not None]
+    if not flights:
+        raise ValueError(f"{family}: no recording with a reference velocity")
+    runs = estimators(params, with_vqf)
+    floors: dict[float, list[float]] = {t: [] for t in MEMORIES_S}
+    measured: dict[str, list[float]] = {k: [] for k in runs}
+    accel, bias_ref, bias_err = [], [], []
+    for f in flights:
+        bias_ref.append(math.degrees(float(np.linalg.norm(reference_bias_rad_s(f)))))
+        bias_err.append(learned_bias_error_deg_s(f, params))
+        mask = (f.t_s >= SETTLE_S) & f.has_reference
+        for t in MEMORIES_S:
+            floors[t].append(_rms(mean_acceleration_tilt_deg(f, t), mask))
+        a_h = GRAVITY_M_S2 * np.tan(np.radians(mean_acceleration_tilt_deg(f, 0.5)))
+        accel.append(float(np.nanmedian(a_h[mask])))
+        for name, run in runs.items():
+            measured[name].append(score(f, run(f)))
+    return FamilyFloors(family, len(flights), float(np.median(accel)),
+                        {t: float(np.mean(v)) for t, v in floors.items()},
+                        {k: float(np.mean(v)) for k, v in measured.items()},
+                        float(np.mean(bias_ref)), float(np.mean(bias_err)))
+
+
+def score(flight: Flight, q: np.ndarray) -> float:
+    """Inclination RMS [deg] of ``q`` over the scored samples (t ≥ SETTLE_S, reference)."""
+    mask = (flight.t_s >= SETTLE_S) & flight.has_reference
+    return _rms(metrics.inclination_error_deg(q, flight.q_ref), mask)
+
+
+def drift_deg(memory_s: float, bias_deg_s: float = BIAS_RESIDUAL_DEG_S) -> float:
+    """The gyro drift over a memory T [s] with a bias residual δb [deg/s]: δb·T/2 [deg]."""
+    return bias_deg_s * memory_s / 2.0
+
+
+def format_table(rows: Sequence[FamilyFloors]) -> str:
+    """The floors and the measured errors, one column per family."""
+    names = [r.family for r in rows]
+    width = max(12, *(len(n) for n in names))
+    head = f"  {'':58s}" + "".join(f"{n:>{width + 2}s}" for n in names)
+    lines = [head, f"  {'recordings':58s}" + "".join(f"{r.n:>{width + 2}d}" for r in rows),
+             f"  {'median horizontal acceleration [m/s^2]':58s}"
+             + "".join(f"{r.median_horizontal_accel_m_s2:>{width + 2}.2f}" for r in rows)]
+    for t in MEMORIES_S:
+        label = (f"IMU-only floor, memory {t:g} s [deg] (drift "
+                 f"{drift_deg(t):.2f} at {BIAS_RESIDUAL_DEG_S:g} deg/s)")
+        lines.append(f"  {label:58s}" + "".join(f"{r.floor_deg[t]:>{width + 2}.2f}" for r in rows))
+    for t in MEMORIES_S:
+        label = f"IMU-only floor with the drift, memory {t:g} s [deg]"
+        lines.append(f"  {label:58s}" + "".join(
+            f"{math.hypot(r.floor_deg[t], drift_deg(t)):>{width + 2}.2f}" for r in rows))
+    for name in rows[0].measured_deg:
+        label = f"measured: {name} [deg]"
+        lines.append(f"  {label:58s}"
+                     + "".join(f"{r.measured_deg.get(name, math.nan):>{width + 2}.2f}"
+                               for r in rows))
+    lines.append(f"  {'gyro bias the reference shows |b_ref| [deg/s]':58s}"
+                 + "".join(f"{r.reference_bias_deg_s:>{width + 2}.2f}" for r in rows))
+    label = f"ours online: learned-bias error at {SETTLE_S:g} s [deg/s]"
+    lines.append(f"  {label:58s}" + "".join(f"{r.bias_error_deg_s:>{width + 2}.2f}" for r in rows))
+    return "\n".join(lines) + "\n"
+
+
+def plot(rows: Sequence[FamilyFloors], example: Flight, series: Mapping[str, np.ndarray],
+         out_png: str) -> None:
+    """Left: one recording's accelerometer disagreement, 5 s floor and estimators' inclination
+    errors over time; right: the floor e_acc(T), the drift δb·T/2 and the measured errors."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a, b) = plt.subplots(1, 2, figsize=(13, 4.6))
+    t = example.t_s
+    a.plot(t, mean_acceleration_tilt_deg(example, 0.5), color="0.6", lw=0.8,
+           label="accelerometer off the vertical (0.5 s)")
+    a.plot(t, mean_acceleration_tilt_deg(example, 5.0), color="k", ls="--", lw=1.0,
+           label="IMU-only floor, 5 s memory")
+    for name, q in series.items():
+        e = metrics.inclination_error_deg(q, example.q_ref)
+        m = np.isfinite(e)
+        a.plot(t[m], e[m], lw=1.0, label=name)
+    a.axvline(SETTLE_S, color="0.8", lw=0.8)
+    a.set_xlabel("time [s]")
+    a.set_ylabel("inclination [deg]")
+    a.set_title(f"{example.name}")
+    a.legend(fontsize=7)
+    a.grid(alpha=0.3)
+    memories = np.array(MEMORIES_S)
+    for i, r in enumerate(rows):
+        b.plot(memories, [r.floor_deg[x] for x in MEMORIES_S], "o-", color=f"C{i}",
+               label=f"{r.family}: mean acceleration over T")
+        b.plot(memories, [math.hypot(r.floor_deg[x], drift_deg(x)) for x in MEMORIES_S], ":",
+               color=f"C{i}", label=f"{r.family}: with the drift")
+    b.plot(memories, [drift_deg(x) for x in MEMORIES_S], "k--",
+           label=f"gyro drift, {BIAS_RESIDUAL_DEG_S:g} deg/s bias residual")
+    for j, (name, value) in enumerate(rows[0].measured_deg.items()):  # the first family's
+        b.axhline(value, color=f"C{j + len(rows)}", lw=1.2, label=f"{rows[0].family}: {name}")
+    b.set_xscale("log")
+    b.set_xlabel("filter memory T [s]")
+    b.set_ylabel("inclination RMS after 10 s [deg]")
+    b.set_title("what an IMU-only filter cannot avoid")
+    b.legend(fontsize=6, ncol=2)
+    b.grid(alpha=0.3, which="both")
+    fig.tight_layout()
+    fig.savefig(out_png, dpi=90)
+    plt.close(fig)

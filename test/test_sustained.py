@@ -1,0 +1,108 @@
+"""bench sustained: the IMU-only floor in a sustained acceleration (issue 22 item 3).
+
+The floor formula on synthetic velocities with known answers; on the Phantom 4 recordings the
+physics the document states (horizontal zig-zags leave an IMU-only filter far more to average
+than vertical ones; velocity aiding removes it); the CLI's usage errors.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import DATA_ROOT
+
+from cf_estimator.bench import euroc, sustained
+from cf_estimator.cli.main import main
+from cf_estimator.core.params import FilterParams
+
+G = sustained.GRAVITY_M_S2
+
+
+def _flight(t: np.ndarray, v: np.ndarray) -> euroc.Flight:
+    n = t.size
+    q = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+    acc = np.tile([0.0, 0.0, G], (n, 1))
+    return euroc.Flight("synthetic", t, np.zeros((n, 3)), acc, q, 0, Path("."),
+                        velocity_t_s=t, velocity_m_s=v)
+
+
+def test_a_constant_acceleration_is_its_tilt_for_every_memory():
+    t = np.arange(0.0, 30.0, 0.01)
+    a = 3.0  # m/s² along a diagonal of the horizontal plane
+    v = np.stack([a * t / math.sqrt(2), a * t / math.sqrt(2), np.zeros_like(t)], axis=1)
+    f = _flight(t, v)
+    for memory in sustained.MEMORIES_S:
+        e = sustained.mean_acceleration_tilt_deg(f, memory)
+        assert np.all(np.isnan(e[t < memory]))  # no velocity that far back yet
+        np.testing.assert_allclose(e[t >= memory + 0.01], math.degrees(math.atan(a / G)),
+                                   rtol=1e-6)
+
+
+def test_a_zig_zag_averages_out_over_whole_periods_only():
+    t = np.arange(0.0, 40.0, 0.01)
+    period, amplitude = 5.0, 4.0  # v = A sin(ωt): peak acceleration A·ω
+    v = np.stack([amplitude * np.sin(2 * np.pi * t / period), np.zeros_like(t),
+                  np.zeros_like(t)], axis=1)
+    f = _flight(t, v)
+    late = t >= 10.0
+    whole = sustained.mean_acceleration_tilt_deg(f, period)[late]
+    half = sustained.mean_acceleration_tilt_deg(f, period / 2)[late]
+    assert np.nanmax(whole) < 1e-6  # the mean acceleration over a period is zero
+    # over half a period the mean acceleration reaches 2A/(T/2) = 4A/T
+    assert np.nanmax(half) == pytest.approx(math.degrees(math.atan(4 * amplitude / period / G)),
+                                            rel=1e-3)
+
+
+def test_the_reference_bias_is_the_gyro_minus_the_reference_rate():
+    t = np.arange(0.0, 20.0, 0.01)
+    rate = np.array([0.1, -0.2, 0.3])  # rad/s, constant, sensor frame
+    angle = np.linalg.norm(rate) * t
+    axis = rate / np.linalg.norm(rate)
+    q = np.column_stack([np.cos(angle / 2), np.outer(np.sin(angle / 2), axis)])
+    bias = np.array([0.02, -0.01, 0.005])
+    f = euroc.Flight("spin", t, np.tile(rate + bias, (t.size, 1)),
+                     np.tile([0.0, 0.0, G], (t.size, 1)), q, 0, Path("."))
+    np.testing.assert_allclose(sustained.reference_bias_rad_s(f), bias, atol=1e-6)
+
+
+def test_drift_grows_with_the_memory():
+    assert sustained.drift_deg(2.0, 0.5) == pytest.approx(0.5)
+    assert sustained.drift_deg(10.0) == pytest.approx(10 * sustained.BIAS_RESIDUAL_DEG_S / 2)
+
+
+def _family(name: str, n: int) -> list[euroc.Flight]:
+    folder = DATA_ROOT / name
+    if not folder.is_dir():
+        pytest.skip(f"{folder} missing (../shared/data)")
+    return euroc.load_flights(folder)[::4][:n]  # one IMU per flight
+
+
+def test_horizontal_zig_zags_leave_an_imu_only_filter_far_more_than_vertical_ones():
+    params = FilterParams()
+    horizontal = sustained.analyse("phantom4_horizontal", _family("phantom4_horizontal", 8),
+                                   params, with_vqf=False)
+    vertical = sustained.analyse("phantom4", _family("phantom4", 10), params, with_vqf=False)
+    assert horizontal.median_horizontal_accel_m_s2 > 3 * vertical.median_horizontal_accel_m_s2
+    for memory in (0.5, 1.0, 2.0):
+        assert horizontal.floor_deg[memory] > 2 * vertical.floor_deg[memory]
+    # a longer memory averages more of the acceleration out
+    floors = [horizontal.floor_deg[m] for m in sustained.MEMORIES_S]
+    assert floors[-1] < floors[0] / 5
+    # velocity aiding takes the acceleration out: below the online filter on both
+    for row in (horizontal, vertical):
+        assert row.measured_deg["cf_estimator_aided"] < row.measured_deg["cf_estimator"]
+    # the Xsens DOTs' biases, as the data README says: about 1-2 deg/s
+    assert 0.8 < vertical.reference_bias_deg_s < 3.0
+    assert 0.8 < horizontal.reference_bias_deg_s < 3.0
+    table = sustained.format_table([horizontal, vertical])
+    assert "phantom4_horizontal" in table and "IMU-only floor, memory 5 s" in table
+
+
+def test_cli_usage_errors_exit_2(tmp_path, capsys):
+    assert main(["bench", "sustained", "--data", str(tmp_path), "--families", "nope"]) == 2
+    assert "is not a directory" in capsys.readouterr().err
+    assert main(["bench", "sustained", "--data", str(tmp_path), "--families", ","]) == 2
+    assert "--families is empty" in capsys.readouterr().err
