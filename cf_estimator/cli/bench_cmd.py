@@ -1,4 +1,5 @@
-"""``cf-estimator bench broad|scenarios|speed``: accuracy and speed versus the peers.
+"""``cf-estimator bench broad|euroc|scenarios|speed|cross|sustained|fleet``: accuracy and speed
+versus the peers.
 
 ``bench broad --data DIR`` scores our filter (and ``--peers``) on BROAD trial files: per-group
 tables of total/heading/inclination RMSE [deg] over the movement samples, 9-D and 6-D, and
@@ -38,7 +39,7 @@ def register(subparsers: Any) -> None:
     """Add ``bench`` and its sub-commands."""
     p = subparsers.add_parser(
         "bench", help="accuracy and speed benchmarks vs peers (bench broad, euroc, scenarios, "
-        "speed)",
+        "speed, cross, sustained, fleet)",
         description="Benchmarks of the filter against VQF, x-io Fusion and Madgwick.",
     )
     sub = p.add_subparsers(dest="bench_command", required=True, metavar="BENCHMARK")
