@@ -122,7 +122,8 @@ def estimators(params: FilterParams, with_vqf: bool) -> dict[str, Callable[[Flig
 def analyse(family: str, flights: Sequence[Flight], params: FilterParams,
             with_vqf: bool = True) -> FamilyFloors:
     """The floors e_acc(T) for :data:`MEMORIES_S` and the measured inclination errors, each
-    the mean over ``flights`` of its RMS over the scored samples (t ≥ SETTLE_S, reference)."""
+    the mean over ``flights`` of its RMS over the scored samples (t ≥ SETTLE_S, reference);
+    the reference's gyro bias and ours' learned-bias error at SETTLE_S, means over ``flights``."""
     flights = [f for f in flights if f.velocity_t_s is not None]
     if not flights:
         raise ValueError(f"{family}: no recording with a reference velocity")
