@@ -729,7 +729,7 @@ def test_valid_parameter_changes_apply_at_the_next_sample_without_reset(changes,
     status = pipe.filter.status()
     settling = status.phase in ("startup", "recovering")
     floor = pp_new.orientation_covariance_rad2
-    model = pipe._cov_model  # noqa: SLF001 - the mean square it holds after this step
+    model = pipe.covariance_model  # the mean square it holds after this step
     assert model.tilt0 == floor and model.k1 == fp_new.k1 and model.lag_s == (
         fp_new.aperiodic_time_constant_s)
     tilt = floor + (status.error_norm_rad**2 if settling else 0.0)

@@ -224,6 +224,12 @@ class ComplementaryFilter:
 
     # -- state ---------------------------------------------------------------------------------
     @property
+    def step_state(self) -> Any:
+        """The step state (:class:`cf_estimator.core.state.StepState`, or the compiled twin's
+        struct with the same fields): for reading — the bulk path, diagnostics, tests."""
+        return self._state
+
+    @property
     def initialized(self) -> bool:
         """True once an attitude exists (after the first valid accelerometer sample)."""
         return self._initialized

@@ -36,7 +36,7 @@ import numpy as np
 from cf_estimator.core.filter import EXTRA_COLUMNS
 from cf_estimator.core.step import MAG_DISABLED, MAG_REJECTED, MAG_USED
 from cf_estimator.pipeline import checks
-from cf_estimator.pipeline.pipeline import _ACCEL_MAX2, _GYRO_MAX2, _TWO_PI, ImuPipeline
+from cf_estimator.pipeline.pipeline import ACCEL_MAX2, GYRO_MAX2, TWO_PI, ImuPipeline
 
 IMU, MAG, OTHER = 0, 1, 2  #: event kinds; OTHER (e.g. a reference) passes through
 _GYRO_WARN2 = checks.GYRO_IMPLAUSIBLE_RAD_S**2
@@ -66,10 +66,10 @@ class Scan:
 
 
 def _ordinary_start(pipe: ImuPipeline) -> bool:
-    f = pipe._filter  # noqa: SLF001 - this module is the pipeline's own bulk path
-    return (f.initialized and pipe._last_ns is not None and not pipe._pending_warnings
-            and pipe._acc_n >= checks.ACCEL_CHECK_SAMPLES
-            and getattr(pipe, "_aiding", None) is None)  # velocity aiding: per message
+    return (pipe.filter.initialized and pipe.clock.last_ns is not None
+            and not pipe.has_pending_warnings
+            and pipe.accel_check_n >= checks.ACCEL_CHECK_SAMPLES
+            and not pipe.has_velocity_aiding)  # velocity aiding: per message
 
 
 def _imu_ok(v: np.ndarray, sec: np.ndarray, nsec: np.ndarray) -> np.ndarray:
@@ -79,8 +79,8 @@ def _imu_ok(v: np.ndarray, sec: np.ndarray, nsec: np.ndarray) -> np.ndarray:
         finite = np.all(np.isfinite(v[:, [13, 14, 15, 25, 26, 27]]), axis=1)
         a2 = ax * ax + ay * ay + az * az
         g2 = gx * gx + gy * gy + gz * gz
-        return (finite & ~((sec == 0) & (nsec == 0)) & (a2 != 0.0) & (g2 <= _GYRO_MAX2)
-                & (a2 <= _ACCEL_MAX2) & (g2 <= _GYRO_WARN2))
+        return (finite & ~((sec == 0) & (nsec == 0)) & (a2 != 0.0) & (g2 <= GYRO_MAX2)
+                & (a2 <= ACCEL_MAX2) & (g2 <= _GYRO_WARN2))
 
 
 def _mag_ok(v: np.ndarray, sec: np.ndarray, nsec: np.ndarray) -> np.ndarray:
@@ -190,8 +190,8 @@ def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = N
     out = Scan(start)
     if not _ordinary_start(p):
         return out
-    heading = bool(p._filter._state.heading_initialized)  # noqa: SLF001
-    pending = p._pending_mag
+    heading = bool(p.filter.step_state.heading_initialized)
+    pending = p.mag_input.pending
     if pending is not None and not heading:
         return out
     st = ev.static()
@@ -208,9 +208,9 @@ def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = N
     is_mag = kind == MAG
     ok = st["ok"][start:stop]
     if ev.imu is not None and is_imu.any():
-        good &= ~is_imu | (ok & ev.frame_is(IMU, p._imu_frame)[start:stop])
-        av = np.asarray(ev.same_covariance(16, p._av_cov.raw), dtype=bool)
-        la = np.asarray(ev.same_covariance(28, p._la_cov.raw), dtype=bool)
+        good &= ~is_imu | (ok & ev.frame_is(IMU, p.imu_frame)[start:stop])
+        av = np.asarray(ev.same_covariance(16, p.angular_velocity_covariance.raw), dtype=bool)
+        la = np.asarray(ev.same_covariance(28, p.linear_acceleration_covariance.raw), dtype=bool)
         rows = np.asarray(ev.row[start:stop], dtype=np.intp)
         imu_pos = np.flatnonzero(is_imu)
         cov_ok = np.ones(stop - start, dtype=bool)
@@ -218,40 +218,40 @@ def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = N
         good &= cov_ok
         # stamps increase from message to message, without a gap that resets the filter
         t = st["t_ns"][start:stop][imu_pos]
-        d = np.diff(t, prepend=np.int64(p._last_ns))
+        d = np.diff(t, prepend=np.int64(p.clock.last_ns))
         t_ok = d > 0
-        if p._reset_gap_on:
-            t_ok &= d <= p._reset_gap_ns
+        if p.rules.reset_gap_on:
+            t_ok &= d <= p.rules.reset_gap_ns
         seq_ok = np.ones(stop - start, dtype=bool)
         seq_ok[imu_pos] = t_ok
         good &= seq_ok
     if is_mag.any():
-        if not (p._use_mag and heading and p._mag_n >= checks.MAG_CHECK_SAMPLES):
+        if not (p.rules.use_mag and heading and p.mag_input.check_n >= checks.MAG_CHECK_SAMPLES):
             good &= ~is_mag
         else:
-            good &= ~is_mag | (ok & ev.frame_is(MAG, p._mag_frame)[start:stop])
+            good &= ~is_mag | (ok & ev.frame_is(MAG, p.mag_input.frame)[start:stop])
     bad = np.flatnonzero(~good)
     end = start + (int(bad[0]) if bad.size else stop - start)
     if end <= start:
         return out
     # -- the sequential bookkeeping over the run, in the pipeline's order ---------------------
     kinds, rows_l, t_all = ev.kind, ev.row, st["t_ns"]
-    max_dt_ns, timeout = p._max_dt_ns, p._mag_timeout_ns
-    dt_mean, gaps = p._dt_mean, p._gaps
+    max_dt_ns, timeout = p.rules.max_dt_ns, p.rules.mag_timeout_ns
+    dt_mean, gaps = p.clock.dt_mean, p.tally.gaps
     dropped = stale = n_mag = 0
-    w = p._window
+    w = p.window
     dt_min, dt_max, dt_sum, n_dt = w.dt_min, w.dt_max, w.dt_sum, w.n_dt
-    last = p._last_ns
+    last = p.clock.last_ns
     mag_block = ev.mag
     if mag_block is not None:
         mxs, mys, mzs = ev.column("mx"), ev.column("my"), ev.column("mz")
-        if p._flip:  # body_frame FLU <-> FRD, as on_mag turns the field
+        if p.rules.flip:  # body_frame FLU <-> FRD, as on_mag turns the field
             mys, mzs = ev.column("-my"), ev.column("-mz")
     t_list = t_all[start:end].tolist()
     logs = ev.log_ns
     imu_sec = ev.imu.sec if ev.imu is not None else []
     imu_nsec = ev.imu.nsec if ev.imu is not None else []
-    max_dt_fallback = min(p._pp.max_dt_s, 0.01)
+    max_dt_fallback = min(p.pipeline_params.max_dt_s, 0.01)
     o_rows, o_t, o_sec, o_nsec, o_log = out.rows, out.t_ns, out.sec, out.nsec, out.log_ns
     o_mag, o_mag_t, o_dt = out.mag, out.mag_t_ns, out.dt
     for i in range(start, end):
@@ -302,10 +302,10 @@ def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = N
         last = t_ns
     out.end = end
     out.n_events = end - start
-    out.frame = p.output_frame_id(str(p._imu_frame))
+    out.frame = p.output_frame_id(str(p.imu_frame))
     out.values = ev.imu.values if ev.imu is not None else None
     out.state = {
-        "_last_ns": last, "_dt_mean": dt_mean, "_gaps": gaps, "_pending_mag": pending,
+        "last_ns": last, "dt_mean": dt_mean, "gaps": gaps, "pending_mag": pending,
         "dropped": dropped, "stale": stale, "n_mag": n_mag,
         "window": (dt_min, dt_max, dt_sum, n_dt),
     }
@@ -333,11 +333,11 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
     t0 = perf_counter()
     p = pipe
     n = run.n
-    f = p._filter  # noqa: SLF001
+    f = p.filter
     sel = run.values[np.asarray(run.rows, dtype=np.intp)]
     gyro = np.ascontiguousarray(sel[:, 13:16])
     acc = np.ascontiguousarray(sel[:, 25:28])
-    if p._flip:  # body_frame FLU <-> FRD, as on_imu turns the vectors
+    if p.rules.flip:  # body_frame FLU <-> FRD, as on_imu turns the vectors
         gyro[:, 1:] = -gyro[:, 1:]
         acc[:, 1:] = -acc[:, 1:]
     mag_rows = [k for k, m in enumerate(run.mag) if m is not None]
@@ -352,7 +352,7 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
     # the filter over the run (the covariance model's inputs and the bias estimate after each
     # row are columns of extra)
     f.run_rows(gyro, acc, mag, dt, 0, q, extra)
-    state = f._state  # noqa: SLF001 - read-only
+    state = f.step_state
     # -- counters, statistics and the covariance model, row by row ------------------------------
     st = run.state
     status = extra[:, 9].tolist()
@@ -364,8 +364,8 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
     lx, ly, yaw_err, noise_a2 = (extra[:, 11].tolist(), extra[:, 12].tolist(),
                                  extra[:, 13].tolist(), extra[:, 14].tolist())
     heading = bool(state.heading_initialized)  # constant over the run
-    model = p._cov_model
-    last_mag = p._last_mag_used_ns
+    model = p.covariance_model
+    last_mag = p.mag_input.last_used_ns
     t_ns = run.t_ns
     used = [False] * n
     ages: list[float | None] = [None] * n
@@ -374,13 +374,13 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
             if run.mag[k] is not None:
                 ms = status[k]
                 if ms == MAG_USED:
-                    p._mag_used += 1
+                    p.tally.mag_used += 1
                     used[k] = True
                     last_mag = run.mag_t_ns[k]
                 elif ms == MAG_REJECTED:
-                    p._mag_rejected += 1
+                    p.tally.mag_rejected += 1
                 elif ms == MAG_DISABLED:
-                    p._mag_disabled += 1
+                    p.tally.mag_disabled += 1
             if last_mag is not None:
                 ages[k] = (t_ns[k] - last_mag) * 1e-9
     tilts, yaws = model.steps(run.dt, clipped, sigma, phase, en, lx, ly, noise_a2, heading,
@@ -389,15 +389,15 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
     cov[:, 0] = tilts
     cov[:, 4] = tilts
     cov[:, 8] = yaws
-    p._last_mag_used_ns = last_mag
-    p._mag_dropped += st["dropped"]
-    p._mag_stale += st["stale"]
-    p._received_mag += st["n_mag"]
-    p._pending_mag = st["_pending_mag"]
-    p._last_ns, p._dt_mean, p._gaps = st["_last_ns"], st["_dt_mean"], st["_gaps"]
-    p._received_imu += n
-    p._processed += n
-    w = p._window
+    p.mag_input.last_used_ns = last_mag
+    p.tally.mag_dropped += st["dropped"]
+    p.tally.mag_stale += st["stale"]
+    p.tally.received_mag += st["n_mag"]
+    p.mag_input.pending = st["pending_mag"]
+    p.clock.last_ns, p.clock.dt_mean, p.tally.gaps = st["last_ns"], st["dt_mean"], st["gaps"]
+    p.tally.received_imu += n
+    p.tally.processed += n
+    w = p.window
     w.dt_min, w.dt_max, w.dt_sum, w.n_dt = st["window"]
     err_sum, err_max = w.err_sum, w.err_max
     for e in en:
@@ -412,11 +412,11 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
     w.n += n
     w.last_ns = run.t_ns[-1]
     # -- outputs ------------------------------------------------------------------------------
-    if not p._out_frame.identity:  # core world -> published (nwu, true north), as on_imu
-        q = p._out_frame.apply_array(q)
+    if not p.output_frame.identity:  # core world -> published (nwu, true north), as on_imu
+        q = p.output_frame.apply_array(q)
     atan2, asin = math.atan2, math.asin
-    unwrap = p._pp.rpy_unwrap
-    prev = p._unwrap_prev
+    unwrap = p.pipeline_params.rpy_unwrap
+    prev = p.clock.unwrap_prev
     rpy = []
     for qw, qx, qy, qz in q.tolist():
         roll = atan2(2.0 * (qw * qx + qy * qz), 1.0 - 2.0 * (qx * qx + qy * qy))
@@ -425,16 +425,16 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
         yaw = atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
         if unwrap:
             if prev is not None:
-                roll += _TWO_PI * round((prev[0] - roll) / _TWO_PI)
-                yaw += _TWO_PI * round((prev[2] - yaw) / _TWO_PI)
+                roll += TWO_PI * round((prev[0] - roll) / TWO_PI)
+                yaw += TWO_PI * round((prev[2] - yaw) / TWO_PI)
             prev = (roll, pitch, yaw)
         rpy.append((roll, pitch, yaw))
     if unwrap:
-        p._unwrap_prev = prev
-    p._last_rpy = rpy[-1]
+        p.clock.unwrap_prev = prev
+    p.last_rpy = rpy[-1]
     elapsed = perf_counter() - t0  # the run's processing time, shared by its messages
     w.proc_sum += elapsed
     if elapsed / n > w.proc_max:
         w.proc_max = elapsed / n
-    return Committed(q, rpy, extra, en, cov,
-                     p._av_cov.value, p._la_cov.value, gyro, acc)
+    return Committed(q, rpy, extra, en, cov, p.angular_velocity_covariance.value,
+                     p.linear_acceleration_covariance.value, gyro, acc)

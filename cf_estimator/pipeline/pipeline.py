@@ -52,13 +52,15 @@ from cf_estimator.pipeline.diagnostics import (
 )
 from cf_estimator.pipeline.messages import UNKNOWN_COVARIANCE, covariance9
 from cf_estimator.pipeline.params import PipelineParams
+from cf_estimator.pipeline.state import ImuTime, InputRules, MagInput, MessageCounts
 from cf_estimator.pipeline.velocity_input import velocity_from_message
 from cf_estimator.schema import ParameterError, as_dict, specs_of, split_by_owner
 
 Vec3 = tuple[float, float, float]
-_TWO_PI = 2.0 * math.pi
-_GYRO_MAX2 = checks.GYRO_MAX_RAD_S**2
-_ACCEL_MAX2 = checks.ACCEL_MAX_M_S2**2
+TWO_PI = 2.0 * math.pi
+#: squared norms beyond any sensor's range [(rad/s)², (m/s²)²]: rejected (checks.*_MAX_*)
+GYRO_MAX2 = checks.GYRO_MAX_RAD_S**2
+ACCEL_MAX2 = checks.ACCEL_MAX_M_S2**2
 
 
 @dataclass(slots=True)
@@ -108,41 +110,33 @@ class ImuPipeline:
         self._filter = ComplementaryFilter(frames.core_params(self._fp))
         self.diagnostics_name = diagnostics_name
         self.imu_topic = imu_topic  #: named in the "no IMU messages" diagnostics (the node's)
-        # cumulative counters (plain ints: the hot path increments attributes)
-        self._received_imu = 0
-        self._processed = 0
+        #: cumulative counts (plain ints: the hot path increments attributes)
+        self.tally = MessageCounts()
         self._rejected: dict[str, int] = {}
         self._resets: dict[str, int] = {}
         self.reset_total = 0  #: resets of every reason (a cheap "did it reset?" for the node)
-        self._gaps = 0
-        self._received_mag = 0
-        self._mag_used = 0
-        self._mag_rejected = 0
-        self._mag_stale = 0
-        self._mag_invalid = 0
-        self._mag_dropped = 0
-        self._mag_disabled = 0
+        #: the IMU time base (cleared by every reset), the magnetometer input, the rules
+        self.clock = ImuTime()
+        self.mag_input = MagInput()
+        self.rules = InputRules()
         self.last_reject_reason = ""
         # warn-once state
         self._warned: dict[str, str] = {}
         self._pending_warnings: list[str] = []
-        self._imu_frame: str | None = None
-        self._mag_frame: str | None = None
-        self._acc_n = 0
+        self.imu_frame: str | None = None  #: the IMU messages' frame id (None: none yet)
+        self.accel_check_n = 0  #: accelerometer samples in the unit check so far
         self._acc_sx = self._acc_sy = self._acc_sz = 0.0
-        self._mag_n = 0
-        self._mag_sum = 0.0
-        # diagnostics window
-        self._window = WindowStats()
+        #: the diagnostics window (since the last report)
+        self.window = WindowStats()
         self._previous_counters: dict[str, Any] = {}
         self._previous_now_s: float | None = None
-        self._last_rpy: Vec3 | None = None
-        self._last_mag_used_ns: int | None = None
-        self._pending_mag: tuple[int, float, float, float] | None = None  # (t_ns, x, y, z)
+        self.last_rpy: Vec3 | None = None  #: roll, pitch, yaw [rad] of the last output
         self._aiding: VelocityAiding | None = None  # created by the first velocity message
-        self._av_cov = _CovarianceCache()
-        self._la_cov = _CovarianceCache()
-        self._cov_model = OrientationCovariance(
+        #: the input covariances (angular velocity, linear acceleration), cached by their bytes
+        self.angular_velocity_covariance = _CovarianceCache()
+        self.linear_acceleration_covariance = _CovarianceCache()
+        #: the orientation covariance model (cf_estimator.core.covariance)
+        self.covariance_model = OrientationCovariance(
             self._pp.orientation_covariance_rad2, self._pp.yaw_covariance_rad2,
             self._pp.unreferenced_yaw_covariance_rad2, self._fp.bias_prior_sigma_rad_s,
             self._fp.k1, self._fp.gravity_m_s2, self._fp.aperiodic_time_constant_s)
@@ -209,7 +203,7 @@ class ImuPipeline:
 
     def _apply_derived(self) -> None:
         pp = self._pp
-        cov = self._cov_model
+        cov = self.covariance_model
         cov.tilt0 = pp.orientation_covariance_rad2
         cov.yaw0 = pp.yaw_covariance_rad2
         cov.yaw_unref = pp.unreferenced_yaw_covariance_rad2
@@ -217,13 +211,13 @@ class ImuPipeline:
         cov.k1 = self._fp.k1
         cov.lag_s = self._fp.aperiodic_time_constant_s
         cov.set_gravity(self._fp.gravity_m_s2)
-        self._max_dt_ns = int(round(pp.max_dt_s * 1e9))
+        self.rules.max_dt_ns = int(round(pp.max_dt_s * 1e9))
         # 0 = never; a positive value below 0.5 ns must not round to "never"
-        self._reset_gap_on = pp.reset_after_gap_s > 0.0
-        self._reset_gap_ns = int(round(pp.reset_after_gap_s * 1e9))
-        self._jump_back_ns = int(round(pp.time_jump_back_threshold_s * 1e9))
-        self._mag_timeout_ns = int(round(pp.mag_timeout_s * 1e9))
-        self._use_mag = self._fp.use_mag
+        self.rules.reset_gap_on = pp.reset_after_gap_s > 0.0
+        self.rules.reset_gap_ns = int(round(pp.reset_after_gap_s * 1e9))
+        self.rules.jump_back_ns = int(round(pp.time_jump_back_threshold_s * 1e9))
+        self.rules.mag_timeout_ns = int(round(pp.mag_timeout_s * 1e9))
+        self.rules.use_mag = self._fp.use_mag
         self._ned = self._fp.world_frame == "ned"
         # the published world frame, true north, yaw offset (identity: skipped, bit-identical)
         self._out_frame = frames.OutputFrame(self._fp.world_frame, pp.magnetic_declination_rad,
@@ -238,14 +232,13 @@ class ImuPipeline:
         # vectors when their convention is not the one paired with the world frame (FLU-ENU,
         # FRD-NED), so the core estimates q_world_from_body in that paired convention.
         bf = pp.body_frame
-        self._flip = bf != "sensor" and (bf == "frd") != self._ned
-        self._av_cov.flip = self._la_cov.flip = self._flip
+        self.rules.flip = bf != "sensor" and (bf == "frd") != self._ned
+        flip = self.rules.flip
+        self.angular_velocity_covariance.flip = self.linear_acceleration_covariance.flip = flip
 
     # -- state ------------------------------------------------------------------------------------
     def _clear_time_state(self) -> None:
-        self._last_ns: int | None = None
-        self._dt_mean = 0.0
-        self._unwrap_prev: Vec3 | None = None
+        self.clock = ImuTime()
 
     def reset(self, reason: str) -> None:
         """Forget the attitude and the time base; the next valid IMU message re-initialises.
@@ -256,13 +249,13 @@ class ImuPipeline:
         self._filter.reset()
         if self._aiding is not None:
             self._aiding.reset()
-        self._cov_model.reset()
+        self.covariance_model.reset()
         self._clear_time_state()
         self._resets[reason] = self._resets.get(reason, 0) + 1
         self.reset_total += 1
-        if self._pending_mag is not None:
-            self._pending_mag = None
-            self._mag_dropped += 1
+        if self.mag_input.pending is not None:
+            self.mag_input.pending = None
+            self.tally.mag_dropped += 1
 
     def output_frame_id(self, input_frame_id: str) -> str:
         """The frame id published for an input ``frame_id`` (:func:`frames.output_frame_id`)."""
@@ -274,6 +267,16 @@ class ImuPipeline:
         return out
 
     @property
+    def has_pending_warnings(self) -> bool:
+        """True while warn-once messages wait for the next output."""
+        return bool(self._pending_warnings)
+
+    @property
+    def has_velocity_aiding(self) -> bool:
+        """True once a velocity message has created the aiding (it then runs per message)."""
+        return self._aiding is not None
+
+    @property
     def output_frame(self) -> frames.OutputFrame:
         """The rotation from the core's world frame to the published one."""
         return self._out_frame
@@ -283,7 +286,7 @@ class ImuPipeline:
         """True when ``body_frame`` turns the input vectors half a turn about x (FLU <-> FRD):
         the output's angular velocity, acceleration and their covariances differ from the
         input's."""
-        return self._flip
+        return self.rules.flip
 
     @property
     def initialized(self) -> bool:
@@ -294,19 +297,19 @@ class ImuPipeline:
     def counters(self) -> dict[str, Any]:
         """Cumulative counters (a fresh dict; see docs/ros_interface.md)."""
         return {
-            "received_imu": self._received_imu,
-            "processed": self._processed,
+            "received_imu": self.tally.received_imu,
+            "processed": self.tally.processed,
             "rejected": dict(self._rejected),
             "resets": dict(self._resets),
-            "gaps": self._gaps,
-            "received_mag": self._received_mag,
-            "mag_used": self._mag_used,
-            "mag_rejected": self._mag_rejected,
-            "mag_stale": self._mag_stale,
-            "mag_invalid": self._mag_invalid,
-            "mag_dropped": self._mag_dropped,
-            "mag_disabled": self._mag_disabled,
-            "mag_pending": 0 if self._pending_mag is None else 1,
+            "gaps": self.tally.gaps,
+            "received_mag": self.tally.received_mag,
+            "mag_used": self.tally.mag_used,
+            "mag_rejected": self.tally.mag_rejected,
+            "mag_stale": self.tally.mag_stale,
+            "mag_invalid": self.tally.mag_invalid,
+            "mag_dropped": self.tally.mag_dropped,
+            "mag_disabled": self.tally.mag_disabled,
+            "mag_pending": 0 if self.mag_input.pending is None else 1,
         }
 
     @property
@@ -339,38 +342,39 @@ class ImuPipeline:
     # -- magnetometer -----------------------------------------------------------------------------
     def on_mag(self, msg: Any) -> None:
         """Store the latest valid magnetometer sample (any unit; only directions are used)."""
-        self._received_mag += 1
+        self.tally.received_mag += 1
         try:
             st = msg.header.stamp
             t_ns = int(st.sec) * 1_000_000_000 + int(st.nanosec)
             m = msg.magnetic_field
             mx, my, mz = float(m.x), float(m.y), float(m.z)
             frame = msg.header.frame_id
-            if self._flip:
+            if self.rules.flip:
                 my, mz = -my, -mz
         except Exception:  # noqa: BLE001 - malformed: counted, never raised
-            self._mag_invalid += 1
+            self.tally.mag_invalid += 1
             return
-        if not self._use_mag:
-            self._mag_disabled += 1
+        if not self.rules.use_mag:
+            self.tally.mag_disabled += 1
             return
         n2 = mx * mx + my * my + mz * mz
         if t_ns == 0 or not math.isfinite(n2) or n2 == 0.0:
-            self._mag_invalid += 1
+            self.tally.mag_invalid += 1
             return
-        if frame != self._mag_frame:
-            self._mag_frame = frame
+        mi = self.mag_input
+        if frame != mi.frame:
+            mi.frame = frame
             self._warn(checks.frame_id_warning(str(frame), "magnetometer"))
-            if self._imu_frame is not None and frame != self._imu_frame:
-                self._warn(checks.mag_frame_warning(str(frame), self._imu_frame))
-        if self._mag_n < checks.MAG_CHECK_SAMPLES:
-            self._mag_n += 1
-            self._mag_sum += math.sqrt(n2)
-            if self._mag_n == checks.MAG_CHECK_SAMPLES:
-                self._warn(checks.mag_units_warning(self._mag_sum / self._mag_n))
-        if self._pending_mag is not None:
-            self._mag_dropped += 1
-        self._pending_mag = (t_ns, mx, my, mz)
+            if self.imu_frame is not None and frame != self.imu_frame:
+                self._warn(checks.mag_frame_warning(str(frame), self.imu_frame))
+        if mi.check_n < checks.MAG_CHECK_SAMPLES:
+            mi.check_n += 1
+            mi.check_norm_sum += math.sqrt(n2)
+            if mi.check_n == checks.MAG_CHECK_SAMPLES:
+                self._warn(checks.mag_units_warning(mi.check_norm_sum / mi.check_n))
+        if self.mag_input.pending is not None:
+            self.tally.mag_dropped += 1
+        self.mag_input.pending = (t_ns, mx, my, mz)
 
     # -- velocity ---------------------------------------------------------------------------------
     def on_velocity(self, msg: Any) -> str | None:
@@ -401,7 +405,7 @@ class ImuPipeline:
     def on_imu(self, msg: Any) -> PipelineOutput | None:
         """Process one sensor_msgs/Imu-like message; None when it is rejected (reason counted)."""
         t0 = perf_counter()
-        self._received_imu += 1
+        self.tally.received_imu += 1
         try:
             return self._on_imu(msg, t0)
         except Exception:  # noqa: BLE001 - the pipeline never raises on data
@@ -418,12 +422,12 @@ class ImuPipeline:
             gx, gy, gz = float(av.x), float(av.y), float(av.z)
             la = msg.linear_acceleration
             ax, ay, az = float(la.x), float(la.y), float(la.z)
-            av_cov = self._av_cov.get(msg.angular_velocity_covariance)
-            la_cov = self._la_cov.get(msg.linear_acceleration_covariance)
+            av_cov = self.angular_velocity_covariance.get(msg.angular_velocity_covariance)
+            la_cov = self.linear_acceleration_covariance.get(msg.linear_acceleration_covariance)
         except Exception:  # noqa: BLE001
             self._reject(checks.MALFORMED)
             return None
-        if self._flip:  # into the body convention paired with world_frame (see body_frame)
+        if self.rules.flip:  # into the body convention paired with world_frame (see body_frame)
             gy, gz, ay, az = -gy, -gz, -ay, -az
         if sec == 0 and nsec == 0:
             self._reject(checks.ZERO_STAMP)
@@ -440,16 +444,16 @@ class ImuPipeline:
             self._reject(checks.ZERO_ACCEL)
             return None
         g2 = gx * gx + gy * gy + gz * gz
-        if g2 > _GYRO_MAX2:
+        if g2 > GYRO_MAX2:
             self._reject(checks.IMPLAUSIBLE_GYRO)
             return None
-        if a2 > _ACCEL_MAX2:
+        if a2 > ACCEL_MAX2:
             self._reject(checks.IMPLAUSIBLE_ACCEL)
             return None
 
         # -- time ---------------------------------------------------------------------------------
         t_ns = sec * 1_000_000_000 + nsec
-        last = self._last_ns
+        last = self.clock.last_ns
         dt = 0.0
         if last is not None:
             d_ns = t_ns - last
@@ -457,19 +461,19 @@ class ImuPipeline:
                 if d_ns == 0:
                     self._reject(checks.DUPLICATE_STAMP)
                     return None
-                if -d_ns < self._jump_back_ns:
+                if -d_ns < self.rules.jump_back_ns:
                     self._reject(checks.OUT_OF_ORDER)
                     return None
                 if not self._pp.reset_on_time_jump_back:
                     self._reject(checks.TIME_BACKWARDS)
                     return None
                 self.reset(checks.RESET_TIME_JUMP_BACK)
-            elif self._reset_gap_on and d_ns > self._reset_gap_ns:
+            elif self.rules.reset_gap_on and d_ns > self.rules.reset_gap_ns:
                 self.reset(checks.RESET_LONG_GAP)
             else:
                 dt = d_ns * 1e-9
         # -- from here on the message is processed ------------------------------------------------
-        w = self._window
+        w = self.window
         if dt > 0.0:
             if w.n_dt == 0 or dt < w.dt_min:
                 w.dt_min = dt
@@ -477,26 +481,27 @@ class ImuPipeline:
                 w.dt_max = dt
             w.dt_sum += dt
             w.n_dt += 1
-            if d_ns > self._max_dt_ns:  # gap: do not integrate over it
-                self._gaps += 1
-                dt = self._dt_mean if self._dt_mean > 0.0 else min(self._pp.max_dt_s, 0.01)
-            elif self._dt_mean > 0.0:
-                self._dt_mean += 0.05 * (dt - self._dt_mean)
+            if d_ns > self.rules.max_dt_ns:  # gap: do not integrate over it
+                self.tally.gaps += 1
+                dt = (self.clock.dt_mean if self.clock.dt_mean > 0.0
+                      else min(self._pp.max_dt_s, 0.01))
+            elif self.clock.dt_mean > 0.0:
+                self.clock.dt_mean += 0.05 * (dt - self.clock.dt_mean)
             else:
-                self._dt_mean = dt
+                self.clock.dt_mean = dt
 
-        if frame != self._imu_frame:
-            self._imu_frame = frame
+        if frame != self.imu_frame:
+            self.imu_frame = frame
             self._warn(checks.frame_id_warning(str(frame), "IMU"))
-        if self._acc_n < checks.ACCEL_CHECK_SAMPLES:
+        if self.accel_check_n < checks.ACCEL_CHECK_SAMPLES:
             # |mean a|, not mean |a|: vibration adds to every |a| (13 m/s^2 on a quadrotor)
             # but averages out of the vector, which is gravity (plus a mean acceleration)
-            self._acc_n += 1
+            self.accel_check_n += 1
             self._acc_sx += ax
             self._acc_sy += ay
             self._acc_sz += az
-            if self._acc_n == checks.ACCEL_CHECK_SAMPLES:
-                n = self._acc_n
+            if self.accel_check_n == checks.ACCEL_CHECK_SAMPLES:
+                n = self.accel_check_n
                 mean_norm = math.sqrt(self._acc_sx**2 + self._acc_sy**2 + self._acc_sz**2) / n
                 self._warn(checks.accel_units_warning(mean_norm, self._fp.gravity_m_s2))
         if g2 > checks.GYRO_IMPLAUSIBLE_RAD_S**2:
@@ -505,15 +510,15 @@ class ImuPipeline:
         # -- magnetometer sample, used once -------------------------------------------------------
         mag = None
         mag_used = False
-        pending = self._pending_mag
+        pending = self.mag_input.pending
         if pending is not None:
-            self._pending_mag = None
-            if not self._use_mag:
-                self._mag_disabled += 1
-            elif abs(t_ns - pending[0]) <= self._mag_timeout_ns:
+            self.mag_input.pending = None
+            if not self.rules.use_mag:
+                self.tally.mag_disabled += 1
+            elif abs(t_ns - pending[0]) <= self.rules.mag_timeout_ns:
                 mag = (pending[1], pending[2], pending[3])
             else:
-                self._mag_stale += 1
+                self.tally.mag_stale += 1
 
         # -- filter -------------------------------------------------------------------------------
         f = self._filter
@@ -528,13 +533,13 @@ class ImuPipeline:
             if mag is not None:
                 ms = s.mag_status
                 if ms == MAG_USED:
-                    self._mag_used += 1
+                    self.tally.mag_used += 1
                     mag_used = True
-                    self._last_mag_used_ns = pending[0]  # type: ignore[index]
+                    self.mag_input.last_used_ns = pending[0]  # type: ignore[index]
                 elif ms == MAG_REJECTED:
-                    self._mag_rejected += 1
+                    self.tally.mag_rejected += 1
                 elif ms == MAG_DISABLED:
-                    self._mag_disabled += 1
+                    self.tally.mag_disabled += 1
             w.n_err += 1
             e = s.error_norm
             w.err_sum += e
@@ -546,13 +551,13 @@ class ImuPipeline:
             q = f.update((gx, gy, gz), (ax, ay, az), 0.0, mag)
             if mag is not None:
                 if f._state.heading_initialized:  # noqa: SLF001
-                    self._mag_used += 1
+                    self.tally.mag_used += 1
                     mag_used = True
-                    self._last_mag_used_ns = pending[0]  # type: ignore[index]
+                    self.mag_input.last_used_ns = pending[0]  # type: ignore[index]
                 else:  # horizontal component too small to give a heading
-                    self._mag_rejected += 1
-        self._last_ns = t_ns
-        self._processed += 1
+                    self.tally.mag_rejected += 1
+        self.clock.last_ns = t_ns
+        self.tally.processed += 1
 
         # -- output -------------------------------------------------------------------------------
         if q is None:  # cannot happen after the checks above; keep the contract anyway
@@ -565,8 +570,8 @@ class ImuPipeline:
                 q = self._out_frame.apply(q)
             qw, qx, qy, qz = q
             xyzw = (qx, qy, qz, qw)
-            last_mag = self._last_mag_used_ns
-            cov = self._cov_model.update(
+            last_mag = self.mag_input.last_used_ns
+            cov = self.covariance_model.update(
                 dt, f._state, mag_used,  # noqa: SLF001 - flags without building FilterStatus
                 None if last_mag is None else (t_ns - last_mag) * 1e-9)
             roll = math.atan2(2.0 * (qw * qx + qy * qz), 1.0 - 2.0 * (qx * qx + qy * qy))
@@ -574,13 +579,13 @@ class ImuPipeline:
             pitch = math.asin(1.0 if sp > 1.0 else (-1.0 if sp < -1.0 else sp))
             yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
             if self._pp.rpy_unwrap:
-                prev = self._unwrap_prev
+                prev = self.clock.unwrap_prev
                 if prev is not None:
-                    roll += _TWO_PI * round((prev[0] - roll) / _TWO_PI)
-                    yaw += _TWO_PI * round((prev[2] - yaw) / _TWO_PI)
-                self._unwrap_prev = (roll, pitch, yaw)
+                    roll += TWO_PI * round((prev[0] - roll) / TWO_PI)
+                    yaw += TWO_PI * round((prev[2] - yaw) / TWO_PI)
+                self.clock.unwrap_prev = (roll, pitch, yaw)
             rpy = (roll, pitch, yaw)
-            self._last_rpy = rpy
+            self.last_rpy = rpy
             initialized = True
         warnings = self._pending_warnings
         if warnings:
@@ -615,23 +620,23 @@ class ImuPipeline:
         if now_s is not None and self._previous_now_s is not None:
             period = now_s - self._previous_now_s
         stamp_age = None
-        if now_s is not None and self._last_ns is not None:
-            stamp_age = now_s - self._last_ns * 1e-9
+        if now_s is not None and self.clock.last_ns is not None:
+            stamp_age = now_s - self.clock.last_ns * 1e-9
         mag_age = None
-        if self._last_mag_used_ns is not None and self._last_ns is not None:
-            mag_age = (self._last_ns - self._last_mag_used_ns) * 1e-9
+        if self.mag_input.last_used_ns is not None and self.clock.last_ns is not None:
+            mag_age = (self.clock.last_ns - self.mag_input.last_used_ns) * 1e-9
         initialized = self._filter.initialized
         report = compose_report(
             name=self.diagnostics_name,
-            hardware_id=self._imu_frame or "",
+            hardware_id=self.imu_frame or "",
             counters=counters,
             previous=self._previous_counters,
-            window=self._window,
+            window=self.window,
             status=self._filter.status() if initialized else None,
             initialized=initialized,
             world_frame=self._fp.world_frame,
             use_mag=self._fp.use_mag,
-            rpy_rad=self._last_rpy if initialized else None,
+            rpy_rad=self.last_rpy if initialized else None,
             input_warnings=dict(self._warned),
             period_s=period,
             stamp_age_s=stamp_age,
@@ -643,10 +648,10 @@ class ImuPipeline:
         if self._aiding is not None:
             report = dataclasses.replace(
                 report, values=list(report.values) + velocity_values(
-                    self._aiding.status(self._last_ns * 1e-9 if self._last_ns else None)))
+                    self._aiding.status(self.clock.last_ns * 1e-9 if self.clock.last_ns else None)))
         self._previous_counters = counters
         self._previous_now_s = now_s
-        self._window = WindowStats()
+        self.window = WindowStats()
         return report
 
 
