@@ -1,0 +1,57 @@
+"""The bulk path works through the pipeline's public state (issue 26 item 5).
+
+pipeline/bulk.py must leave an ImuPipeline exactly as the per-message path would; it does so
+through the objects of pipeline/state.py and public properties, never a private attribute of
+the pipeline or a private constant of its module (checked on the source here). That the state
+and outputs it leaves are the per-message path's is test/test_bulk_decode.py's (same bags, same
+diagnostics, on hostile and real input).
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+from cf_estimator.pipeline import pipeline as pipeline_module
+from cf_estimator.pipeline.pipeline import ImuPipeline
+from cf_estimator.pipeline.state import ImuTime, InputRules, MagInput, MessageCounts
+
+BULK = Path(pipeline_module.__file__).with_name("bulk.py")
+
+
+def test_bulk_reads_and_writes_no_private_attribute_of_the_pipeline():
+    tree = ast.parse(BULK.read_text(encoding="utf-8"))
+    private = [
+        f"line {node.lineno}: {node.value.id}.{node.attr}"
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+        and node.value.id in ("p", "pipe") and node.attr.startswith("_")
+    ]
+    assert private == []
+    imported = [alias.name for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)
+                and node.module == "cf_estimator.pipeline.pipeline" for alias in node.names]
+    assert imported and not [n for n in imported if n.startswith("_")]
+
+
+def test_a_new_pipeline_has_one_state_object_per_concern_at_its_start():
+    pipe = ImuPipeline()
+    assert pipe.tally == MessageCounts()
+    assert pipe.clock == ImuTime()
+    assert pipe.mag_input == MagInput()
+    assert isinstance(pipe.rules, InputRules)
+    assert pipe.rules.max_dt_ns == round(pipe.pipeline_params.max_dt_s * 1e9)
+    assert pipe.rules.use_mag is pipe.filter_params.use_mag
+    # the counters report reads the same object
+    pipe.tally.mag_stale = 3
+    assert pipe.counters["mag_stale"] == 3
+
+
+def test_a_reset_clears_the_time_base_and_drops_the_pending_magnetometer_sample():
+    pipe = ImuPipeline()
+    pipe.clock = ImuTime(last_ns=5, dt_mean=0.01, unwrap_prev=(0.0, 0.0, 0.0))
+    pipe.mag_input.pending = (5, 1.0, 0.0, 0.0)
+    pipe.reset("test")
+    assert pipe.clock == ImuTime()
+    assert pipe.mag_input.pending is None
+    assert pipe.tally.mag_dropped == 1
+    assert pipe.reset_counts["test"] == 1
