@@ -55,3 +55,18 @@ def test_a_reset_clears_the_time_base_and_drops_the_pending_magnetometer_sample(
     assert pipe.mag_input.pending is None
     assert pipe.tally.mag_dropped == 1
     assert pipe.reset_counts["test"] == 1
+
+
+def test_the_filter_can_be_replaced_only_before_the_first_message():
+    import pytest
+
+    from cf_estimator.core.filter import ComplementaryFilter
+
+    pipe = ImuPipeline()
+    other = ComplementaryFilter(pipe.filter.params)
+    pipe.replace_filter(other)
+    assert pipe.filter is other
+    pipe.tally.received_imu = 1
+    with pytest.raises(RuntimeError, match="already processed"):
+        pipe.replace_filter(ComplementaryFilter(pipe.filter.params))
+    assert pipe.filter is other

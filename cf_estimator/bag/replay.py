@@ -302,7 +302,7 @@ class _Run:
         self.offline_segments = 0
         if self.offline:
             self.recorder = _RecordingFilter(frames.core_params(self.fparams))
-            self.pipe._filter = self.recorder  # noqa: SLF001 - same filter, recording its input
+            self.pipe.replace_filter(self.recorder)  # same filter, recording its input
         if self.out_path is not None:
             self.bag = io.OutputBag(self.out_path, storage=opts.storage, overwrite=opts.overwrite)
             self.bag.add_topic(OUT_IMU_TOPIC, io.IMU_TYPE)

@@ -266,6 +266,13 @@ class ImuPipeline:
             self._out_frame_ids[input_frame_id] = out
         return out
 
+    def replace_filter(self, new_filter: ComplementaryFilter) -> None:
+        """Run ``new_filter`` (same parameters, e.g. one that records its input for an
+        offline pass) instead of the pipeline's own; before the first IMU message only."""
+        if self.tally.received_imu:
+            raise RuntimeError("replace_filter: messages were already processed")
+        self._filter = new_filter
+
     @property
     def has_pending_warnings(self) -> bool:
         """True while warn-once messages wait for the next output."""
