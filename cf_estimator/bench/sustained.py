@@ -77,7 +77,8 @@ def reference_bias_rad_s(flight: Flight) -> np.ndarray:
 
 def learned_bias_error_deg_s(flight: Flight, params: FilterParams, at_s: float = SETTLE_S
                              ) -> float:
-    """|b − b_ref| [deg/s] of ours online at ``at_s`` [s] (b_ref: :func:`reference_bias_rad_s`)."""
+    """|b − b_ref| [deg/s] of ours online at ``at_s`` [s] (b_ref: :func:`reference_bias_rad_s`;
+    beyond the recording: its last sample)."""
     p = dataclasses.replace(params, use_mag=False)
     r = estimate(flight.gyro_rad_s, flight.accel_m_s2, None, timestamps_s=flight.t_s, params=p)
     i = min(int(np.searchsorted(flight.t_s, at_s)), flight.n_samples - 1)
@@ -95,6 +96,7 @@ class FamilyFloors:
     measured_deg: dict[str, float]  # estimator -> inclination error
     reference_bias_deg_s: float  # |b_ref|, the bias the reference shows
     bias_error_deg_s: float  # |b − b_ref| of ours online at SETTLE_S
+    bias_error_end_deg_s: float  # |b − b_ref| of ours online at the last sample
 
 
 def _rms(x: np.ndarray, mask: np.ndarray) -> float:
@@ -102,13 +104,26 @@ def _rms(x: np.ndarray, mask: np.ndarray) -> float:
     return float(np.sqrt(np.mean(x[m] ** 2))) if m.any() else math.nan
 
 
+def with_reference_bias(flight: Flight, params: FilterParams) -> np.ndarray:
+    """Ours online with the gyro bias the reference shows (:func:`reference_bias_rad_s`)
+    taken out of the gyro and no bias learning (integral, in-flight boost, rest): what the
+    loop would do if its in-flight bias learning were perfect. An analysis of the recordings,
+    never a filter mode: the reference is not there in flight. → q_world_from_sensor (N, 4)."""
+    p = dataclasses.replace(params, use_mag=False, k2=0.0, k3=0.0, bias_learning_k2=0.0,
+                            rest_bias_learning=False)
+    gyro = flight.gyro_rad_s - reference_bias_rad_s(flight)
+    return estimate(gyro, flight.accel_m_s2, None, timestamps_s=flight.t_s, params=p).quaternion
+
+
 def estimators(params: FilterParams, with_vqf: bool) -> dict[str, Callable[[Flight], np.ndarray]]:
-    """Name → f(flight) → q_world_from_sensor (N, 4): ours online, ours aided, VQF online."""
+    """Name → f(flight) → q_world_from_sensor (N, 4): ours online, ours with the reference's
+    bias (:func:`with_reference_bias`), ours aided, VQF online."""
     p = dataclasses.replace(params, use_mag=False)
     aided = aided_algorithms(VelocityInput())[0]
     out: dict[str, Callable[[Flight], np.ndarray]] = {
         "cf_estimator": lambda f: estimate(f.gyro_rad_s, f.accel_m_s2, None,
                                            timestamps_s=f.t_s, params=p).quaternion,
+        "cf_estimator_reference_bias": lambda f: with_reference_bias(f, params),
         "cf_estimator_aided": lambda f: aided.run(f, p),
     }
     if with_vqf:
@@ -123,17 +138,19 @@ def analyse(family: str, flights: Sequence[Flight], params: FilterParams,
             with_vqf: bool = True) -> FamilyFloors:
     """The floors e_acc(T) for :data:`MEMORIES_S` and the measured inclination errors, each
     the mean over ``flights`` of its RMS over the scored samples (t ≥ SETTLE_S, reference);
-    the reference's gyro bias and ours' learned-bias error at SETTLE_S, means over ``flights``."""
+    the reference's gyro bias and ours' learned-bias error at SETTLE_S and at the end, means
+    over ``flights``."""
     flights = [f for f in flights if f.velocity_t_s is not None]
     if not flights:
         raise ValueError(f"{family}: no recording with a reference velocity")
     runs = estimators(params, with_vqf)
     floors: dict[float, list[float]] = {t: [] for t in MEMORIES_S}
     measured: dict[str, list[float]] = {k: [] for k in runs}
-    accel, bias_ref, bias_err = [], [], []
+    accel, bias_ref, bias_err, bias_err_end = [], [], [], []
     for f in flights:
         bias_ref.append(math.degrees(float(np.linalg.norm(reference_bias_rad_s(f)))))
         bias_err.append(learned_bias_error_deg_s(f, params))
+        bias_err_end.append(learned_bias_error_deg_s(f, params, at_s=math.inf))
         mask = (f.t_s >= SETTLE_S) & f.has_reference
         for t in MEMORIES_S:
             floors[t].append(_rms(mean_acceleration_tilt_deg(f, t), mask))
@@ -144,7 +161,8 @@ def analyse(family: str, flights: Sequence[Flight], params: FilterParams,
     return FamilyFloors(family, len(flights), float(np.median(accel)),
                         {t: float(np.mean(v)) for t, v in floors.items()},
                         {k: float(np.mean(v)) for k, v in measured.items()},
-                        float(np.mean(bias_ref)), float(np.mean(bias_err)))
+                        float(np.mean(bias_ref)), float(np.mean(bias_err)),
+                        float(np.mean(bias_err_end)))
 
 
 def score(flight: Flight, q: np.ndarray) -> float:
@@ -183,6 +201,9 @@ def format_table(rows: Sequence[FamilyFloors]) -> str:
                  + "".join(f"{r.reference_bias_deg_s:>{width + 2}.2f}" for r in rows))
     label = f"ours online: learned-bias error at {SETTLE_S:g} s [deg/s]"
     lines.append(f"  {label:58s}" + "".join(f"{r.bias_error_deg_s:>{width + 2}.2f}" for r in rows))
+    label = "ours online: learned-bias error at the end [deg/s]"
+    lines.append(f"  {label:58s}"
+                 + "".join(f"{r.bias_error_end_deg_s:>{width + 2}.2f}" for r in rows))
     return "\n".join(lines) + "\n"
 
 
