@@ -92,6 +92,21 @@ def test_the_reference_bias_run_takes_that_bias_out_and_learns_none():
     assert np.median(metrics.inclination_error_deg(plain, q)[late]) > 1.0
 
 
+def test_the_score_windows_split_the_scored_samples():
+    # an estimate 1 deg off the reference before SPLIT_S and 3 deg off after it
+    t = np.arange(0.0, 40.0, 0.01)
+    q_ref = np.tile([1.0, 0.0, 0.0, 0.0], (t.size, 1))
+    tilt = np.radians(np.where(t < sustained.SPLIT_S, 1.0, 3.0))
+    q = np.column_stack([np.cos(tilt / 2), np.sin(tilt / 2), np.zeros_like(t), np.zeros_like(t)])
+    f = euroc.Flight("split", t, np.zeros((t.size, 3)), np.zeros((t.size, 3)), q_ref, 0, Path("."))
+    early = sustained.score(f, q, (sustained.SETTLE_S, sustained.SPLIT_S))
+    assert early == pytest.approx(1.0, abs=1e-9)
+    assert sustained.score(f, q, (sustained.SPLIT_S, math.inf)) == pytest.approx(3.0, abs=1e-9)
+    whole = sustained.score(f, q)
+    assert 1.0 < whole < 3.0
+    assert math.isnan(sustained.score(f, q, (50.0, 60.0)))
+
+
 def test_drift_grows_with_the_memory():
     assert sustained.drift_deg(2.0, 0.5) == pytest.approx(0.5)
     assert sustained.drift_deg(10.0) == pytest.approx(10 * sustained.BIAS_RESIDUAL_DEG_S / 2)
@@ -126,6 +141,10 @@ def test_horizontal_zig_zags_leave_an_imu_only_filter_far_more_than_vertical_one
     assert (vertical.measured_deg["cf_estimator_reference_bias"]
             < vertical.measured_deg["cf_estimator"])
     assert horizontal.bias_error_end_deg_s > 2 * vertical.bias_error_end_deg_s
+    # ... and most of what ours loses is in the first seconds after the in-air start
+    early, late = horizontal.measured_split_deg["cf_estimator"]
+    assert early > late
+    assert set(horizontal.measured_split_deg) == set(horizontal.measured_deg)
     # the Xsens DOTs' biases, as the data README says: about 1-2 deg/s
     assert 0.8 < vertical.reference_bias_deg_s < 3.0
     assert 0.8 < horizontal.reference_bias_deg_s < 3.0

@@ -39,6 +39,9 @@ from cf_estimator.core.params import FilterParams
 
 #: Memories T [s] of the floor table (0.5 s: about the accelerometer's own disagreement).
 MEMORIES_S = (0.5, 1.0, 2.0, 5.0, 10.0)
+#: The scored samples split at this time [s]: the first seconds after the settling, while an
+#: in-air start is still learning its bias, and the rest.
+SPLIT_S = 20.0
 #: Gyro-bias residual [deg/s] for the drift column: about what an in-flight start has left
 #: after 10 s on the Phantom 4 (BENCHMARKS.md, issue 22).
 BIAS_RESIDUAL_DEG_S = 0.5
@@ -94,6 +97,9 @@ class FamilyFloors:
     median_horizontal_accel_m_s2: float
     floor_deg: dict[float, float]  # memory T [s] -> e_acc(T)
     measured_deg: dict[str, float]  # estimator -> inclination error
+    #: estimator -> (RMS over SETTLE_S..SPLIT_S, RMS after SPLIT_S) [deg], means over recordings
+    #: (recordings shorter than SPLIT_S count in the first only)
+    measured_split_deg: dict[str, tuple[float, float]]
     reference_bias_deg_s: float  # |b_ref|, the bias the reference shows
     bias_error_deg_s: float  # |b − b_ref| of ours online at SETTLE_S
     bias_error_end_deg_s: float  # |b − b_ref| of ours online at the last sample
@@ -146,6 +152,7 @@ def analyse(family: str, flights: Sequence[Flight], params: FilterParams,
     runs = estimators(params, with_vqf)
     floors: dict[float, list[float]] = {t: [] for t in MEMORIES_S}
     measured: dict[str, list[float]] = {k: [] for k in runs}
+    split: dict[str, tuple[list[float], list[float]]] = {k: ([], []) for k in runs}
     accel, bias_ref, bias_err, bias_err_end = [], [], [], []
     for f in flights:
         bias_ref.append(math.degrees(float(np.linalg.norm(reference_bias_rad_s(f)))))
@@ -157,17 +164,25 @@ def analyse(family: str, flights: Sequence[Flight], params: FilterParams,
         a_h = GRAVITY_M_S2 * np.tan(np.radians(mean_acceleration_tilt_deg(f, 0.5)))
         accel.append(float(np.nanmedian(a_h[mask])))
         for name, run in runs.items():
-            measured[name].append(score(f, run(f)))
+            q = run(f)
+            measured[name].append(score(f, q))
+            for part, window in zip(split[name], ((SETTLE_S, SPLIT_S), (SPLIT_S, math.inf)),
+                                    strict=True):
+                part.append(score(f, q, window))
     return FamilyFloors(family, len(flights), float(np.median(accel)),
                         {t: float(np.mean(v)) for t, v in floors.items()},
                         {k: float(np.mean(v)) for k, v in measured.items()},
+                        {k: (float(np.nanmean(a)), float(np.nanmean(b)) if np.isfinite(b).any()
+                             else math.nan) for k, (a, b) in split.items()},
                         float(np.mean(bias_ref)), float(np.mean(bias_err)),
                         float(np.mean(bias_err_end)))
 
 
-def score(flight: Flight, q: np.ndarray) -> float:
-    """Inclination RMS [deg] of ``q`` over the scored samples (t ≥ SETTLE_S, reference)."""
-    mask = (flight.t_s >= SETTLE_S) & flight.has_reference
+def score(flight: Flight, q: np.ndarray, window: tuple[float, float] = (SETTLE_S, math.inf)
+          ) -> float:
+    """Inclination RMS [deg] of ``q`` over the samples with a reference in ``window``
+    [s, s) (default: t ≥ SETTLE_S, the scored samples); NaN if there are none."""
+    mask = (flight.t_s >= window[0]) & (flight.t_s < window[1]) & flight.has_reference
     return _rms(metrics.inclination_error_deg(q, flight.q_ref), mask)
 
 
@@ -197,6 +212,12 @@ def format_table(rows: Sequence[FamilyFloors]) -> str:
         lines.append(f"  {label:58s}"
                      + "".join(f"{r.measured_deg.get(name, math.nan):>{width + 2}.2f}"
                                for r in rows))
+    for name in rows[0].measured_split_deg:
+        for j, part in enumerate((f"{SETTLE_S:g}-{SPLIT_S:g} s", f"after {SPLIT_S:g} s")):
+            label = f"measured: {name}, {part} [deg]"
+            lines.append(f"  {label:58s}" + "".join(
+                f"{r.measured_split_deg.get(name, (math.nan, math.nan))[j]:>{width + 2}.2f}"
+                for r in rows))
     lines.append(f"  {'gyro bias the reference shows |b_ref| [deg/s]':58s}"
                  + "".join(f"{r.reference_bias_deg_s:>{width + 2}.2f}" for r in rows))
     label = f"ours online: learned-bias error at {SETTLE_S:g} s [deg/s]"
