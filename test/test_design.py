@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from cf_estimator.cli.main import main
-from cf_estimator.core import design
+from cf_estimator.core import design, thesis
 from cf_estimator.core.axis import AxisFilter, AxisParams
 from cf_estimator.core.params import FilterParams
 
@@ -268,7 +268,7 @@ def test_thesis_first_order_static_drift_error():
     # "5*10^-25"), T = 100 s -> 0.29 deg. With the exact 10 deg/h = 4.85e-5 rad/s it is 0.278 deg.
     assert math.degrees(design.first_order_static_drift_error_rad(100.0, 5e-5)) == pytest.approx(
         0.29, abs=0.005)
-    exact_drift = design.THESIS_GYRO_DRIFT_RAD_S
+    exact_drift = thesis.THESIS_GYRO_DRIFT_RAD_S
     assert exact_drift == pytest.approx(4.848e-5, rel=1e-3)
     static = design.first_order_static_drift_error_rad(100.0, exact_drift)
     assert math.degrees(static) == pytest.approx(0.278, abs=0.0005)
@@ -336,12 +336,12 @@ def test_clipped_recovery_time():
 
 def test_thesis_limits():
     # Seed 003 requirements: fixed base <= 28.8 arcmin; impacts and vibration <= 90 arcmin.
-    assert design.THESIS_LIMITS_ARCMIN == {"fixed_base": 28.8, "disturbed": 90.0}
+    assert thesis.THESIS_LIMITS_ARCMIN == {"fixed_base": 28.8, "disturbed": 90.0}
 
 
 def test_thesis_check_seed_gains_without_clip():
     t0 = time.perf_counter()
-    rows = {r.name: r for r in design.thesis_check(K1, K2)}
+    rows = {r.name: r for r in thesis.thesis_check(K1, K2)}
     assert time.perf_counter() - t0 < 3.0
     # (a) fixed base: 10 deg/h * 17.70 s = 8.58e-4 rad = 2.95'.
     assert rows["fixed_base"].peak_arcmin == pytest.approx(2.951, abs=0.001)
@@ -358,7 +358,7 @@ def test_thesis_check_seed_gains_without_clip():
 
 
 def test_thesis_check_seed_gains_with_clip():
-    rows = {r.name: r for r in design.thesis_check(K1, K2, saturation_limit_rad=0.02)}
+    rows = {r.name: r for r in thesis.thesis_check(K1, K2, saturation_limit_rad=0.02)}
     assert all(r.passed for r in rows.values())
     assert rows["impacts_half-sine"].peak_arcmin == pytest.approx(1.3, abs=0.1)  # DESIGN: 1.2'
     assert rows["manoeuvre"].peak_arcmin == pytest.approx(11.2, abs=0.1)
@@ -367,15 +367,15 @@ def test_thesis_check_seed_gains_with_clip():
 def test_thesis_fixed_base_simulated_when_clip_engages():
     # A clip below the drift peak makes the fixed-base case nonlinear: it is simulated, and the
     # clipped loop's peak is larger than the linear one.
-    linear = design.thesis_fixed_base(K1, K2)
-    clipped = design.thesis_fixed_base(K1, K2, saturation_limit_rad=2e-4)
+    linear = thesis.thesis_fixed_base(K1, K2)
+    clipped = thesis.thesis_fixed_base(K1, K2, saturation_limit_rad=2e-4)
     assert "simulation" in clipped.method and "exact" in linear.method
     assert clipped.peak_arcmin > linear.peak_arcmin
 
 
 def test_thesis_impacts_rejects_unknown_shape():
     with pytest.raises(ValueError, match="shape"):
-        design.thesis_impacts(K1, K2, shape="triangle")
+        thesis.thesis_impacts(K1, K2, shape="triangle")
 
 
 # ------------------------------------------------------------------------------------- CLI

@@ -17,7 +17,7 @@ import math
 from typing import Any
 
 from cf_estimator.cli.base import CliError, finite_float
-from cf_estimator.core import design
+from cf_estimator.core import design, thesis
 from cf_estimator.core.params import FilterParams
 
 #: Ryzhkov & Karpenko's example initial error [rad] for the clipped recovery time.
@@ -194,9 +194,9 @@ def compute(args: argparse.Namespace) -> dict[str, Any]:
     if args.bias is not None or args.saturation is not None:
         out["saturation_guidance"] = _guidance(args, k1, k2)
     if args.thesis:
-        rows = design.thesis_check(k1, k2, saturation, t_ap)
+        rows = thesis.thesis_check(k1, k2, saturation, t_ap)
         out["thesis"] = {
-            "limits_arcmin": dict(design.THESIS_LIMITS_ARCMIN),
+            "limits_arcmin": dict(thesis.THESIS_LIMITS_ARCMIN),
             "saturation_rad": saturation,
             "aperiodic_time_constant_s": t_ap,
             "checks": [{"name": r.name, "description": r.description,
