@@ -151,7 +151,7 @@ def test_bench_skips_missing_peers_with_one_note(tmp_path, capsys, monkeypatch):
 
     monkeypatch.setattr(peers_mod, "_require", only_madgwick_missing)
     args = argparse.Namespace(peers="madgwick")
-    from cf_estimator.cli.bench_cmd import _available_peers
+    from cf_estimator.cli.bench_cmd.common import available_peers as _available_peers
 
     assert _available_peers(args) == []
     err = capsys.readouterr().err.strip().splitlines()

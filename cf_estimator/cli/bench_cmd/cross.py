@@ -1,0 +1,82 @@
+"""``bench cross``: the cross-dataset table of BENCHMARKS.md."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from cf_estimator.cli.base import CliError
+from cf_estimator.cli.common import note
+
+if TYPE_CHECKING:
+    pass
+from cf_estimator.cli.bench_cmd.common import (
+    check_outputs,
+    csv_list,
+    load_filter_params,
+    write_json,
+)
+
+
+def add_parser(sub: Any) -> None:
+    """Add ``bench cross`` to the ``bench`` sub-parsers."""
+    cr = sub.add_parser(
+        "cross", help="one table over every data family (EuRoC ground and mid-air starts, "
+        "phantom4 vertical and horizontal, BROAD groups, thesis scenarios, compass "
+        "disturbances), ours beside VQF online and offline",
+        description=(
+            "The cross-dataset table of BENCHMARKS.md: for each family below --data (euroc/, "
+            "phantom4/, phantom4_horizontal/, broad/; missing ones are left out with a note) "
+            "and the simulated thesis scenarios and compass cases (a magnet on a turning "
+            "sensor), our filter online and offline beside VQF online and offline. Inclination "
+            "[deg]; scenarios: peak tilt error [arcmin]; compass: heading error [deg]. A "
+            "default changes only when no row gets worse."
+        ),
+    )
+    cr.add_argument("--data", default="../shared/data", metavar="DIR",
+                    help="directory holding euroc/, phantom4/, phantom4_horizontal/ and broad/ "
+                    "(default %(default)s)")
+    cr.add_argument("--families", default=",".join(_cross_families()), metavar="LIST",
+                    help="comma-separated subset of %(default)s")
+    cr.add_argument("--params", metavar="YAML", help="ROS 2 parameter file for our filter "
+                    "(default: the shipped defaults)")
+    cr.add_argument("--json", metavar="OUT", help="write the rows as JSON")
+    cr.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
+    cr.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
+                    help="worker processes (default %(default)s)")
+    cr.set_defaults(run=run)
+
+
+def _cross_families() -> tuple[str, ...]:
+    from cf_estimator.bench.cross import FAMILIES
+
+    return FAMILIES
+
+
+def run(args: Any) -> int:
+    """``bench cross``."""
+    from cf_estimator.bench import cross
+
+    check_outputs(args, "json")
+    families = csv_list(args.families)
+    bad = [f for f in families if f not in cross.FAMILIES]
+    if bad or not families:
+        raise CliError(f"--families: unknown {bad[0]!r}; valid: {', '.join(cross.FAMILIES)}"
+                       if bad else "--families is empty", 2)
+    if args.jobs < 1:
+        raise CliError("--jobs must be >= 1", 2)
+    if not Path(args.data).is_dir() and not set(families) <= set(cross.SIMULATED):
+        raise CliError(f"--data: {args.data} is not a directory", 2)
+    params = load_filter_params(args.params)
+    result = cross.run_cross(args.data, params, families, jobs=args.jobs,
+                             progress=lambda f: note(f"bench cross: {f} ..."))
+    print(f"Cross-dataset table ({args.data}); cf_estimator parameters: "
+          f"{args.params or 'shipped defaults'}")
+    for line in result.notes:
+        print(f"  note: {line}")
+    print()
+    print(cross.format_table(result), end="")
+    if args.json:
+        write_json(args.json, result.to_json())
+    return 0
