@@ -498,6 +498,134 @@ def replay_bag(
     return replay_variants(input_path, [variant], options, pipeline_factory=pipeline_factory)[0]
 
 
+@dataclass(frozen=True)
+class _Topics:
+    """The input topics a replay reads (None: not read) and their message types."""
+
+    imu: str
+    mag: str | None
+    reference: str | None
+    reference_type: str | None
+    velocity: str | None
+    names: list[str]  #: the topics to read, each once (the reference may be the IMU topic)
+    types: dict[str, str | None]
+
+    def in_summary(self) -> dict[str, str | None]:
+        """The summary's ``topics`` entry."""
+        return {"imu": self.imu, "mag": self.mag, "reference": self.reference,
+                **({"velocity": self.velocity} if self.velocity else {})}
+
+
+def _select_topics(bag: Any, opts: ReplayOptions, px4_in: _Px4Input | None) -> _Topics:
+    """The IMU (required), magnetometer, reference and velocity topics by the options (a
+    ulog's vehicle_attitude is the reference unless another one was asked for)."""
+    imu = bag.select_topic("IMU", opts.imu_topic, [io.IMU_TYPE], required=True,
+                           option="--imu-topic")
+    assert imu is not None
+    mag = None
+    if opts.mag_topic is None or opts.mag_topic.lower() != "none":
+        mag = bag.select_topic("magnetometer", opts.mag_topic, [io.MAG_TYPE], required=False,
+                               option="--mag-topic")
+    ref = None
+    if px4_in is not None and px4_in.reference:
+        ref = ulog.ATTITUDE_TOPIC  # the autopilot's own estimate, beside ours
+    elif opts.reference_topic is not None and opts.reference_topic.lower() != "none":
+        ref = bag.select_topic("reference", opts.reference_topic,
+                               (*io.REFERENCE_TYPES, io.IMU_TYPE), required=True,
+                               option="--reference-topic")
+    vel = None
+    if opts.velocity_topic is not None:
+        vel = bag.select_topic("velocity", opts.velocity_topic, io.VELOCITY_TYPES,
+                               required=True, option="--velocity-topic")
+    names = list(dict.fromkeys(t for t in (imu, mag, ref, vel) if t))
+    return _Topics(imu, mag, ref, bag.msgtype_of(ref) if ref else None, vel, names,
+                   {t: bag.msgtype_of(t) for t in names})
+
+
+@dataclass
+class _Reading:
+    """What the one pass over the input counted and collected for every variant."""
+
+    n_imu: int = 0
+    n_mag: int = 0
+    n_ref: int = 0  #: reference messages (not counted again when the reference is the IMU)
+    n_vel: int = 0
+    first_log_ns: int | None = None
+    last_log_ns: int | None = None
+    ref_t: list[float] = field(default_factory=list)  #: reference stamps [s]
+    ref_q: list[tuple[float, float, float, float]] = field(default_factory=list)
+
+    @property
+    def n_read(self) -> int:
+        """Messages read on the replayed topics."""
+        return self.n_imu + self.n_mag + self.n_ref + self.n_vel
+
+    def logged(self, first_ns: int, last_ns: int) -> None:
+        """Extend the read span of log times [ns]."""
+        if self.first_log_ns is None:
+            self.first_log_ns = first_ns
+        self.last_log_ns = last_ns
+
+
+def _read_in_bulk(bag: Any, topics: _Topics, run: _Run, reading: _Reading,
+                  progress: _Progress) -> None:
+    """The bulk path: chunks of decoded IMU and magnetometer rows through one online run's
+    pipeline at once (pipeline/bulk.py); references as arrays where the reader has them."""
+    for chunk in bag.chunks(topics.names):
+        reading.logged(chunk.log_ns[0], chunk.log_ns[-1])
+        kinds = [bulk.IMU if t == topics.imu else bulk.MAG if t == topics.mag else bulk.OTHER
+                 for t in chunk.topic]
+        reading.n_imu += kinds.count(bulk.IMU)
+        reading.n_mag += kinds.count(bulk.MAG)
+        run.events(bulk.Events(kinds, chunk.log_ns, chunk.row, chunk.blocks.get(io.IMU_TYPE),
+                               chunk.blocks.get(io.MAG_TYPE), chunk.msg))
+        ref = topics.reference
+        fast_ref = getattr(chunk, "references", None)  # a ulog's, as arrays
+        if ref is not None and fast_ref is not None and ref != topics.imu:
+            reading.n_ref += fast_ref(ref, reading.ref_t, reading.ref_q)
+        elif ref is not None:
+            for i, t in enumerate(chunk.topic):
+                if t == ref:
+                    if t != topics.imu:
+                        reading.n_ref += 1
+                    _add_reference(topics.reference_type, chunk.msg(i), reading.ref_t,
+                                   reading.ref_q)
+        progress.add(len(chunk))
+
+
+def _read_messages(bag: Any, topics: _Topics, runs: Sequence[_Run], copy: bool,
+                   decode_bulk: bool, reading: _Reading, progress: _Progress) -> None:
+    """Message by message, in log-time order, to every run's pipeline (and, with ``copy``,
+    each input message into the output bags)."""
+    for m in bag.messages(topics.names, bulk=decode_bulk):
+        log_ns = m.log_time_ns
+        reading.logged(log_ns, log_ns)
+        for r in runs:
+            r.tick(log_ns)
+        if copy:
+            jazzy = bag.to_jazzy(m.msg, m.msgtype)
+            for r in runs:
+                if r.bag is not None:
+                    r.bag.write(m.topic, m.msgtype, log_ns, jazzy)
+        if m.topic == topics.imu:
+            reading.n_imu += 1
+            for r in runs:
+                r.imu(log_ns, m.msg)
+        elif m.topic == topics.mag:
+            reading.n_mag += 1
+            for r in runs:
+                r.pipe.on_mag(m.msg)
+        elif m.topic == topics.velocity:
+            reading.n_vel += 1
+            for r in runs:
+                r.pipe.on_velocity(m.msg)
+        if m.topic == topics.reference:
+            if m.topic != topics.imu:
+                reading.n_ref += 1
+            _add_reference(topics.reference_type, m.msg, reading.ref_t, reading.ref_q)
+        progress.tick()
+
+
 def replay_variants(
     input_path: str | os.PathLike[str],
     variants: Sequence[ReplayVariant],
@@ -520,110 +648,34 @@ def replay_variants(
         px4_in = _px4_input(bag, opts, variants)
         if px4_in is not None:
             variants = px4_in.variants
-        imu_topic = bag.select_topic("IMU", opts.imu_topic, [io.IMU_TYPE], required=True,
-                                     option="--imu-topic")
-        assert imu_topic is not None
-        if opts.mag_topic is not None and opts.mag_topic.lower() == "none":
-            mag_topic = None
-        else:
-            mag_topic = bag.select_topic("magnetometer", opts.mag_topic, [io.MAG_TYPE],
-                                         required=False, option="--mag-topic")
-        ref_topic = None
-        if px4_in is not None and px4_in.reference:
-            ref_topic = ulog.ATTITUDE_TOPIC  # the autopilot's own estimate, beside ours
-        elif opts.reference_topic is not None and opts.reference_topic.lower() != "none":
-            ref_topic = bag.select_topic("reference", opts.reference_topic,
-                                         (*io.REFERENCE_TYPES, io.IMU_TYPE), required=True,
-                                         option="--reference-topic")
-        ref_type = bag.msgtype_of(ref_topic) if ref_topic else None
-        vel_topic = None
-        if opts.velocity_topic is not None:
-            vel_topic = bag.select_topic("velocity", opts.velocity_topic, io.VELOCITY_TYPES,
-                                         required=True, option="--velocity-topic")
-        # the reference may be the input IMU topic itself (its orientation, e.g. the driver's)
-        topics = list(dict.fromkeys(t for t in (imu_topic, mag_topic, ref_topic, vel_topic)
-                                    if t))
-        types = {t: bag.msgtype_of(t) for t in topics}
-        total = bag.count(topics)
+        topics = _select_topics(bag, opts, px4_in)
+        total = bag.count(topics.names)
         in_format = bag.format
-
         runs: list[_Run] = []
         progress: _Progress | None = None
-        ref_t: list[float] = []
-        ref_q: list[tuple[float, float, float, float]] = []
-        n_imu = n_mag = n_ref = n_vel = 0
-        first_log = last_log = None
+        reading = _Reading()
         try:
             for v in variants:
-                runs.append(_Run(v, opts, topics, types, pipeline_factory))
+                runs.append(_Run(v, opts, topics.names, topics.types, pipeline_factory))
             progress = _Progress(total, opts.progress, in_path.name, opts.on_messages)
             copy = opts.copy_inputs and any(r.bag is not None for r in runs)
             # IMU and magnetometer decoded in bulk (bag/cdr.py), except when the inputs are
             # copied: those need rosbags' message objects; runs of ordinary messages through
-            # the pipeline at once (pipeline/bulk.py) for one online variant
+            # the pipeline at once (pipeline/bulk.py) for one online variant (velocity
+            # aiding: message by message, the aided accelerometer is per sample)
             decode_bulk = not copy and opts.bulk_decode
-            # (velocity aiding: message by message, the aided accelerometer is per sample)
-            bulk_run = runs[0] if (decode_bulk and opts.bulk_pipeline and len(runs) == 1
-                                   and not runs[0].offline and pipeline_factory is None
-                                   and vel_topic is None) else None
-            if bulk_run is not None:
-                for chunk in bag.chunks(topics):
-                    if first_log is None:
-                        first_log = chunk.log_ns[0]
-                    last_log = chunk.log_ns[-1]
-                    kinds = [bulk.IMU if t == imu_topic else bulk.MAG if t == mag_topic
-                             else bulk.OTHER for t in chunk.topic]
-                    n_imu += kinds.count(bulk.IMU)
-                    n_mag += kinds.count(bulk.MAG)
-                    bulk_run.events(bulk.Events(
-                        kinds, chunk.log_ns, chunk.row, chunk.blocks.get(io.IMU_TYPE),
-                        chunk.blocks.get(io.MAG_TYPE), chunk.msg))
-                    fast_ref = getattr(chunk, "references", None)  # a ulog's, as arrays
-                    if ref_topic is not None and fast_ref is not None and ref_topic != imu_topic:
-                        n_ref += fast_ref(ref_topic, ref_t, ref_q)
-                    elif ref_topic is not None:
-                        for i, t in enumerate(chunk.topic):
-                            if t == ref_topic:
-                                if t != imu_topic:
-                                    n_ref += 1
-                                _add_reference(ref_type, chunk.msg(i), ref_t, ref_q)
-                    progress.add(len(chunk))
-            for m in (() if bulk_run is not None else bag.messages(topics, bulk=decode_bulk)):
-                log_ns = m.log_time_ns
-                if first_log is None:
-                    first_log = log_ns
-                last_log = log_ns
-                for r in runs:
-                    r.tick(log_ns)
-                if copy:
-                    jazzy = bag.to_jazzy(m.msg, m.msgtype)
-                    for r in runs:
-                        if r.bag is not None:
-                            r.bag.write(m.topic, m.msgtype, log_ns, jazzy)
-                if m.topic == imu_topic:
-                    n_imu += 1
-                    for r in runs:
-                        r.imu(log_ns, m.msg)
-                elif m.topic == mag_topic:
-                    n_mag += 1
-                    for r in runs:
-                        r.pipe.on_mag(m.msg)
-                elif m.topic == vel_topic:
-                    n_vel += 1
-                    for r in runs:
-                        r.pipe.on_velocity(m.msg)
-                if m.topic == ref_topic:
-                    if m.topic != imu_topic:
-                        n_ref += 1
-                    _add_reference(ref_type, m.msg, ref_t, ref_q)
-                progress.tick()
-            if n_imu == 0:
-                raise io.BagError(f"{in_path}: topic {imu_topic!r} yielded no messages")
-            if n_imu + n_mag + n_ref + n_vel < total:
+            if (decode_bulk and opts.bulk_pipeline and len(runs) == 1 and not runs[0].offline
+                    and pipeline_factory is None and topics.velocity is None):
+                _read_in_bulk(bag, topics, runs[0], reading, progress)
+            else:
+                _read_messages(bag, topics, runs, copy, decode_bulk, reading, progress)
+            if reading.n_imu == 0:
+                raise io.BagError(f"{in_path}: topic {topics.imu!r} yielded no messages")
+            if reading.n_read < total:
                 # e.g. garbage inside an mcap chunk written without CRC: the reader skips
                 # records silently; an output would look complete with data missing
                 raise io.BagError(
-                    f"{in_path}: read {n_imu + n_mag + n_ref + n_vel} of the {total} messages its "
+                    f"{in_path}: read {reading.n_read} of the {total} messages its "
                     "index lists on the replayed topics: the bag is corrupt"
                 )
         except BaseException:
@@ -644,94 +696,15 @@ def replay_variants(
 
     wall = time.perf_counter() - t_wall
     try:
-        results = []
-        for r in runs:
-            if px4_in is not None:
-                r.warnings[:0] = px4_in.notes
-            r_ref_t, r_ref_q = (ref_t, ref_q)
-            if px4_in is not None and ref_topic == ulog.ATTITUDE_TOPIC:
-                r_ref_t, r_ref_q = px4_in.reference_in_output(r, ref_t, ref_q)
-            series = _series(r, r_ref_t, r_ref_q)
-            counters = _jsonable(dict(r.pipe.counters))
-            stamps = series.t_s
-            duration = float(stamps[-1] - stamps[0]) if stamps.size > 1 else 0.0
-            init = np.all(np.isfinite(series.q_wxyz), axis=1)
-            clip_frac = float(np.mean(series.clipped[init])) if init.any() else None
-            final_bias = (
-                [float(c) for c in r.pipe.filter.gyro_bias_rad_s] if r.pipe.initialized else None
-            )
-            status = r.pipe.filter.status() if r.pipe.initialized else None
-            converged = np.asarray(r.bias_sigma) < BIAS_CONVERGED_SIGMA_RAD_S
-            mag_in_use = mag_topic is not None and r.fparams.use_mag
-            summary: dict[str, Any] = {
-                "variant": r.variant.name,
-                "mode": "offline" if r.offline else "online",
-                "input": str(in_path),
-                "input_format": in_format,
-                "output": str(r.out_path) if r.out_path is not None else None,
-                "storage": opts.storage if r.out_path is not None else None,
-                "topics": {"imu": imu_topic, "mag": mag_topic, "reference": ref_topic,
-                           **({"velocity": vel_topic} if vel_topic else {})},
-                "messages_in": n_imu,
-                "mag_messages_in": n_mag,
-                "reference_messages_in": n_ref,
-                "messages_processed": int(counters.get("processed", len(r.t))),
-                "messages_rejected": counters.get("rejected", {}),
-                "gaps": counters.get("gaps"),
-                "resets": counters.get("resets"),
-                "outputs_written": dict(r.bag.counts) if r.bag is not None else {},
-                "diagnostics_reports": r.n_diag,
-                "duration_s": duration,
-                "bag_duration_s": (last_log - first_log) * 1e-9 if first_log is not None else 0.0,
-                "imu_rate_hz": (stamps.size - 1) / duration if duration > 0 else None,
-                "clipped_fraction": clip_frac,
-                "final_gyro_bias_rad_s": final_bias,
-                "final_gyro_bias_sigma_rad_s": status.gyro_bias_sigma_rad_s if status else None,
-                "gyro_bias_converged": status.gyro_bias_converged if status else False,
-                "gyro_bias_converged_after_s": (
-                    float(r.bias_t[int(np.argmax(converged))] - r.bias_t[0])
-                    if converged.any() else None),
-                "still_fraction": float(np.mean(series.at_rest[init])) if init.any() else None,
-                **({"velocity": _velocity_summary(r.pipe, n_vel)} if vel_topic else {}),
-                "counters": counters,
-                "warnings": r.warnings,
-                **({"offline": {"segments": r.offline_segments,
-                                "note": "orientations from cf_estimator.core.offline (acausal); "
-                                        "the pipeline's guards chose the samples; /diagnostics "
-                                        "and the bias report the online filter"}}
-                   if r.offline else {}),
-                # what reproduces the run: the effective parameters, the version, the backend
-                "parameters": {"filter": as_dict(r.fparams), "pipeline": as_dict(r.pparams)},
-                "version": __version__,
-                "filter_backend": resolve_backend(),
-                "wall_time_s": wall,
-                "messages_per_s": (n_imu + n_mag + n_ref) / wall if wall > 0 else None,
-            }
-            scored = None
-            if ref_topic is not None:
-                align = resolve_heading_alignment(opts.heading_alignment, mag_in_use)
-                stats, scored = error_statistics(series.t_s, series.q_wxyz, series.ref_t_s,
-                                                 series.ref_q_wxyz, align)
-                stats["topic"] = ref_topic
-                if px4_in is not None and ref_topic == ulog.ATTITUDE_TOPIC:
-                    stats["kind"] = "autopilot"
-                    stats["label"] = AUTOPILOT_LABEL
-                if not r.offline and scored and stats.get("kind") != "autopilot":
-                    # the reported sigma against a ground truth (not against another estimate)
-                    stats["covariance"] = covariance_consistency(series, scored, mag_in_use)
-                summary["reference"] = stats
-                summary["rmse_deg"] = stats.get("rmse_deg")
-            if px4_in is not None:
-                summary["px4"] = px4_in.summary(r)
-            results.append(ReplayResult(_jsonable(summary), series, r.out_path, scored))
+        results = [_result(r, in_path, in_format, topics, reading, opts, px4_in, wall)
+                   for r in runs]
     except BaseException:
         for r in runs:
             r.abort()
         raise
     # nothing that looks like a good result is left behind: an unusable run writes no output
-    unusable = [(r, checks.unusable_reason(res.summary)) for r, res in zip(runs, results,
-                                                                          strict=True)]
-    reason = next((why for _, why in unusable if why), None)
+    reason = next((why for why in (checks.unusable_reason(res.summary) for res in results)
+                   if why), None)
     if reason is not None:
         for r in runs:
             r.abort()
@@ -740,6 +713,91 @@ def replay_variants(
         if r.bag is not None:
             r.bag.commit()
     return results
+
+
+def _result(r: _Run, in_path: Path, in_format: str, topics: _Topics, reading: _Reading,
+            opts: ReplayOptions, px4_in: _Px4Input | None, wall: float) -> ReplayResult:
+    """One variant's summary (the replay JSON), series and scored reference."""
+    if px4_in is not None:
+        r.warnings[:0] = px4_in.notes
+    r_ref_t, r_ref_q = reading.ref_t, reading.ref_q
+    if px4_in is not None and topics.reference == ulog.ATTITUDE_TOPIC:
+        r_ref_t, r_ref_q = px4_in.reference_in_output(r, reading.ref_t, reading.ref_q)
+    series = _series(r, r_ref_t, r_ref_q)
+    counters = _jsonable(dict(r.pipe.counters))
+    stamps = series.t_s
+    duration = float(stamps[-1] - stamps[0]) if stamps.size > 1 else 0.0
+    init = np.all(np.isfinite(series.q_wxyz), axis=1)
+    clip_frac = float(np.mean(series.clipped[init])) if init.any() else None
+    final_bias = (
+        [float(c) for c in r.pipe.filter.gyro_bias_rad_s] if r.pipe.initialized else None
+    )
+    status = r.pipe.filter.status() if r.pipe.initialized else None
+    converged = np.asarray(r.bias_sigma) < BIAS_CONVERGED_SIGMA_RAD_S
+    mag_in_use = topics.mag is not None and r.fparams.use_mag
+    first, last = reading.first_log_ns, reading.last_log_ns
+    summary: dict[str, Any] = {
+        "variant": r.variant.name,
+        "mode": "offline" if r.offline else "online",
+        "input": str(in_path),
+        "input_format": in_format,
+        "output": str(r.out_path) if r.out_path is not None else None,
+        "storage": opts.storage if r.out_path is not None else None,
+        "topics": topics.in_summary(),
+        "messages_in": reading.n_imu,
+        "mag_messages_in": reading.n_mag,
+        "reference_messages_in": reading.n_ref,
+        "messages_processed": int(counters.get("processed", len(r.t))),
+        "messages_rejected": counters.get("rejected", {}),
+        "gaps": counters.get("gaps"),
+        "resets": counters.get("resets"),
+        "outputs_written": dict(r.bag.counts) if r.bag is not None else {},
+        "diagnostics_reports": r.n_diag,
+        "duration_s": duration,
+        "bag_duration_s": (last - first) * 1e-9 if first is not None and last is not None
+        else 0.0,
+        "imu_rate_hz": (stamps.size - 1) / duration if duration > 0 else None,
+        "clipped_fraction": clip_frac,
+        "final_gyro_bias_rad_s": final_bias,
+        "final_gyro_bias_sigma_rad_s": status.gyro_bias_sigma_rad_s if status else None,
+        "gyro_bias_converged": status.gyro_bias_converged if status else False,
+        "gyro_bias_converged_after_s": (
+            float(r.bias_t[int(np.argmax(converged))] - r.bias_t[0])
+            if converged.any() else None),
+        "still_fraction": float(np.mean(series.at_rest[init])) if init.any() else None,
+        **({"velocity": _velocity_summary(r.pipe, reading.n_vel)} if topics.velocity else {}),
+        "counters": counters,
+        "warnings": r.warnings,
+        **({"offline": {"segments": r.offline_segments,
+                        "note": "orientations from cf_estimator.core.offline (acausal); "
+                                "the pipeline's guards chose the samples; /diagnostics "
+                                "and the bias report the online filter"}}
+           if r.offline else {}),
+        # what reproduces the run: the effective parameters, the version, the backend
+        "parameters": {"filter": as_dict(r.fparams), "pipeline": as_dict(r.pparams)},
+        "version": __version__,
+        "filter_backend": resolve_backend(),
+        "wall_time_s": wall,
+        "messages_per_s": (reading.n_imu + reading.n_mag + reading.n_ref) / wall
+        if wall > 0 else None,
+    }
+    scored = None
+    if topics.reference is not None:
+        align = resolve_heading_alignment(opts.heading_alignment, mag_in_use)
+        stats, scored = error_statistics(series.t_s, series.q_wxyz, series.ref_t_s,
+                                         series.ref_q_wxyz, align)
+        stats["topic"] = topics.reference
+        if px4_in is not None and topics.reference == ulog.ATTITUDE_TOPIC:
+            stats["kind"] = "autopilot"
+            stats["label"] = AUTOPILOT_LABEL
+        if not r.offline and scored and stats.get("kind") != "autopilot":
+            # the reported sigma against a ground truth (not against another estimate)
+            stats["covariance"] = covariance_consistency(series, scored, mag_in_use)
+        summary["reference"] = stats
+        summary["rmse_deg"] = stats.get("rmse_deg")
+    if px4_in is not None:
+        summary["px4"] = px4_in.summary(r)
+    return ReplayResult(_jsonable(summary), series, r.out_path, scored)
 
 
 AUTOPILOT_LABEL = ("agreement with the autopilot's estimate (vehicle_attitude, itself an "
