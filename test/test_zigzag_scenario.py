@@ -4,6 +4,8 @@ horizontal campaign does, so a fix can be developed and checked on it.
 "A scenario counts when VQF and ours rank on it as they do on the real family it stands for":
 the ranking on ``../shared/data/phantom4_horizontal`` is computed here, live, beside the
 scenario's, so the test follows the filter when it gets better (it does not pin today's loss).
+So is the diagnosis: on both, the loop with the right gyro bias is far better than ours online
+(what fails is the bias learned in the air).
 """
 
 from __future__ import annotations
@@ -54,15 +56,29 @@ def test_the_zigzags_accelerate_most_of_the_time_from_the_first_sample(flights):
         assert along.min() < -3.0 < 3.0 < along.max()
 
 
-def test_the_in_flight_bias_learning_is_fooled_as_on_the_real_flights(flights):
-    """The failure the issue saw on the real flights: the learned bias is wrong by tenths of a
-    degree per second, and less eager bias learning gives a smaller tilt error."""
+def _known_bias(flights) -> float:
+    """Ours with the scenario's true gyro bias taken out and every bias learning off."""
+    off = dataclasses.replace(P6, k2=0.0, k3=0.0, bias_learning_k2=0.0, rest_bias_learning=False)
+    return float(np.mean([_rms_after_10_s(estimate(
+        sc.imu.gyro_rad_s - sc.imu.gyro_bias_rad_s, sc.imu.accel_m_s2, None,
+        timestamps_s=sc.imu.t_s, params=off).quaternion, sc) for sc in flights]))
+
+
+def test_the_in_flight_bias_learning_is_what_fails_as_on_the_real_flights(flights):
+    """The failure found on the real flights (BENCHMARKS.md, "Sustained acceleration"): the
+    learned bias is wrong by tenths of a degree per second, and the same loop with the right
+    bias and no learning is far better (real horizontal campaign: 2.26 deg against 5.37; the
+    real side is checked live in the ranking test below)."""
     sc = flights[3]
     r = estimate(sc.imu.gyro_rad_s, sc.imu.accel_m_s2, None, timestamps_s=sc.imu.t_s, params=P6)
     err = np.degrees(np.abs(r.gyro_bias_rad_s[-1] - sc.imu.gyro_bias_rad_s[-1]))
     assert err.max() > 0.3
-    slow = dataclasses.replace(P6, bias_learning_k2=0.0)
-    assert _ours(flights, slow) < _ours(flights)
+    assert _known_bias(flights) < KNOWN_BIAS_SHARE * _ours(flights)
+
+
+#: With the right bias the loop's error is below this share of ours online, on the scenario and
+#: on the real horizontal campaign alike (real 0.42, scenario 0.57 when written).
+KNOWN_BIAS_SHARE = 0.7
 
 
 @pytest.mark.skipif(not HORIZONTAL.is_dir(), reason=f"{HORIZONTAL} not present")
@@ -81,3 +97,15 @@ def test_ours_and_vqf_rank_on_the_scenario_as_on_the_real_horizontal_campaign(fl
     sim_ours = _ours(flights)
     assert (sim_ours < sim_vqf) == (real_ours < real_vqf), (sim_ours, sim_vqf, real_ours,
                                                             real_vqf)
+
+
+@pytest.mark.skipif(not HORIZONTAL.is_dir(), reason=f"{HORIZONTAL} not present")
+def test_the_right_bias_helps_on_the_real_campaign_as_on_the_scenario():
+    from cf_estimator.bench import euroc, sustained
+
+    real = euroc.load_flights(HORIZONTAL)[::4]  # one IMU per path
+    ours = np.mean([sustained.score(f, estimate(f.gyro_rad_s, f.accel_m_s2, None,
+                                                timestamps_s=f.t_s, params=P6).quaternion)
+                    for f in real])
+    known = np.mean([sustained.score(f, sustained.with_reference_bias(f, P6)) for f in real])
+    assert known < KNOWN_BIAS_SHARE * ours, (known, ours)
