@@ -6,16 +6,9 @@ import os
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from cf_estimator.cli.base import CliError
-from cf_estimator.cli.common import (
-    add_params_options,
-    check_input_path,
-)
-
-if TYPE_CHECKING:
-    pass
 from cf_estimator.cli.bench_cmd.common import (
     add_peers_option,
     available_peers,
@@ -23,6 +16,10 @@ from cf_estimator.cli.bench_cmd.common import (
     csv_list,
     load_filter_params,
     write_json,
+)
+from cf_estimator.cli.common import (
+    add_params_options,
+    check_input_path,
 )
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from cf_estimator.cli.base import CliError
 from cf_estimator.cli.common import (
@@ -13,9 +13,6 @@ from cf_estimator.cli.common import (
     load_params,
     note,
 )
-
-if TYPE_CHECKING:
-    pass
 
 
 def csv_list(text: str) -> list[str]:

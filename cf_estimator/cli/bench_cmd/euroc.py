@@ -8,12 +8,9 @@ import dataclasses
 import math
 import os
 import sys
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from cf_estimator.cli.base import CliError, finite_float
-
-if TYPE_CHECKING:
-    pass
 from cf_estimator.cli.bench_cmd.common import (
     csv_list,
     load_filter_params,

@@ -3,18 +3,15 @@
 from __future__ import annotations
 
 import sys
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from cf_estimator.cli.base import CliError, finite_float
-from cf_estimator.cli.common import check_input_path
-
-if TYPE_CHECKING:
-    pass
 from cf_estimator.cli.bench_cmd.common import (
     check_outputs,
     csv_list,
     write_json,
 )
+from cf_estimator.cli.common import check_input_path
 
 
 def add_parser(sub: Any) -> None:

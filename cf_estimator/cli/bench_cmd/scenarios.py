@@ -5,13 +5,9 @@ the peers.
 from __future__ import annotations
 
 import os
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from cf_estimator.cli.base import CliError
-from cf_estimator.cli.common import add_params_options
-
-if TYPE_CHECKING:
-    pass
 from cf_estimator.cli.bench_cmd.common import (
     add_peers_option,
     available_peers,
@@ -20,6 +16,7 @@ from cf_estimator.cli.bench_cmd.common import (
     load_filter_params,
     write_json,
 )
+from cf_estimator.cli.common import add_params_options
 
 
 def add_parser(sub: Any) -> None:

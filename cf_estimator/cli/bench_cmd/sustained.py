@@ -5,18 +5,15 @@ acceleration.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from cf_estimator.cli.base import CliError
-from cf_estimator.cli.common import note
-
-if TYPE_CHECKING:
-    pass
 from cf_estimator.cli.bench_cmd.common import (
     check_outputs,
     csv_list,
     load_filter_params,
 )
+from cf_estimator.cli.common import note
 
 
 def add_parser(sub: Any) -> None:
