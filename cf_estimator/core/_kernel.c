@@ -44,6 +44,8 @@
 #define REST_MAG_TOLERANCE_RAD 0.01
 #define ACCEL_DETECT_SIGMAS 3.0
 #define BIAS_RANDOM_WALK_RAD_S_SQRT_S 2e-4
+#define SWING_TIME_CONSTANT_S 10.0
+#define SWING_VAR_TIME_CONSTANT_S 10.0
 #define GRAVITY_TIME_CONSTANT_S 10.0
 #define MAG_REFERENCE_SAMPLES 20
 #define MAG_RELEARN_AFTER_S 20.0
@@ -92,7 +94,7 @@ typedef struct {
         mag_last_time_s, mvx, mvy, mvz, mcx, mcy, mcz, mmx, mmy, mmz, mag_cand_norm, mag_seen_time_s,
         mag_ok_timer_s, mag_cand_timer_s, mag_ref_time_s, g_ref, accel_hold, acx, acy, acz, rate_lp, ex, ey,
         ez, error_norm,
-        fx, fy, fz, yaw_error_rad, recovery_count, quick_until_s;
+        fx, fy, fz, yaw_error_rad, recovery_count, quick_until_s, pvx, pvy, pv_var;
     char recovering, at_rest, mag_disturbed, heading_initialized, clipped, accel_used, moved,
         bias_unverified, mag_recovering, aided;
     int mag_status, phase;
@@ -524,9 +526,17 @@ static void regulate(cf_state *s, const cf_params *p, const double *f, double en
                      const double *u, const double *v, int quick, int tight, int learn,
                      double dt)
 {
-    double d[4];
+    double d[4], w[3];
+    /* bias.observe_velocity_swing: the raw error integrated in the world frame */
+    rotate(s->qw, s->qx, s->qy, s->qz, s->ex, s->ey, s->ez, w);
+    double leak = dt / (SWING_TIME_CONSTANT_S + dt);
+    s->pvx = s->pvx + w[0] * dt - leak * s->pvx;
+    s->pvy = s->pvy + w[1] * dt - leak * s->pvy;
+    double sw = dt / (mind(SWING_VAR_TIME_CONSTANT_S, maxd(s->time_s, dt)) + dt);
+    s->pv_var = s->pv_var + sw * (s->pvx * s->pvx + s->pvy * s->pvy - s->pv_var);
     double share = mind(s->bias_var / pow(p->bias_prior_sigma_rad_s, 2.0), 1.0);
-    double k2 = maxd(p->k2, p->bias_learning_k2 * share);
+    double swing = sqrt(maxd(s->bias_var, 0.0)) / maxd(sqrt(s->pv_var), TINY);
+    double k2 = maxd(p->k2, mind(p->bias_learning_k2 * share, swing));
     double k1 = maxd(p->k1, 2.0 * sqrt(k2));
     double k3dt = learn ? p->k3 * dt : 0.0;
     s->cx = s->cx + k3dt * f[0];
@@ -972,7 +982,7 @@ static PyMemberDef State_members[] = {
     SD(blk_d), SD(blk_mx), SD(blk_my), SD(blk_mz), SD(blk_mn), SD(prev_n), SD(pgx), SD(pgy),
     SD(pgz), SD(pax), SD(pay), SD(paz), SD(pmx), SD(pmy), SD(pmz), SD(pm_n), SD(last_n), SD(lgx),
     SD(lgy), SD(lgz), SD(lax), SD(lay), SD(laz), SD(noise_g2), SD(noise_a2), SD(g_ref), SD(bx),
-    SD(by), SD(bz), SD(bias_var), SB(bias_unverified), SD(z_m), SD(mag_ref_norm), SD(mag_ref_dip),
+    SD(by), SD(bz), SD(bias_var), SB(bias_unverified), SD(pvx), SD(pvy), SD(pv_var), SD(z_m), SD(mag_ref_norm), SD(mag_ref_dip),
     SD(mag_ref_count), SB(mag_disturbed), SD(mag_last_time_s), SB(heading_initialized),
     SD(mag_clip_timer_s), SB(mag_recovering), SD(mvx), SD(mvy), SD(mvz), SD(mcx), SD(mcy),
     SD(mcz), SD(mmx), SD(mmy), SD(mmz), SD(mag_cand_norm), SD(mag_seen_time_s), SD(mag_ok_timer_s), SD(mag_cand_timer_s),

@@ -9,7 +9,9 @@ The estimate b (sensor frame, rad/s) is the PI regulator's integral state; its v
   measurement of b: scalar Kalman update per axis;
 - :func:`learning_gains` — in motion, while b is uncertain, k2 is raised towards
   ``bias_learning_k2`` in proportion to the variance and k1 to at least 2√k2 (critically damped):
-  learned within about 20 s of any start, in the air too;
+  learned within about 20 s of any start, in the air too; but never beyond σ_b/σ_V, the gain at
+  which the vehicle's own velocity swing would move the estimate by more than its uncertainty
+  (:func:`observe_velocity_swing`);
 - :func:`integrate` — the integral itself (k2 and the k3 path on the processed error), except
   from an error too large to be a bias (BIAS_LEARNING_MAX_ERROR_RAD, anti-windup); the variance
   shrinks as it learns (time constant k1/k2);
@@ -23,6 +25,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from cf_estimator.core.ops import TINY
 from cf_estimator.core.state import StepState
 from cf_estimator.core.stillness import RestMeasurement
 
@@ -36,6 +39,11 @@ BIAS_RANDOM_WALK_RAD_S_SQRT_S = 2e-4
 BIAS_CONVERGED_SIGMA_RAD_S = 0.005
 #: Smallest k1 [1/s] in the integral's learning time constant k1/k2 (k1 = 0 learns at once).
 BIAS_LEARNING_MIN_K1 = 1e-3
+#: High-pass time constant [s] of the pseudo-velocity (the disagreement integrated in the world
+#: frame): longer than a manoeuvre's legs, so it holds the vehicle's velocity changes over g.
+SWING_TIME_CONSTANT_S = 10.0
+#: Time constant [s] of the pseudo-velocity's mean square (a growing window until then).
+SWING_VAR_TIME_CONSTANT_S = 10.0
 
 
 def add_process_noise(s: StepState, p: Any, dt: Any, o: Any) -> None:
@@ -56,10 +64,25 @@ def fuse_rest(s: StepState, m: RestMeasurement, o: Any) -> None:
     s.bias_var = s.bias_var - k * s.bias_var
 
 
+def observe_velocity_swing(s: StepState, wx: Any, wy: Any, dt: Any, o: Any) -> None:
+    """The accelerometer's disagreement (wx, wy) [rad, world frame, horizontal] integrated into
+    the pseudo-velocity over g ``pv`` [rad·s] (high-passed over SWING_TIME_CONSTANT_S) and its
+    mean square ``pv_var``. The integral state learns k2·∫f: a vehicle whose velocity swings by
+    Δv moves it by about k2·Δv/g, however well the attitude is known."""
+    leak = dt / (SWING_TIME_CONSTANT_S + dt)
+    s.pvx = s.pvx + wx * dt - leak * s.pvx
+    s.pvy = s.pvy + wy * dt - leak * s.pvy
+    w = dt / (o.minimum(SWING_VAR_TIME_CONSTANT_S, o.maximum(s.time_s, dt)) + dt)
+    s.pv_var = s.pv_var + w * (s.pvx * s.pvx + s.pvy * s.pvy - s.pv_var)
+
+
 def learning_gains(s: StepState, p: Any, o: Any) -> tuple[Any, Any]:
-    """(k1 [1/s], k2 [1/s²]) of the regulator at this step: raised while b is uncertain."""
+    """(k1 [1/s], k2 [1/s²]) of the regulator at this step: raised while b is uncertain, the
+    raise at most σ_b/σ_V [rad/s over rad·s] (the velocity swing moves the estimate by no more
+    than its uncertainty σ_b = √bias_var; σ_V = √pv_var)."""
     share = o.minimum(s.bias_var / (p.bias_prior_sigma_rad_s ** 2), 1.0)
-    k2 = o.maximum(p.k2, p.bias_learning_k2 * share)
+    swing = o.sqrt(o.maximum(s.bias_var, 0.0)) / o.maximum(o.sqrt(s.pv_var), TINY)
+    k2 = o.maximum(p.k2, o.minimum(p.bias_learning_k2 * share, swing))
     k1 = o.maximum(p.k1, 2.0 * o.sqrt(k2))
     return k1, k2
 

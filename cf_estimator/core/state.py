@@ -92,6 +92,9 @@ BIAS: tuple[Field, ...] = (
     _f("bias_var", "(rad/s)^2", "variance of the bias estimate per axis (< 0: not set yet)"),
     _f("bias_unverified", "", "last rest measurement came from a power-on still phase without "
        "a magnetometer (a steady turn cannot be told from rest then)", "bool"),
+    *_vec("pv", "rad*s", "pseudo-velocity over g: the accelerometer's disagreement integrated in "
+          "the world frame, high-passed over SWING_TIME_CONSTANT_S", "xy"),
+    _f("pv_var", "rad^2*s^2", "mean square of |pv|: the vehicle's velocity swing over g^2"),
 )
 
 HEADING: tuple[Field, ...] = (

@@ -15,8 +15,8 @@ stage is a function of its name here and a static function of the same name in c
     5. regulate() c ← c + k3·dt·f;  b ← b − dt·(k2'·f + c);  q ← q⁻ ⊗ Exp(g(k1')·f)
                   (W1 = k1 + k2/s + k3/s²; g(k) = k·dt/(1+k·dt), the backward-Euler gain;
                   b, the integral state, is the gyro-bias estimate; k2' = max(k2,
-                  bias_learning_k2·σ_b²/σ_0²) and k1' = max(k1, 2√k2') while the bias is
-                  uncertain); then l ← l − p·g(k1')·l with p = aperiodic_prefilter (0 while
+                  min(bias_learning_k2·σ_b²/σ_0², σ_b/σ_V)) and k1' = max(k1, 2√k2') while
+                  the bias is uncertain; σ_V: the velocity swing, bias.py); then l ← l − p·g(k1')·l with p = aperiodic_prefilter (0 while
                   the tight clip is on): the correction also turns the unit's memory (p = 1: a
                   pre-filter of the specific force in the world frame, as VQF's; p = 0: the
                   thesis's unit on the error)
@@ -63,6 +63,8 @@ from cf_estimator.core.bias import (  # noqa: F401 - the constants of the whole 
     BIAS_CONVERGED_SIGMA_RAD_S,
     BIAS_LEARNING_MAX_ERROR_RAD,
     BIAS_RANDOM_WALK_RAD_S_SQRT_S,
+    SWING_TIME_CONSTANT_S,
+    SWING_VAR_TIME_CONSTANT_S,
 )
 from cf_estimator.core.ops import TINY
 from cf_estimator.core.state import StepState
@@ -364,13 +366,17 @@ def regulate(s: StepState, p: Any, f: tuple, en: Any, u: tuple, v: tuple, quick:
     """Stage 5: the PI(+k3) regulator on f; its integral states are the bias estimate.
 
     While the bias is uncertain (no still phase yet) the loop runs faster: k2 up to
-    bias_learning_k2 in proportion to the bias variance, k1 kept at least critically damping
-    it. The correction q ← q ⊗ Exp(g(k1)·f) also turns the unit's memory by the share
-    aperiodic_prefilter (quick: fully; tight clip: not at all).
+    bias_learning_k2 in proportion to the bias variance (at most σ_b/σ_V: the vehicle's
+    velocity swing, the raw error integrated in the world frame, must not move the estimate by
+    more than its uncertainty), k1 kept at least critically damping it. The correction
+    q ← q ⊗ Exp(g(k1)·f) also turns the unit's memory by the share aperiodic_prefilter (quick:
+    fully; tight clip: not at all).
     """
     fx, fy, fz = f
     ux, uy, uz = u
     vx, vy, vz = v
+    wx, wy, _ = _rotate(s.qw, s.qx, s.qy, s.qz, s.ex, s.ey, s.ez)
+    bias.observe_velocity_swing(s, wx, wy, dt, o)
     k1, k2 = bias.learning_gains(s, p, o)
     # an error beyond BIAS_LEARNING_MAX_ERROR_RAD is an attitude error (a gyro over range, a
     # glitch), not a bias: the integral does not learn from it (anti-windup; beyond 90° the
