@@ -16,10 +16,11 @@ stage is a function of its name here and a static function of the same name in c
                   (W1 = k1 + k2/s + k3/s²; g(k) = k·dt/(1+k·dt), the backward-Euler gain;
                   b, the integral state, is the gyro-bias estimate; k2' = max(k2,
                   min(bias_learning_k2·σ_b²/σ_0², σ_b/σ_V)) and k1' = max(k1, 2√k2') while
-                  the bias is uncertain; σ_V: the velocity swing, bias.py); then l ← l − p·g(k1')·l with p = aperiodic_prefilter (0 while
-                  the tight clip is on): the correction also turns the unit's memory (p = 1: a
-                  pre-filter of the specific force in the world frame, as VQF's; p = 0: the
-                  thesis's unit on the error)
+                  the bias is uncertain; σ_V: the velocity swing, bias.py); then
+                  l ← l − p·g(k1')·l with p = aperiodic_prefilter (0 while the tight clip
+                  is on): the correction also turns the unit's memory (p = 1: a pre-filter of
+                  the specific force in the world frame, as VQF's; p = 0: the thesis's unit on
+                  the error)
     .  recover()  a clip unbroken for recovery_trigger_s: RECOVERING (as start-up)
     6. heading()  'yaw':  e_ψ = atan2(m_E, m_N) of the measured field in the world frame,
                   saturated; q ← Exp_z(g(r1)·e_ψ) ⊗ q; z_m ← z_m + r2·dt_m·e_ψ (heading only:
