@@ -141,6 +141,40 @@ def test_learning_gains_follow_the_bias_uncertainty():
     assert (k1, k2) == (p.k1, p.k2)
 
 
+def test_a_velocity_swing_caps_the_raised_learning_at_sigma_b_over_sigma_v():
+    p = step_params(FilterParams())
+    var = p.bias_prior_sigma_rad_s ** 2
+    s = _bias_state(var)
+    s.pv_var = 0.25  # sigma_V = 0.5 rad s: legs of about +-5 m/s
+    k1, k2 = bias.learning_gains(s, p, FloatOps)
+    assert k2 == pytest.approx(math.sqrt(var) / 0.5) and k2 < p.bias_learning_k2
+    assert k1 == pytest.approx(2 * math.sqrt(k2))
+    s.pv_var = 1e-6  # hovering: the cap is far above the raise
+    assert bias.learning_gains(s, p, FloatOps)[1] == p.bias_learning_k2
+    s = _bias_state(1e-10)
+    s.pv_var = 100.0  # the cap never takes k2 below the shipped gain
+    assert bias.learning_gains(s, p, FloatOps) == (p.k1, p.k2)
+
+
+def test_the_velocity_swing_is_the_disagreement_integrated_and_high_passed():
+    s = _bias_state(0.01)
+    dt = 0.01
+    for _ in range(6000):  # 60 s of a steady 0.1 rad disagreement along world x
+        s.time_s += dt
+        bias.observe_velocity_swing(s, 0.1, 0.0, dt, FloatOps)
+    # the leaky integral settles at w * T (a steady disagreement is no swing for ever)
+    assert s.pvx == pytest.approx(0.1 * bias.SWING_TIME_CONSTANT_S, rel=0.01) and s.pvy == 0.0
+    assert s.pv_var == pytest.approx(s.pvx ** 2, rel=0.05)
+    # a zig-zag whose velocity swings by +-dv: sigma_V about its RMS over g
+    s = _bias_state(0.01)
+    for k in range(6000):
+        s.time_s += dt
+        bias.observe_velocity_swing(s, 0.3 * math.copysign(1.0, math.sin(k * dt * math.pi / 3)),
+                                    0.0, dt, FloatOps)
+    # legs of 3 s at 0.3 rad (a/g): the velocity over g swings by +-0.45 s, RMS ~ 0.26-0.5
+    assert 0.2 < math.sqrt(s.pv_var) < 0.6
+
+
 def test_integral_learns_only_from_a_bias_sized_error_and_is_bounded():
     p = step_params(FilterParams())
     s = _bias_state(0.01)
