@@ -170,7 +170,7 @@ def test_mag_range_agrees_between_warning_and_docs():
 
 def test_readme_says_how_long_the_tests_take_and_a_quick_subset():
     readme = (REPO / "README.md").read_text()
-    assert "min on a fresh 2-core machine" in readme
+    assert "min on an idle 2-core machine" in readme and "from an empty virtual" in readme
     assert "quick check" in readme.lower()
 
 
