@@ -19,6 +19,7 @@ from cf_estimator.scenarios import disturbances as dist
 from cf_estimator.scenarios.motion import (
     Truth,
     hover,
+    multirotor_circles,
     multirotor_flight,
     multirotor_zigzag,
     static,
@@ -76,19 +77,19 @@ ScenarioFactory = Callable[..., Scenario]
 DEFAULT_RATE_HZ = {
     "static": 200.0, "static_150": 200.0, "flight": 200.0, "impacts": 1000.0,
     "vibration": 1000.0, "acceleration": 200.0, "thesis": 1000.0, "uav": 200.0,
-    "zigzag": 120.0,
+    "zigzag": 120.0, "circles": 1000.0,
 }
 """Default sample rate [Hz] of each scenario (impacts and vibration need ≥ 500/480 Hz)."""
 
 DEFAULT_DURATION_S = {
     "static": 60.0, "static_150": 60.0, "flight": 120.0, "impacts": 70.0, "vibration": 55.0,
-    "acceleration": 45.0, "thesis": 120.0, "uav": 120.0, "zigzag": 45.0,
+    "acceleration": 45.0, "thesis": 120.0, "uav": 120.0, "zigzag": 45.0, "circles": 60.0,
 }
 """Default duration [s] of each scenario."""
 
 _MIN_DURATION_S = {
     "static": 1.0, "static_150": 1.0, "flight": 20.0, "impacts": 60.0, "vibration": 45.0,
-    "acceleration": 20.0, "thesis": 110.0, "uav": 40.0, "zigzag": 15.0,
+    "acceleration": 20.0, "thesis": 110.0, "uav": 40.0, "zigzag": 15.0, "circles": 15.0,
 }
 
 # Thesis disturbance layout [s]
@@ -312,6 +313,39 @@ def scenario_zigzag(
                     dict(flight.events))
 
 
+def scenario_circles(
+    rate_hz: float | None, duration_s: float | None, seed: int, *,
+    gyro_bias_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0), speed_m_s: float = 3.0,
+    turn_rate_rad_s: float = 0.6, figure_eight: bool = True, vibration_m_s2: float = 1.0,
+    gyro_vibration_rad_s: float = 0.01, model: SensorModel | None = None,
+) -> Scenario:
+    """Sustained coordinated turns (:func:`~cf_estimator.scenarios.motion.multirotor_circles`),
+    in the air from the first sample, figure-8s by default, 1 kHz like a small quadrotor's
+    flight controller, whose firmware has already removed the gyro bias (zero by default):
+    whatever bias the filter learns is the turn's."""
+    rate, duration = _setup("circles", rate_hz, duration_s)
+    rng = np.random.default_rng(seed)
+    flight = multirotor_circles(duration, rate, rng, speed_m_s=speed_m_s,
+                                turn_rate_rad_s=turn_rate_rad_s, figure_eight=figure_eight)
+    acc_vib, gyro_vib = dist.rotor_vibration(flight.truth.t_s, flight.rotor_speed, rng,
+                                             accel_rms_m_s2=vibration_m_s2,
+                                             gyro_rms_rad_s=gyro_vibration_rad_s)
+    base = SensorModel() if model is None else model
+    sensor = dataclasses.replace(base, gyro_bias_rad_s=tuple(float(b) for b in gyro_bias_rad_s))
+    shape = "figure-8s (the turn reversed every loop)" if figure_eight else "circles"
+    text = (f"Multirotor {shape} in the air from the first sample at {speed_m_s:g} m/s and "
+            f"{turn_rate_rad_s:g} rad/s (centripetal {speed_m_s * turn_rate_rad_s:g} m/s^2, "
+            "fixed on the body for each loop); thrust along body z plus rotor drag; gyro bias "
+            f"{', '.join(f'{b:g}' for b in sensor.gyro_bias_rad_s or ())} rad/s (removed by "
+            f"the firmware); rotor vibration {vibration_m_s2:g} m/s^2 and "
+            f"{gyro_vibration_rad_s:g} rad/s RMS; default MEMS noise.")
+    imu = measure(flight.truth, sensor, rng)
+    imu = imu.with_accel_disturbance(acc_vib).with_gyro_disturbance(gyro_vib)
+    windows = [(float(flight.truth.t_s[0]), float(flight.truth.t_s[-1]), "acceleration")]
+    return Scenario("circles", flight.truth, imu, sensor, text, windows, rate, seed,
+                    dict(flight.events))
+
+
 SCENARIOS: dict[str, ScenarioFactory] = {
     "static": scenario_static,
     "static_150": scenario_static_150,
@@ -322,6 +356,7 @@ SCENARIOS: dict[str, ScenarioFactory] = {
     "thesis": scenario_thesis,
     "uav": scenario_uav,
     "zigzag": scenario_zigzag,
+    "circles": scenario_circles,
 }
 """Scenario factories ``(rate_hz | None, duration_s | None, seed) -> Scenario`` by name."""
 

@@ -599,3 +599,48 @@ def multirotor_zigzag(
         tc += dur + rng.uniform(0.0, 0.5)
     truth, rotor = _thrust_flight(t, d, drag_per_s, gravity)
     return MultirotorFlight(truth, rotor, events)
+
+
+def multirotor_circles(
+    duration_s: float,
+    rate_hz: float,
+    rng: np.random.Generator,
+    *,
+    speed_m_s: float = 3.0,
+    turn_rate_rad_s: float = 0.6,
+    figure_eight: bool = True,
+    reversal_s: float = 1.0,
+    drag_per_s: float = 0.35,
+    gravity: float = GRAVITY_M_S2,
+) -> MultirotorFlight:
+    """Sustained coordinated turns of a multirotor already cruising at ``speed_m_s`` [m/s] at
+    t = 0: full circles at ``turn_rate_rad_s`` [rad/s] (centripetal acceleration
+    speed·turn_rate, constant in the body frame: the thrust axis leans into the turn for the
+    whole loop), the turn reversed after every loop (``figure_eight``, a min-jerk reversal of
+    ``reversal_s`` [s]) or not (circles). The accelerometer then reads a tilt that stays fixed
+    on the body for seconds — what a bias learned from it looks like. Same physics as
+    :func:`multirotor_flight` (thrust along body z, linear drag ``drag_per_s``); events:
+    ``first_reversal`` [s] (inf for plain circles)."""
+    t = sample_times(duration_s, rate_hz)
+    d = _Design(t, rng.uniform(-np.pi, np.pi))
+    d.speed[0] += speed_m_s
+    loop_s = 2.0 * np.pi / turn_rate_rad_s
+    rate = np.full_like(t, turn_rate_rad_s)
+    drate = np.zeros_like(t)
+    sign, tc = 1.0, loop_s
+    first = np.inf
+    while figure_eight and tc < t[-1]:
+        i0, i1 = np.searchsorted(t, (tc, tc + reversal_s), side="right")
+        step, dstep, _ = _smoothstep(t[i0:i1], tc, reversal_s)
+        change = -2.0 * sign * turn_rate_rad_s
+        rate[i0:i1] = sign * turn_rate_rad_s + change * step
+        drate[i0:i1] = change * dstep
+        rate[i1:] = -sign * turn_rate_rad_s
+        first = min(first, tc)
+        sign, tc = -sign, tc + loop_s
+    d.ang[2, 1] += rate
+    d.ang[2, 2] += drate
+    d.ang[2, 0] += np.concatenate(([0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(t))))
+    truth, rotor = _thrust_flight(t, d, drag_per_s, gravity)
+    return MultirotorFlight(truth, rotor, {"first_reversal": float(first)})
+
