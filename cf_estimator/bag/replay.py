@@ -279,7 +279,7 @@ class _Run:
         self.out_path = Path(variant.output_path) if variant.output_path is not None else None
         self.bag: io.OutputBag | None = None
         self.t: list[float] = []
-        self.q: list[tuple[float, float, float, float] | None] = []
+        self.q: list[Sequence[float] | None] = []  #: w, x, y, z per output (None: no attitude)
         self.rpy: list[Any] = []
         self.clipped: list[bool] = []
         self.enorm: list[float] = []
@@ -384,7 +384,7 @@ class _Run:
                                                         np.asarray(c.rpy, dtype=np.float64))))
             bag.write_rows(np.asarray(run.log_ns, dtype=np.int64), topics)
         self.t.extend(ts)
-        self.q.extend(tuple(r) for r in c.q_wxyz.tolist())
+        self.q.extend(c.q_wxyz.tolist())  # rows as lists: _series reads them as tuples
         self.rpy.extend(c.rpy)
         self.clipped.extend((c.extra[:, 6] != 0.0).tolist())
         self.enorm.extend(c.error_norm)
