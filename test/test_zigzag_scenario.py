@@ -10,25 +10,19 @@ So is the diagnosis: on both, the loop with the right gyro bias is far better th
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
 import pytest
+from scenario_scores import known_bias_rms, rms_after_10_s
 
 from cf_estimator.core.batch import estimate
 from cf_estimator.core.params import FilterParams
-from cf_estimator.metrics import tilt_error_rad
 from cf_estimator.scenarios import make_scenario
 
 P6 = FilterParams(use_mag=False)
 SEEDS = (0, 1, 2, 3)
 HORIZONTAL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "phantom4_horizontal"
-
-
-def _rms_after_10_s(q: np.ndarray, sc) -> float:
-    e = np.degrees(tilt_error_rad(q, sc.truth.q_world_from_body))[sc.imu.t_s >= 10.0]
-    return float(np.sqrt(np.mean(e * e)))
 
 
 @pytest.fixture(scope="module")
@@ -37,7 +31,7 @@ def flights():
 
 
 def _ours(flights, params=P6) -> float:
-    return float(np.mean([_rms_after_10_s(estimate(
+    return float(np.mean([rms_after_10_s(estimate(
         sc.imu.gyro_rad_s, sc.imu.accel_m_s2, None, timestamps_s=sc.imu.t_s,
         params=params).quaternion, sc) for sc in flights]))
 
@@ -56,14 +50,6 @@ def test_the_zigzags_accelerate_most_of_the_time_from_the_first_sample(flights):
         assert along.min() < -3.0 < 3.0 < along.max()
 
 
-def _known_bias(flights) -> float:
-    """Ours with the scenario's true gyro bias taken out and every bias learning off."""
-    off = dataclasses.replace(P6, k2=0.0, k3=0.0, bias_learning_k2=0.0, rest_bias_learning=False)
-    return float(np.mean([_rms_after_10_s(estimate(
-        sc.imu.gyro_rad_s - sc.imu.gyro_bias_rad_s, sc.imu.accel_m_s2, None,
-        timestamps_s=sc.imu.t_s, params=off).quaternion, sc) for sc in flights]))
-
-
 def test_the_in_flight_bias_learning_is_what_fails_as_on_the_real_flights(flights):
     """The failure found on the real flights (BENCHMARKS.md, "Sustained acceleration"): the
     learned bias is wrong by tenths of a degree per second, and the same loop with the right
@@ -73,7 +59,7 @@ def test_the_in_flight_bias_learning_is_what_fails_as_on_the_real_flights(flight
     r = estimate(sc.imu.gyro_rad_s, sc.imu.accel_m_s2, None, timestamps_s=sc.imu.t_s, params=P6)
     err = np.degrees(np.abs(r.gyro_bias_rad_s[-1] - sc.imu.gyro_bias_rad_s[-1]))
     assert err.max() > 0.3
-    assert _known_bias(flights) < KNOWN_BIAS_SHARE * _ours(flights)
+    assert known_bias_rms(flights, P6) < KNOWN_BIAS_SHARE * _ours(flights)
 
 
 #: With the right bias the loop's error is below this share of ours online, on the scenario and
@@ -92,7 +78,7 @@ def test_ours_and_vqf_rank_on_the_scenario_as_on_the_real_horizontal_campaign(fl
     real_ours = real.mean("cf_estimator", "inclination_rms_deg")
     real_vqf = real.mean("vqf", "inclination_rms_deg")
     assert np.isfinite(real_ours) and np.isfinite(real_vqf)
-    sim_vqf = float(np.mean([_rms_after_10_s(run_vqf(sc.imu.gyro_rad_s, sc.imu.accel_m_s2, None,
+    sim_vqf = float(np.mean([rms_after_10_s(run_vqf(sc.imu.gyro_rad_s, sc.imu.accel_m_s2, None,
                                                      sc.rate_hz)["6d"], sc) for sc in flights]))
     sim_ours = _ours(flights)
     assert (sim_ours < sim_vqf) == (real_ours < real_vqf), (sim_ours, sim_vqf, real_ours,

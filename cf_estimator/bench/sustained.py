@@ -39,6 +39,8 @@ from cf_estimator.core.params import FilterParams
 
 #: Memories T [s] of the floor table (0.5 s: about the accelerometer's own disagreement).
 MEMORIES_S = (0.5, 1.0, 2.0, 5.0, 10.0)
+#: Name of ours online among :func:`estimators`.
+OURS = "cf_estimator"
 #: The scored samples split at this time [s]: the first seconds after the settling, while an
 #: in-air start is still learning its bias, and the rest.
 SPLIT_S = 20.0
@@ -78,14 +80,13 @@ def reference_bias_rad_s(flight: Flight) -> np.ndarray:
     return np.median(flight.gyro_rad_s[:-1][ok] - rate[ok], axis=0)
 
 
-def learned_bias_error_deg_s(flight: Flight, params: FilterParams, at_s: float = SETTLE_S
+def learned_bias_error_deg_s(flight: Flight, bias_rad_s: np.ndarray, at_s: float = SETTLE_S
                              ) -> float:
-    """|b − b_ref| [deg/s] of ours online at ``at_s`` [s] (b_ref: :func:`reference_bias_rad_s`;
-    beyond the recording: its last sample)."""
-    p = dataclasses.replace(params, use_mag=False)
-    r = estimate(flight.gyro_rad_s, flight.accel_m_s2, None, timestamps_s=flight.t_s, params=p)
+    """|b − b_ref| [deg/s] at ``at_s`` [s] of a bias series ``bias_rad_s`` (N, 3) [rad/s] on
+    the flight's samples (ours online: ``EstimateResult.gyro_bias_rad_s``; b_ref:
+    :func:`reference_bias_rad_s`; beyond the recording: its last sample)."""
     i = min(int(np.searchsorted(flight.t_s, at_s)), flight.n_samples - 1)
-    return math.degrees(float(np.linalg.norm(r.gyro_bias_rad_s[i] - reference_bias_rad_s(flight))))
+    return math.degrees(float(np.linalg.norm(bias_rad_s[i] - reference_bias_rad_s(flight))))
 
 
 @dataclass(frozen=True)
@@ -110,15 +111,23 @@ def _rms(x: np.ndarray, mask: np.ndarray) -> float:
     return float(np.sqrt(np.mean(x[m] ** 2))) if m.any() else math.nan
 
 
-def with_reference_bias(flight: Flight, params: FilterParams) -> np.ndarray:
-    """Ours online with the gyro bias the reference shows (:func:`reference_bias_rad_s`)
-    taken out of the gyro and no bias learning (integral, in-flight boost, rest): what the
-    loop would do if its in-flight bias learning were perfect. An analysis of the recordings,
-    never a filter mode: the reference is not there in flight. → q_world_from_sensor (N, 4)."""
+def with_known_bias(gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray, t_s: np.ndarray,
+                    bias_rad_s: np.ndarray, params: FilterParams) -> np.ndarray:
+    """Ours online, 6-D, with a known gyro bias ``bias_rad_s`` [rad/s, sensor; (3,) or one row
+    per sample] taken out of the gyro and no bias learning (integral, in-flight raise, rest):
+    what the loop would do if its bias learning were perfect. An analysis (of recordings with
+    a reference, of simulations with a truth), never a filter mode. → q_world_from_sensor (N, 4)."""
     p = dataclasses.replace(params, use_mag=False, k2=0.0, k3=0.0, bias_learning_k2=0.0,
                             rest_bias_learning=False)
-    gyro = flight.gyro_rad_s - reference_bias_rad_s(flight)
-    return estimate(gyro, flight.accel_m_s2, None, timestamps_s=flight.t_s, params=p).quaternion
+    return estimate(gyro_rad_s - bias_rad_s, accel_m_s2, None, timestamps_s=t_s,
+                    params=p).quaternion
+
+
+def with_reference_bias(flight: Flight, params: FilterParams) -> np.ndarray:
+    """:func:`with_known_bias` with the bias the reference shows (:func:`reference_bias_rad_s`):
+    the reference is not there in flight. → q_world_from_sensor (N, 4)."""
+    return with_known_bias(flight.gyro_rad_s, flight.accel_m_s2, flight.t_s,
+                           reference_bias_rad_s(flight), params)
 
 
 def estimators(params: FilterParams, with_vqf: bool) -> dict[str, Callable[[Flight], np.ndarray]]:
@@ -127,8 +136,8 @@ def estimators(params: FilterParams, with_vqf: bool) -> dict[str, Callable[[Flig
     p = dataclasses.replace(params, use_mag=False)
     aided = aided_algorithms(VelocityInput())[0]
     out: dict[str, Callable[[Flight], np.ndarray]] = {
-        "cf_estimator": lambda f: estimate(f.gyro_rad_s, f.accel_m_s2, None,
-                                           timestamps_s=f.t_s, params=p).quaternion,
+        OURS: lambda f: estimate(f.gyro_rad_s, f.accel_m_s2, None, timestamps_s=f.t_s,
+                                 params=p).quaternion,
         "cf_estimator_reference_bias": lambda f: with_reference_bias(f, params),
         "cf_estimator_aided": lambda f: aided.run(f, p),
     }
@@ -154,17 +163,20 @@ def analyse(family: str, flights: Sequence[Flight], params: FilterParams,
     measured: dict[str, list[float]] = {k: [] for k in runs}
     split: dict[str, tuple[list[float], list[float]]] = {k: ([], []) for k in runs}
     accel, bias_ref, bias_err, bias_err_end = [], [], [], []
+    p = dataclasses.replace(params, use_mag=False)
     for f in flights:
+        # ours online once: its attitude is a measured row, its bias the learned-bias rows
+        ours = estimate(f.gyro_rad_s, f.accel_m_s2, None, timestamps_s=f.t_s, params=p)
         bias_ref.append(math.degrees(float(np.linalg.norm(reference_bias_rad_s(f)))))
-        bias_err.append(learned_bias_error_deg_s(f, params))
-        bias_err_end.append(learned_bias_error_deg_s(f, params, at_s=math.inf))
+        bias_err.append(learned_bias_error_deg_s(f, ours.gyro_bias_rad_s))
+        bias_err_end.append(learned_bias_error_deg_s(f, ours.gyro_bias_rad_s, at_s=math.inf))
         mask = (f.t_s >= SETTLE_S) & f.has_reference
         for t in MEMORIES_S:
             floors[t].append(_rms(mean_acceleration_tilt_deg(f, t), mask))
         a_h = GRAVITY_M_S2 * np.tan(np.radians(mean_acceleration_tilt_deg(f, 0.5)))
         accel.append(float(np.nanmedian(a_h[mask])))
         for name, run in runs.items():
-            q = run(f)
+            q = ours.quaternion if name == OURS else run(f)
             measured[name].append(score(f, q))
             for part, window in zip(split[name], ((SETTLE_S, SPLIT_S), (SPLIT_S, math.inf)),
                                     strict=True):
