@@ -93,8 +93,9 @@ setup(
         "pyulog",
     ],
     extras_require={
-        # vqf: the peer the bench tests run; dask[distributed]: the LocalCluster (loopback) tests
-        "test": ["pytest", "hypothesis", "ruff", "vqf", "dask[distributed]"],
+        # vqf: the peer the bench tests run; dask[distributed]: the LocalCluster (loopback) tests;
+        # pytest-timeout: a hung test fails after 10 minutes (pyproject: timeout), not at CI's limit
+        "test": ["pytest", "pytest-timeout", "hypothesis", "ruff", "vqf", "dask[distributed]"],
         # --cluster ADDRESS|local:N on replay, tune and bench (docs/cluster.md)
         "cluster": ["dask[distributed]"],
         # riann: RIANN on ONNX Runtime (~80 MB installed, no torch); its weights ship inside

@@ -4,8 +4,8 @@ An :class:`Engine` maps a module-level function over picklable tasks and returns
 in task order (``on_done(i, result)`` is called as each one finishes, for progress bars).
 :func:`make_engine` turns the CLI's ``--cluster`` / ``--jobs`` into one:
 
-* no ``--cluster``: :class:`LocalEngine` (serial, or a fork pool of ``jobs`` processes) —
-  today's behaviour; nothing of Dask is imported;
+* no ``--cluster``: :class:`LocalEngine` (serial, or a pool of ``jobs`` processes started by
+  a fork server) — nothing of Dask is imported;
 * ``--cluster local:N``: a Dask ``LocalCluster`` of N single-threaded worker processes on the
   loopback interface, shut down when the command ends;
 * ``--cluster tcp://host:8786``: a running Dask scheduler (``dask scheduler`` / ``dask worker``).
@@ -61,13 +61,43 @@ class Engine:
         self.close()
 
 
-def _indexed(args: tuple[Callable[[Any], Any], int, Any]) -> tuple[int, Any]:
-    fn, i, task = args
+#: Environment variables a local worker takes from the caller at each task (a fork server's
+#: workers otherwise keep the environment of the moment the server started).
+_WORKER_ENV_PREFIX = "CF_ESTIMATOR_"
+
+
+def _caller_env() -> dict[str, str]:
+    return {k: v for k, v in os.environ.items() if k.startswith(_WORKER_ENV_PREFIX)}
+
+
+def _indexed(args: tuple[Callable[[Any], Any], int, Any, dict[str, str]]) -> tuple[int, Any]:
+    fn, i, task, env = args
+    for k in [k for k in os.environ if k.startswith(_WORKER_ENV_PREFIX) and k not in env]:
+        del os.environ[k]
+    os.environ.update(env)
     return i, fn(task)
 
 
+def _pool_context() -> multiprocessing.context.BaseContext:
+    """A fork server on POSIX, else spawn.
+
+    Never a plain fork: the caller may hold native threads (a ROS 2 node's DDS threads, Dask,
+    BLAS) and a child forked while one of them holds a lock waits on it for ever. The fork
+    server is a fresh single-threaded interpreter started once per process; the workers it
+    forks import what a task needs (the same as spawn, without an interpreter start per
+    worker).
+    """
+    if "forkserver" in multiprocessing.get_all_start_methods():
+        return multiprocessing.get_context("forkserver")
+    return multiprocessing.get_context("spawn")
+
+
 class LocalEngine(Engine):
-    """Serial in this process (``jobs`` ≤ 1), else a process pool (fork on POSIX)."""
+    """Serial in this process (``jobs`` ≤ 1), else a pool of ``jobs`` worker processes.
+
+    ``fn`` must be a module-level function and the tasks picklable (as for Dask); a worker
+    sees the caller's ``CF_ESTIMATOR_*`` environment variables as they are at :meth:`map`.
+    """
 
     def __init__(self, jobs: int = 1) -> None:
         self.workers = max(1, int(jobs))
@@ -84,9 +114,10 @@ class LocalEngine(Engine):
                 if on_done:
                     on_done(i, out[i])
             return out
-        ctx = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
-        with ctx.Pool(min(self.workers, len(tasks))) as pool:
-            for i, r in pool.imap_unordered(_indexed, [(fn, i, t) for i, t in enumerate(tasks)]):
+        env = _caller_env()
+        with _pool_context().Pool(min(self.workers, len(tasks))) as pool:
+            for i, r in pool.imap_unordered(_indexed,
+                                            [(fn, i, t, env) for i, t in enumerate(tasks)]):
                 out[i] = r
                 if on_done:
                     on_done(i, r)
