@@ -18,6 +18,11 @@ offline (its own offline mode). Rows (inclination [deg] unless marked):
 - compass (simulated, 9-D): a magnet of 0.3, 0.5 and 1x the Earth field fixed to a turning
   sensor for 60 s (:mod:`cf_estimator.scenarios.compass`): heading error [deg] while it is on,
   peak and RMS, mean over COMPASS_SEEDS;
+- multirotor (simulated, 6-D, :mod:`cf_estimator.scenarios`): the sustained-acceleration
+  cases of issue 22, in the air from the first sample — horizontal zig-zags like the Phantom's
+  (``zigzag``, 120 Hz, the DOTs' bias size) and figure-8s on a de-biased gyro (``circles``, at
+  1 kHz and at 100 Hz): inclination RMS and peak after 10 s [deg], and our learned gyro bias's
+  error at the end |b − b_true| [deg/s] (our online column), mean over MULTIROTOR_SEEDS;
 - aided (6-D, velocity aiding, :mod:`cf_estimator.core.velocity`): ours aided online and
   offline in our two columns (VQF takes no velocity: '-'): phantom4 and phantom4_horizontal with
   their RTK velocity as given, EuRoC with its ground truth's velocity degraded to GNSS quality
@@ -48,15 +53,20 @@ if TYPE_CHECKING:
 
 COLUMNS = ("cf_estimator", "cf_estimator_offline", "vqf", "vqf_offline")
 FAMILIES = ("euroc", "phantom4", "phantom4_horizontal", "broad", "scenarios", "compass",
-            "aided")
+            "multirotor", "aided")
 #: Simulated families (no data directory needed).
-SIMULATED = ("scenarios", "compass")
+SIMULATED = ("scenarios", "compass", "multirotor")
 #: The aided rows' recorded families (data directories) and the label of each.
 AIDED_FAMILIES = (("phantom4_horizontal", "phantom4 horizontal"), ("phantom4", "phantom4"),
                   ("euroc", "EuRoC MH"))
 COMPASS_FRACTIONS = (0.3, 0.5, 1.0)
 COMPASS_SEEDS = (0, 1, 2, 3)
 MIDAIR_STARTS_S = (20.0, 40.0, 60.0)
+#: The simulated multirotor cases: (label, scenario name, rate [Hz] or None for its own).
+MULTIROTOR_CASES = (("zig-zags 4 m/s², 120 Hz", "zigzag", None),
+                    ("figure-8s 1.8 m/s², 1 kHz", "circles", None),
+                    ("figure-8s 1.8 m/s², 100 Hz", "circles", 100.0))
+MULTIROTOR_SEEDS = (0, 1, 2)
 SCENARIOS = ("impacts", "vibration", "acceleration")
 #: A consistent Gaussian's share beyond 2σ (tilt 2-D with σ² = cov[0] + cov[4]; heading 1-D).
 CONSISTENT_BEYOND = {"tilt": "1.8 %", "heading": "4.6 %"}
@@ -230,6 +240,58 @@ def _compass_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> list
     return rows
 
 
+def _multirotor_case(args: tuple[str, float | None, int, FilterParams, tuple[str, ...]]
+                     ) -> dict[str, tuple[float, ...]]:
+    """{column: (RMS, peak) [deg] after 10 s}; ours online also the learned-bias error at the
+    end [deg/s] as a third element."""
+    import numpy as np
+
+    from cf_estimator.bench import peers as peer_mod
+    from cf_estimator.bench.euroc_eval import SETTLE_S
+    from cf_estimator.core.batch import estimate
+    from cf_estimator.metrics import tilt_error_rad
+    from cf_estimator.scenarios import make_scenario
+
+    name, rate, seed, params, peers = args
+    sc = make_scenario(name, rate_hz=rate, seed=seed)
+    g, a, t = sc.imu.gyro_rad_s, sc.imu.accel_m_s2, sc.imu.t_s
+    p6 = dataclasses.replace(params, use_mag=False)
+    runs = {col: estimate(g, a, None, timestamps_s=t, params=p6, offline=off)
+            for col, off in (("cf_estimator", False), ("cf_estimator_offline", True))}
+    qs = {col: r.quaternion for col, r in runs.items()}
+    if "vqf" in peers:
+        qs["vqf"] = peer_mod.run_vqf(g, a, None, sc.rate_hz)["6d"]
+        qs["vqf_offline"] = peer_mod.run_vqf_offline(g, a, None, sc.rate_hz)["6d"]
+    after = t >= SETTLE_S
+    out: dict[str, tuple[float, ...]] = {}
+    for col, q in qs.items():
+        e = np.degrees(tilt_error_rad(q, sc.truth.q_world_from_body))[after]
+        out[col] = (float(np.sqrt(np.mean(e * e))), float(np.max(e)))
+    b_err = runs["cf_estimator"].gyro_bias_rad_s[-1] - sc.gyro_bias_true_rad_s[-1]
+    out["cf_estimator"] += (float(np.degrees(np.linalg.norm(b_err))),)
+    return out
+
+
+def _multirotor_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> list[Row]:
+    from cf_estimator.bench.parallel import run_tasks
+
+    work = [(name, rate, seed, params, tuple(peers))
+            for _, name, rate in MULTIROTOR_CASES for seed in MULTIROTOR_SEEDS]
+    found = run_tasks(_multirotor_case, work, jobs)
+    rows = []
+    n = len(MULTIROTOR_SEEDS)
+    for k, (label, _, _) in enumerate(MULTIROTOR_CASES):
+        runs = found[k * n:(k + 1) * n]
+        for i, (what, unit) in enumerate((("inclination RMS after 10 s", "deg"),
+                                          ("inclination peak after 10 s", "deg"),
+                                          ("learned-bias error at the end", "deg/s"))):
+            cols = [c for c in COLUMNS if all(len(r.get(c, ())) > i for r in runs)]
+            rows.append(Row("multirotor", f"simulated {label}: {what}", unit,
+                            {c: sum(r[c][i] for r in runs) / n for c in cols},
+                            {c: standard_error([r[c][i] for r in runs]) for c in cols}))
+    return rows
+
+
 def _aided_rows(root: Path, params: FilterParams, jobs: int) -> tuple[list[Row], list[str]]:
     """The velocity-aided rows (module docstring) and notes for missing data directories."""
     from cf_estimator.bench import euroc
@@ -325,6 +387,9 @@ def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = 
             continue
         if family == "compass":
             result.rows += _compass_rows(params, peers, jobs)
+            continue
+        if family == "multirotor":
+            result.rows += _multirotor_rows(params, peers, jobs)
             continue
         if family == "aided":
             rows, notes = _aided_rows(root, params, jobs)

@@ -21,14 +21,16 @@ def add_parser(sub: Any) -> None:
     cr = sub.add_parser(
         "cross", help="one table over every data family (EuRoC ground and mid-air starts, "
         "phantom4 vertical and horizontal, BROAD groups, thesis scenarios, compass "
-        "disturbances), ours beside VQF online and offline",
+        "disturbances, simulated multirotor zig-zags and figure-8s), ours beside VQF online "
+        "and offline",
         description=(
             "The cross-dataset table of BENCHMARKS.md: for each family below --data (euroc/, "
             "phantom4/, phantom4_horizontal/, broad/; missing ones are left out with a note) "
-            "and the simulated thesis scenarios and compass cases (a magnet on a turning "
-            "sensor), our filter online and offline beside VQF online and offline. Inclination "
-            "[deg]; scenarios: peak tilt error [arcmin]; compass: heading error [deg]. A "
-            "default changes only when no row gets worse."
+            "and the simulated thesis scenarios, compass cases (a magnet on a turning "
+            "sensor) and multirotor cases (zig-zags, figure-8s), our filter online and offline "
+            "beside VQF online and offline. Inclination [deg]; scenarios: peak tilt error "
+            "[arcmin]; compass: heading error [deg]; multirotor: also our learned bias's error "
+            "[deg/s]. A default changes only when no row gets worse."
         ),
     )
     cr.add_argument("--data", default="../shared/data", metavar="DIR",
