@@ -41,6 +41,8 @@
 #define REST_GATE_SIGMAS 3.0
 #define REST_NOISE_CAP 1.0
 #define BIAS_LEARNING_MAX_ERROR_RAD 0.35
+#define BIAS_LEARNING_NOISE_SIGMAS 3.0
+#define LOOP_LAG_FRACTION 0.75
 #define REST_MAG_TOLERANCE_RAD 0.01
 #define ACCEL_DETECT_SIGMAS 3.0
 #define BIAS_RANDOM_WALK_RAD_S_SQRT_S 2e-4
@@ -501,13 +503,25 @@ static double saturate(const cf_state *s, const cf_params *p, double en, int qui
     return *clipped ? *limit / maxd(en, TINY) : 1.0;
 }
 
-/* aperiodic() of step.py: the unit in the world frame on the saturated error; f into s->fx.. */
-static void aperiodic(cf_state *s, const cf_params *p, double scale, int quick, double dt,
-                      double *f)
+/* bias.learning_gains of bias.py: (k1, k2) raised while the bias is uncertain, capped by the
+ * velocity swing */
+static void learning_gains(const cf_state *s, const cf_params *p, double *k1, double *k2)
 {
-    double w[3];
+    double share = mind(s->bias_var / pow(p->bias_prior_sigma_rad_s, 2.0), 1.0);
+    double swing = sqrt(maxd(s->bias_var, 0.0)) / maxd(sqrt(s->pv_var), TINY);
+    *k2 = maxd(p->k2, mind(p->bias_learning_k2 * share, swing));
+    *k1 = maxd(p->k1, 2.0 * sqrt(*k2));
+}
+
+/* aperiodic() of step.py: the unit in the world frame on the saturated error; f into s->fx.. */
+static void aperiodic(cf_state *s, const cf_params *p, double scale, int quick, int tight,
+                      double dt, double *f)
+{
+    double w[3], k1, k2;
     rotate(s->qw, s->qx, s->qy, s->qz, s->ex * scale, s->ey * scale, s->ez * scale, w);
     double lag = s->aided ? AIDED_LAG_TIME_CONSTANT_S : p->aperiodic_time_constant_s;
+    learning_gains(s, p, &k1, &k2);
+    lag = tight ? lag : mind(lag, LOOP_LAG_FRACTION / k1);
     double weight = dt / ((quick ? QUICK_LAG_TIME_CONSTANT_S : lag) + dt);
     s->lx = s->lx + weight * (w[0] - s->lx);
     s->ly = s->ly + weight * (w[1] - s->ly);
@@ -521,7 +535,7 @@ static void aperiodic(cf_state *s, const cf_params *p, double scale, int quick, 
     s->fz = f[2];
 }
 
-/* regulate() of step.py (bias.learning_gains and bias.integrate inlined) */
+/* regulate() of step.py (bias.integrate inlined) */
 static void regulate(cf_state *s, const cf_params *p, const double *f, double en,
                      const double *u, const double *v, int quick, int tight, int learn,
                      double dt)
@@ -534,15 +548,16 @@ static void regulate(cf_state *s, const cf_params *p, const double *f, double en
     s->pvy = s->pvy + w[1] * dt - leak * s->pvy;
     double sw = dt / (mind(SWING_VAR_TIME_CONSTANT_S, maxd(s->time_s, dt)) + dt);
     s->pv_var = s->pv_var + sw * (s->pvx * s->pvx + s->pvy * s->pvy - s->pv_var);
-    double share = mind(s->bias_var / pow(p->bias_prior_sigma_rad_s, 2.0), 1.0);
-    double swing = sqrt(maxd(s->bias_var, 0.0)) / maxd(sqrt(s->pv_var), TINY);
-    double k2 = maxd(p->k2, mind(p->bias_learning_k2 * share, swing));
-    double k1 = maxd(p->k1, 2.0 * sqrt(k2));
+    double k1, k2;
+    learning_gains(s, p, &k1, &k2);
     double k3dt = learn ? p->k3 * dt : 0.0;
     s->cx = s->cx + k3dt * f[0];
     s->cy = s->cy + k3dt * f[1];
     s->cz = s->cz + k3dt * f[2];
-    int small = (en < BIAS_LEARNING_MAX_ERROR_RAD) && (u[0] * v[0] + u[1] * v[1] + u[2] * v[2] > 0.0);
+    /* bias.learning_limit_rad: unaided, widened by one sample's scatter */
+    double widen = BIAS_LEARNING_NOISE_SIGMAS * sqrt(s->noise_a2) / s->g_ref;
+    double limit = BIAS_LEARNING_MAX_ERROR_RAD + (s->aided ? 0.0 : widen);
+    int small = (en < limit) && (u[0] * v[0] + u[1] * v[1] + u[2] * v[2] > 0.0);
     double ldt = (learn && small) ? dt : 0.0;
     s->bx = s->bx - ldt * (k2 * f[0] + s->cx);
     s->by = s->by - ldt * (k2 * f[1] + s->cy);
@@ -592,7 +607,7 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
         int quick = classify_motion(s, p, g, acc, mag, fast, dt, &accelerating);
         double en = tilt_error(s, acc, u, v);
         double scale = saturate(s, p, en, quick, accelerating, &limit, &tight, &clipped);
-        aperiodic(s, p, scale, quick, dt, f);
+        aperiodic(s, p, scale, quick, tight, dt, f);
         regulate(s, p, f, en, u, v, quick, tight, learn, dt);
         recover(s, p, clipped, en, limit, learn, dt);
     }

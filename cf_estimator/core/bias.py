@@ -13,8 +13,8 @@ The estimate b (sensor frame, rad/s) is the PI regulator's integral state; its v
   which the vehicle's own velocity swing would move the estimate by more than its uncertainty
   (:func:`observe_velocity_swing`);
 - :func:`integrate` — the integral itself (k2 and the k3 path on the processed error), except
-  from an error too large to be a bias (BIAS_LEARNING_MAX_ERROR_RAD, anti-windup); the variance
-  shrinks as it learns (time constant k1/k2);
+  from an error too large to be a bias (:func:`learning_limit_rad`, anti-windup, no narrower
+  than the samples' own scatter); the variance shrinks as it learns (time constant k1/k2);
 - :func:`clamp` — bounded by ``bias_limit_rad_s``.
 
 Owns the ``BIAS`` fields of :mod:`cf_estimator.core.state` (and the k3 path's ``c*``). Written
@@ -33,6 +33,12 @@ from cf_estimator.core.stillness import RestMeasurement
 #: prior leaves an error of at most a few REST_GATE_SIGMAS·bias_prior_sigma_rad_s / k1 (< 0.2
 #: rad at the defaults); more is an attitude error, which must not wind the bias up.
 BIAS_LEARNING_MAX_ERROR_RAD = 0.35
+#: ... unaided, widened by this many standard deviations of one accelerometer sample's scatter
+#: (the stillness blocks' noise over ‖g‖ [rad]): a per-sample gate narrower than the samples'
+#: own scatter selects them by their noise, and while the error's mean swings with a manoeuvre,
+#: learning from that selection rectifies the swing into a wrong bias (the Phantom's DOTs: rotor
+#: vibration of 3-5 m/s² per sample, two thirds of the samples beyond 0.35 rad).
+BIAS_LEARNING_NOISE_SIGMAS = 3.0
 #: Bias random walk [rad/s/sqrt(s)]: how fast the confidence in a learned bias fades.
 BIAS_RANDOM_WALK_RAD_S_SQRT_S = 2e-4
 #: The bias estimate counts as converged below this standard deviation [rad/s].
@@ -76,6 +82,16 @@ def observe_velocity_swing(s: StepState, wx: Any, wy: Any, dt: Any, o: Any) -> N
     s.pv_var = s.pv_var + w * (s.pvx * s.pvx + s.pvy * s.pvy - s.pv_var)
 
 
+def learning_limit_rad(s: StepState, o: Any) -> Any:
+    """The raw error [rad] up to which a sample may teach the integral (anti-windup):
+    BIAS_LEARNING_MAX_ERROR_RAD, unaided widened by BIAS_LEARNING_NOISE_SIGMAS × one sample's
+    scatter (√noise_a2 / ‖g‖). Aided, the error's mean no longer swings with the manoeuvre, so
+    the narrow gate selects without rectifying, and its slower learning averages what the aiding
+    leaves (latency, the heading offset's error)."""
+    widen = BIAS_LEARNING_NOISE_SIGMAS * o.sqrt(s.noise_a2) / s.g_ref
+    return BIAS_LEARNING_MAX_ERROR_RAD + o.where(s.aided, 0.0, widen)
+
+
 def learning_gains(s: StepState, p: Any, o: Any) -> tuple[Any, Any]:
     """(k1 [1/s], k2 [1/s²]) of the regulator at this step: raised while b is uncertain, the
     raise at most σ_b/σ_V [rad/s over rad·s] (the velocity swing moves the estimate by no more
@@ -91,7 +107,7 @@ def integrate(s: StepState, p: Any, f: tuple, k1: Any, k2: Any, learn: Any, smal
               dt: Any, o: Any) -> None:
     """The integral states on the processed error ``f`` [rad, sensor]: the k3 path c and b
     (``learn``: not in start-up/recovery; ``small``: the raw error is small enough to be a
-    bias's, see BIAS_LEARNING_MAX_ERROR_RAD); the variance shrinks as the integral learns."""
+    bias's, see :func:`learning_limit_rad`); the variance shrinks as the integral learns."""
     fx, fy, fz = f
     k3dt = o.where(learn, p.k3 * dt, 0.0)
     s.cx, s.cy, s.cz = s.cx + k3dt * fx, s.cy + k3dt * fy, s.cz + k3dt * fz

@@ -63,6 +63,7 @@ from cf_estimator.core import bias
 from cf_estimator.core.bias import (  # noqa: F401 - the constants of the whole step, here too
     BIAS_CONVERGED_SIGMA_RAD_S,
     BIAS_LEARNING_MAX_ERROR_RAD,
+    BIAS_LEARNING_NOISE_SIGMAS,
     BIAS_RANDOM_WALK_RAD_S_SQRT_S,
     SWING_TIME_CONSTANT_S,
     SWING_VAR_TIME_CONSTANT_S,
@@ -107,6 +108,11 @@ QUICK_LAG_TIME_CONSTANT_S = 0.2
 #: Time constant [s] of the aperiodic unit while the specific force is velocity-aided (the
 #: vehicle's acceleration taken out: what is left to average is vibration, not manoeuvres).
 AIDED_LAG_TIME_CONSTANT_S = 0.2
+#: The aperiodic unit sits inside the PI loop: its time constant is at most this over the loop's
+#: k1 [1/s]. T·k1 = 3/4 puts the roots of T·s³ + s² + k1·s + k1²/4 (the critically damped loop
+#: of a raised k2 = k1²/4, with the unit) at k1·(−1/2 ± j·√3/2) and −k1/3: a damping ratio of
+#: 0.5. The 2 s unit in a loop raised to k1 = 1.8 /s (an in-flight start) rang at 0.07.
+LOOP_LAG_FRACTION = 0.75
 #: Magnetometer samples averaged for the field reference (norm, dip) after start-up.
 MAG_REFERENCE_SAMPLES = 20
 #: A rejected field that has stayed steady and turned as the gyro says for as long as the
@@ -238,7 +244,7 @@ def step(
         quick, accelerating = classify_motion(s, p, gyro, accel, mag, fast, dt, o)
         u, v, en = tilt_error(s, accel, o)
         scale, limit, tight, clipped = saturate(s, p, en, quick, accelerating, o)
-        f = aperiodic(s, p, scale, quick, dt, o)
+        f = aperiodic(s, p, scale, quick, tight, dt, o)
         regulate(s, p, f, en, u, v, quick, tight, learn, dt, o)
         recover(s, p, clipped, en, limit, learn, dt, o)
     bias.clamp(s, p, o)
@@ -341,13 +347,20 @@ def saturate(s: StepState, p: Any, en: Any, quick: Any, accelerating: Any,
     return scale, limit, tight, clipped
 
 
-def aperiodic(s: StepState, p: Any, scale: Any, quick: Any, dt: Any, o: Any) -> tuple:
+def aperiodic(s: StepState, p: Any, scale: Any, quick: Any, tight: Any, dt: Any,
+              o: Any) -> tuple:
     """Stage 4: the aperiodic unit 1/(T s+1) in the world frame on the saturated error →
-    f = R⁻ᵀ·l in the sensor frame [rad] (quick: the error bypasses the unit)."""
+    f = R⁻ᵀ·l in the sensor frame [rad] (quick: the error bypasses the unit); T at most
+    LOOP_LAG_FRACTION / k1 of the loop (k1 as raised for learning), except under the tight
+    clip: the loop is saturated then, and the unit's memory is what rejects the disturbance."""
     ex, ey, ez = s.ex * scale, s.ey * scale, s.ez * scale
     wx, wy, wz = _rotate(s.qw, s.qx, s.qy, s.qz, ex, ey, ez)
     # aided (velocity aiding took the vehicle's acceleration out): nothing slow to average
     lag = o.where(s.aided, AIDED_LAG_TIME_CONSTANT_S, p.aperiodic_time_constant_s)
+    # never slower than the linear loop it sits in (LOOP_LAG_FRACTION; k1 as raised for
+    # learning); under the tight clip the loop is saturated and the thesis's unit is kept
+    k1, _ = bias.learning_gains(s, p, o)
+    lag = o.where(tight, lag, o.minimum(lag, LOOP_LAG_FRACTION / k1))
     weight = dt / (o.where(quick, QUICK_LAG_TIME_CONSTANT_S, lag) + dt)
     s.lx = s.lx + weight * (wx - s.lx)
     s.ly = s.ly + weight * (wy - s.ly)
@@ -379,10 +392,11 @@ def regulate(s: StepState, p: Any, f: tuple, en: Any, u: tuple, v: tuple, quick:
     wx, wy, _ = _rotate(s.qw, s.qx, s.qy, s.qz, s.ex, s.ey, s.ez)
     bias.observe_velocity_swing(s, wx, wy, dt, o)
     k1, k2 = bias.learning_gains(s, p, o)
-    # an error beyond BIAS_LEARNING_MAX_ERROR_RAD is an attitude error (a gyro over range, a
-    # glitch), not a bias: the integral does not learn from it (anti-windup; beyond 90° the
-    # cross product shrinks again, hence the sign of the dot product too)
-    small = (en < BIAS_LEARNING_MAX_ERROR_RAD) & (ux * vx + uy * vy + uz * vz > 0.0)
+    # an error beyond the learning limit (BIAS_LEARNING_MAX_ERROR_RAD, widened by the samples'
+    # scatter) is an attitude error (a gyro over range, a glitch), not a bias: the integral
+    # does not learn from it (anti-windup; beyond 90° the cross product shrinks again, hence
+    # the sign of the dot product too)
+    small = (en < bias.learning_limit_rad(s, o)) & (ux * vx + uy * vy + uz * vz > 0.0)
     bias.integrate(s, p, (fx, fy, fz), k1, k2, learn, small, dt, o)
     k1 = o.where(quick, o.maximum(k1, p.startup_k1), k1)
     gain = k1 * dt / (1.0 + k1 * dt)
