@@ -96,7 +96,9 @@ class LocalEngine(Engine):
     """Serial in this process (``jobs`` ≤ 1), else a pool of ``jobs`` worker processes.
 
     ``fn`` must be a module-level function and the tasks picklable (as for Dask); a worker
-    sees the caller's ``CF_ESTIMATOR_*`` environment variables as they are at :meth:`map`.
+    sees the caller's ``CF_ESTIMATOR_*`` environment variables as they are at :meth:`map`. As
+    with spawn, a script that uses a pool from the library (``jobs`` > 1) guards its entry
+    point with ``if __name__ == "__main__":`` (the workers import the main module).
     """
 
     def __init__(self, jobs: int = 1) -> None:

@@ -4,7 +4,8 @@
 - rest/motion classifier (core/stillness.py) alone, on real recordings: airborne phantom4
   blocks are never rest, EuRoC's ground phase is; a steady turn with a magnetometer is motion;
 - bias estimator (core/bias.py): the Kalman fusion at rest, the gains while uncertain, the
-  anti-windup and the bound.
+  anti-windup (widened by the samples' scatter, unaided) and the bound;
+- the aperiodic unit (core/step.py) kept at most 0.75/k1 inside a raised loop.
 """
 
 from __future__ import annotations
@@ -186,3 +187,50 @@ def test_integral_learns_only_from_a_bias_sized_error_and_is_bounded():
     s.bz = 7.0
     bias.clamp(s, SimpleNamespace(bias_limit_rad_s=0.5), FloatOps)
     assert s.bz == 0.5
+
+
+def test_the_learning_limit_is_widened_by_the_sample_scatter_only_unaided():
+    s = _bias_state(0.01)
+    s.g_ref, s.noise_a2 = G, 0.0  # no scatter measured (yet): the glitch guard alone
+    assert bias.learning_limit_rad(s, FloatOps) == bias.BIAS_LEARNING_MAX_ERROR_RAD
+    s.noise_a2 = 3 * 4.0 ** 2  # the DOTs' rotor vibration, 4 m/s^2 per axis
+    wide = bias.learning_limit_rad(s, FloatOps)
+    assert wide == pytest.approx(bias.BIAS_LEARNING_MAX_ERROR_RAD
+                                 + bias.BIAS_LEARNING_NOISE_SIGMAS * math.sqrt(48.0) / G)
+    assert wide > 2.0  # wider than any tilt error a leg's acceleration makes
+    s.aided = True  # aided: the error's mean does not swing, the narrow gate stays
+    assert bias.learning_limit_rad(s, FloatOps) == bias.BIAS_LEARNING_MAX_ERROR_RAD
+
+
+def _unit_weight(s, p, tight: bool) -> float:
+    """The aperiodic unit's weight on one sample of a unit world-x error (dt = 0.01 s)."""
+    from cf_estimator.core.step import aperiodic
+
+    s.qw, s.qx, s.qy, s.qz = 1.0, 0.0, 0.0, 0.0
+    s.lx = s.ly = s.lz = 0.0
+    s.ex, s.ey, s.ez = 1.0, 0.0, 0.0
+    aperiodic(s, p, 1.0, False, tight, 0.01, FloatOps)
+    return s.lx
+
+
+def test_the_unit_inside_a_raised_loop_is_kept_at_most_0_75_over_k1():
+    from cf_estimator.core.step import LOOP_LAG_FRACTION
+
+    p = step_params(FilterParams())
+    dt = 0.01
+    s = _bias_state(p.bias_prior_sigma_rad_s ** 2)  # in flight, bias unknown: k1 raised
+    k1, k2 = bias.learning_gains(s, p, FloatOps)
+    assert k1 > 1.5  # 2*sqrt(0.8)
+    t = LOOP_LAG_FRACTION / k1
+    assert _unit_weight(s, p, False) == pytest.approx(dt / (t + dt))
+    # the damping the bound keeps: T s^3 + s^2 + k1 s + k1^2/4 at T k1 = 3/4 -> zeta 0.5
+    roots = np.roots([t, 1.0, k1, k1 * k1 / 4.0])
+    assert min(-r.real / abs(r) for r in roots) == pytest.approx(0.5, abs=1e-6)
+    # ... where the shipped 2 s unit rang
+    roots = np.roots([p.aperiodic_time_constant_s, 1.0, k1, k1 * k1 / 4.0])
+    assert min(-r.real / abs(r) for r in roots) < 0.1
+    # under the tight clip (a manoeuvre) and with the bias known: the thesis's unit
+    T = p.aperiodic_time_constant_s
+    assert _unit_weight(s, p, True) == pytest.approx(dt / (T + dt))
+    s = _bias_state(1e-10)
+    assert _unit_weight(s, p, False) == pytest.approx(dt / (T + dt))

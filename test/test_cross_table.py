@@ -26,13 +26,12 @@ below.
 The targets **missed** on the dev data are deliberately not asserted (a test would fail, or a
 looser bound would pretend); they stay open in BENCHMARKS.md:
 
-- issue 16: EuRoC mid-air start 60 s, 2-12 s ≤ 5° — 5.38° (20 s: 4.91, 40 s: 4.14 are met);
 - issue 16/22: BROAD 6-D inclination ≤ 0.68° — 0.687° (VQF online 0.689°);
-- issue 22: phantom4 horizontal ≤ 3.0° and below VQF online — 5.10° (VQF 4.05°);
-- issue 22: phantom4 horizontal, no recording above 6° — worst 12.40°;
+- issue 22: phantom4 horizontal ≤ 3.0° — 4.02° (below VQF online's 4.05°: asserted);
+- issue 22: phantom4 horizontal, no recording above 6° — worst 7.11°;
 - issue 22: the simulated multirotor cases (rows "simulated ..."): learned-bias error < 0.05 °/s
-  and inclination RMS at most VQF online's — zig-zags 0.62 °/s, 5.60° (VQF 5.11°); figure-8s
-  at 1 kHz 3.43 °/s, 9.06° (VQF 5.01°), at 100 Hz 3.47 °/s, 9.12° (VQF 5.00°);
+  and inclination RMS at most VQF online's — zig-zags 0.35 °/s, 6.03° (VQF 5.11°); figure-8s
+  at 1 kHz 2.63 °/s, 7.60° (VQF 5.01°), at 100 Hz 2.65 °/s, 7.65° (VQF 5.00°);
 - issue 23: phantom4 horizontal aided ≤ 1.2° online — 1.54° (the DOT's own filter 1.54°);
 - issue 23: EuRoC mid-air aided, 12 s-end ≤ 1.2° — 1.68 / 1.50 / 1.27° (20 / 40 / 60 s);
 - issue 23: median time to < 2° after the first velocity ≤ 5 s — met on EuRoC (0 s), missed on
@@ -74,74 +73,75 @@ HOLD_MARGIN_FLOOR_S = 0.1
 #: The thesis scenarios' margin, as a fraction of the value (one deterministic run: no noise).
 SIMULATED_MARGIN = 0.05
 #: Our (online, offline) value of each row when the guards were last set (issue 26, on the
-#: tree with issues 22-25 merged; `cf-estimator bench cross --json`, 4 decimals).
+#: tree with issues 22-25 merged; re-set with issue 22's loop lag and gate; `cf-estimator bench
+#: cross --json`, 4 decimals).
 BASELINE: dict[str, tuple[float, float | None]] = {
-    "EuRoC MH, ground start, after 10 s: mean": (1.5567, 0.9504),
-    "EuRoC MH, mid-air start 20 s: 2-12 s": (4.9081, 0.8442),
-    "EuRoC MH, mid-air start 20 s: 12 s-end": (2.0495, 0.9659),
-    "EuRoC MH, mid-air start 40 s: 2-12 s": (4.1428, 1.3571),
-    "EuRoC MH, mid-air start 40 s: 12 s-end": (2.0535, 0.9188),
-    "EuRoC MH, mid-air start 60 s: 2-12 s": (5.3846, 0.769),
-    "EuRoC MH, mid-air start 60 s: 12 s-end": (2.2505, 1.0673),
-    "phantom4, after 10 s: mean": (1.8631, 1.3419),
-    "phantom4, after 10 s: worst recording": (2.6703, 3.052),
-    "phantom4 horizontal, after 10 s: mean": (5.1033, 2.3476),
-    "phantom4 horizontal, after 10 s: worst recording": (12.3986, 6.1525),
-    "BROAD all (18): 6-D inclination": (0.6866, 0.5411),
-    "BROAD undisturbed (11): 6-D inclination": (0.6482, 0.5159),
-    "BROAD disturbed (7): 6-D inclination": (0.7469, 0.5807),
-    "BROAD rotation (5): 6-D inclination": (0.6203, 0.5759),
-    "BROAD translation (5): 6-D inclination": (0.4289, 0.3629),
-    "BROAD combined (1): 6-D inclination": (1.8847, 0.9817),
-    "BROAD slow (6): 6-D inclination": (0.3789, 0.3114),
-    "BROAD fast (5): 6-D inclination": (0.9714, 0.7613),
-    "BROAD no_breaks (7): 6-D inclination": (0.7003, 0.524),
+    "EuRoC MH, ground start, after 10 s: mean": (1.5571, 0.9503),
+    "EuRoC MH, mid-air start 20 s: 2-12 s": (2.8731, 0.8405),
+    "EuRoC MH, mid-air start 20 s: 12 s-end": (1.916, 0.9653),
+    "EuRoC MH, mid-air start 40 s: 2-12 s": (4.5638, 1.3655),
+    "EuRoC MH, mid-air start 40 s: 12 s-end": (2.0197, 0.9151),
+    "EuRoC MH, mid-air start 60 s: 2-12 s": (3.7966, 0.7631),
+    "EuRoC MH, mid-air start 60 s: 12 s-end": (2.2572, 1.0628),
+    "phantom4, after 10 s: mean": (1.6767, 1.3203),
+    "phantom4, after 10 s: worst recording": (2.4626, 3.1343),
+    "phantom4 horizontal, after 10 s: mean": (4.0158, 2.0915),
+    "phantom4 horizontal, after 10 s: worst recording": (7.1109, 4.1729),
+    "BROAD all (18): 6-D inclination": (0.687, 0.5411),
+    "BROAD undisturbed (11): 6-D inclination": (0.6484, 0.5159),
+    "BROAD disturbed (7): 6-D inclination": (0.7475, 0.5807),
+    "BROAD rotation (5): 6-D inclination": (0.6193, 0.5759),
+    "BROAD translation (5): 6-D inclination": (0.4313, 0.3629),
+    "BROAD combined (1): 6-D inclination": (1.88, 0.9817),
+    "BROAD slow (6): 6-D inclination": (0.3806, 0.3114),
+    "BROAD fast (5): 6-D inclination": (0.9699, 0.7613),
+    "BROAD no_breaks (7): 6-D inclination": (0.7006, 0.524),
     "BROAD with_breaks (4): 6-D inclination": (0.5571, 0.5018),
-    "BROAD tapping (1): 6-D inclination": (0.6202, 0.5562),
-    "BROAD vibration (1): 6-D inclination": (0.338, 0.3275),
-    "BROAD stationary_magnet (2): 6-D inclination": (1.1398, 0.857),
-    "BROAD attached_magnet (3): 6-D inclination": (0.6635, 0.489),
-    "BROAD all (18): 9-D total": (1.9929, 1.8927),
-    "BROAD undisturbed (11): 9-D total": (1.5258, 1.4482),
-    "BROAD disturbed (7): 9-D total": (2.7271, 2.5913),
-    "BROAD rotation (5): 9-D total": (1.3809, 1.3605),
-    "BROAD translation (5): 9-D total": (1.2911, 1.2217),
-    "BROAD combined (1): 9-D total": (3.4233, 3.0194),
-    "BROAD slow (6): 9-D total": (1.271, 1.2063),
-    "BROAD fast (5): 9-D total": (1.8315, 1.7385),
-    "BROAD no_breaks (7): 9-D total": (1.889, 1.7804),
+    "BROAD tapping (1): 6-D inclination": (0.6205, 0.5562),
+    "BROAD vibration (1): 6-D inclination": (0.3583, 0.3275),
+    "BROAD stationary_magnet (2): 6-D inclination": (1.1359, 0.857),
+    "BROAD attached_magnet (3): 6-D inclination": (0.6606, 0.489),
+    "BROAD all (18): 9-D total": (1.9964, 1.8927),
+    "BROAD undisturbed (11): 9-D total": (1.5276, 1.4482),
+    "BROAD disturbed (7): 9-D total": (2.7331, 2.5913),
+    "BROAD rotation (5): 9-D total": (1.3787, 1.3605),
+    "BROAD translation (5): 9-D total": (1.2959, 1.2217),
+    "BROAD combined (1): 9-D total": (3.4309, 3.0194),
+    "BROAD slow (6): 9-D total": (1.2723, 1.2063),
+    "BROAD fast (5): 9-D total": (1.834, 1.7385),
+    "BROAD no_breaks (7): 9-D total": (1.8919, 1.7804),
     "BROAD with_breaks (4): 9-D total": (0.8901, 0.867),
-    "BROAD tapping (1): 9-D total": (1.3787, 1.3467),
-    "BROAD vibration (1): 9-D total": (6.7742, 6.7015),
-    "BROAD stationary_magnet (2): 9-D total": (1.8102, 1.6434),
-    "BROAD attached_magnet (3): 9-D total": (2.4387, 2.2679),
-    "thesis impacts: peak (limit 90')": (17.6564, None),
-    "thesis vibration: peak (limit 90')": (16.3198, None),
-    "thesis acceleration: peak (limit 90')": (56.4437, None),
+    "BROAD tapping (1): 9-D total": (1.3783, 1.3467),
+    "BROAD vibration (1): 9-D total": (6.8386, 6.7015),
+    "BROAD stationary_magnet (2): 9-D total": (1.7958, 1.6434),
+    "BROAD attached_magnet (3): 9-D total": (2.4409, 2.2679),
+    "thesis impacts: peak (limit 90')": (17.6716, None),
+    "thesis vibration: peak (limit 90')": (15.8792, None),
+    "thesis acceleration: peak (limit 90')": (57.3448, None),
     "magnet 0.3x on a turning sensor: heading peak": (1.6807, 1.5241),
     "magnet 0.3x on a turning sensor: heading RMS": (0.7435, 0.6582),
     "magnet 0.5x on a turning sensor: heading peak": (1.4833, 1.3791),
     "magnet 0.5x on a turning sensor: heading RMS": (0.6843, 0.6266),
     "magnet 1x on a turning sensor: heading peak": (1.4733, 1.3765),
     "magnet 1x on a turning sensor: heading RMS": (0.6824, 0.6221),
-    "simulated zig-zags 4 m/s², 120 Hz: inclination RMS after 10 s": (5.6039, 2.9417),
-    "simulated zig-zags 4 m/s², 120 Hz: inclination peak after 10 s": (13.3037, 6.4254),
-    "simulated zig-zags 4 m/s², 120 Hz: learned-bias error at the end": (0.619, None),
-    "simulated figure-8s 1.8 m/s², 1 kHz: inclination RMS after 10 s": (9.0641, 7.2176),
-    "simulated figure-8s 1.8 m/s², 1 kHz: inclination peak after 10 s": (14.1911, 10.5748),
-    "simulated figure-8s 1.8 m/s², 1 kHz: learned-bias error at the end": (3.4349, None),
-    "simulated figure-8s 1.8 m/s², 100 Hz: inclination RMS after 10 s": (9.1183, 6.9785),
-    "simulated figure-8s 1.8 m/s², 100 Hz: inclination peak after 10 s": (14.1654, 10.2457),
-    "simulated figure-8s 1.8 m/s², 100 Hz: learned-bias error at the end": (3.4708, None),
-    "phantom4 horizontal, aided, after 10 s: mean": (1.5397, 0.82),
-    "phantom4 horizontal, aided: median time to < 2 deg": (19.4929, 19.4842),
-    "phantom4, aided, after 10 s: mean": (1.1506, 0.6981),
+    "simulated zig-zags 4 m/s², 120 Hz: inclination RMS after 10 s": (6.0272, 2.9329),
+    "simulated zig-zags 4 m/s², 120 Hz: inclination peak after 10 s": (15.473, 6.4304),
+    "simulated zig-zags 4 m/s², 120 Hz: learned-bias error at the end": (0.3465, None),
+    "simulated figure-8s 1.8 m/s², 1 kHz: inclination RMS after 10 s": (7.5987, 5.3377),
+    "simulated figure-8s 1.8 m/s², 1 kHz: inclination peak after 10 s": (12.4157, 7.7762),
+    "simulated figure-8s 1.8 m/s², 1 kHz: learned-bias error at the end": (2.6316, None),
+    "simulated figure-8s 1.8 m/s², 100 Hz: inclination RMS after 10 s": (7.6453, 5.341),
+    "simulated figure-8s 1.8 m/s², 100 Hz: inclination peak after 10 s": (12.4039, 7.7769),
+    "simulated figure-8s 1.8 m/s², 100 Hz: learned-bias error at the end": (2.6549, None),
+    "phantom4 horizontal, aided, after 10 s: mean": (1.5397, 0.8473),
+    "phantom4 horizontal, aided: median time to < 2 deg": (19.4929, 19.4802),
+    "phantom4, aided, after 10 s: mean": (1.1506, 0.6938),
     "phantom4, aided: median time to < 2 deg": (14.2849, 7.0011),
-    "EuRoC MH, ground start, aided, after 10 s: mean": (0.9637, 0.7502),
+    "EuRoC MH, ground start, aided, after 10 s: mean": (0.9637, 0.7501),
     "EuRoC MH, ground start, aided: median time to < 2 deg": (0.0, 0.0),
-    "EuRoC MH, aided, mid-air start 20 s: 12 s-end": (1.6797, 0.8168),
-    "EuRoC MH, aided, mid-air start 40 s: 12 s-end": (1.5047, 0.8375),
-    "EuRoC MH, aided, mid-air start 60 s: 12 s-end": (1.2678, 1.2111),
+    "EuRoC MH, aided, mid-air start 20 s: 12 s-end": (1.6797, 0.8163),
+    "EuRoC MH, aided, mid-air start 40 s: 12 s-end": (1.5047, 0.8391),
+    "EuRoC MH, aided, mid-air start 60 s: 12 s-end": (1.2678, 1.2225),
     "thesis acceleration, aided: peak (limit 90')": (25.4873, None),
 }
 
@@ -265,7 +265,7 @@ def test_target_euroc_mid_air_late_at_most_2_5_deg_and_both_windows_below_vqf(ta
     assert _ours(rows, early) < _ours(rows, early, "vqf")
 
 
-@pytest.mark.parametrize("start", [20, 40])  # 60 s: 5.39°, missed (module docstring)
+@pytest.mark.parametrize("start", [20, 40, 60])
 def test_target_euroc_mid_air_early_at_most_5_deg(table, start):
     rows, _ = table
     assert _ours(rows, f"EuRoC MH, mid-air start {start} s: 2-12 s") <= 5.0
@@ -277,6 +277,13 @@ def test_target_phantom4_vertical_at_most_2_deg_below_vqf_no_recording_above_6(t
     assert _ours(rows, mean) <= 2.0  # issue 22 (issue 16: 2.5)
     assert _ours(rows, mean) < _ours(rows, mean, "vqf")
     assert _ours(rows, "phantom4, after 10 s: worst recording") <= 6.0
+
+
+def test_target_phantom4_horizontal_below_vqf_online(table):
+    """Issue 22's second half of the target (≤ 3.0° is missed: module docstring)."""
+    rows, _ = table
+    mean = "phantom4 horizontal, after 10 s: mean"
+    assert _ours(rows, mean) < _ours(rows, mean, "vqf")
 
 
 def test_target_broad_9d_at_most_2_deg(table):
@@ -324,15 +331,19 @@ def test_covariance_consistency_rows(table):
     cov[4] for the tilt, cov[8] for the heading). Fitted on phantom4 (vertical) only; mean(e²/σ²)
     in [0.5, 2] on every family it can be held on, the beyond-2σ share within the issue's
     25 %. BROAD's lab-grade IMU and optical reference have errors below the fitted floor: its
-    tilt is conservative (reported, not asserted in range) but never overconfident."""
+    tilt is conservative (reported, not asserted in range) but never overconfident. So is the
+    horizontal campaign's since issue 22's faster unit during in-flight learning (mean 0.19:
+    the model's disagreement term counts the swing the faster unit holds, not the error the
+    better-learned bias leaves; BENCHMARKS.md "Covariance")."""
     rows, _ = table
-    for label in ("EuRoC MH: tilt", "phantom4: tilt", "phantom4 horizontal: tilt",
-                  "BROAD all 9-D: heading"):
+    for label in ("EuRoC MH: tilt", "phantom4: tilt", "BROAD all 9-D: heading"):
         ratio = _row(rows, f"{label} mean(e²/σ²)")["cf_estimator"]
         beyond = _row(rows, f"{label} beyond 2σ")["cf_estimator"]
         assert 0.5 <= ratio <= 2.0, (label, ratio)
         assert beyond <= 25.0, (label, beyond)
-    assert _row(rows, "BROAD all: tilt mean(e²/σ²)")["cf_estimator"] <= 2.0
+    for label in ("BROAD all: tilt", "phantom4 horizontal: tilt"):  # conservative
+        assert _row(rows, f"{label} mean(e²/σ²)")["cf_estimator"] <= 2.0
+        assert _row(rows, f"{label} beyond 2σ")["cf_estimator"] <= 4.6
     for f in ("0.3", "0.5", "1"):  # the compass: conservative while a magnet is on
         assert _row(rows, f"magnet {f}x on a turning sensor: heading mean")["cf_estimator"] <= 2.0
 

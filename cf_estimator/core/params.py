@@ -114,7 +114,8 @@ class FilterParams:
         2.0,
         "s",
         "Time constant T of the aperiodic unit 1/(T*s+1) on the clipped error, applied "
-        "in the world frame (0 = off). Must satisfy T < k1/k2 for stability.",
+        "in the world frame (0 = off). Must satisfy T < k1/k2 for stability. While the "
+        "bias is learned in flight (k1 raised) at most 0.75/k1, outside the tight clip.",
         minimum=0.0,
         maximum=1000.0,
         group="error path",
