@@ -234,3 +234,12 @@ def test_the_unit_inside_a_raised_loop_is_kept_at_most_0_75_over_k1():
     assert _unit_weight(s, p, True) == pytest.approx(dt / (T + dt))
     s = _bias_state(1e-10)
     assert _unit_weight(s, p, False) == pytest.approx(dt / (T + dt))
+
+
+def test_the_unit_bound_takes_a_loop_without_gains():
+    """k1 = k2 = bias_learning_k2 = 0 is a valid (gyro-only) set: no bound, no division by 0."""
+    p = step_params(FilterParams(k1=0.0, k2=0.0, bias_learning_k2=0.0))
+    s = _bias_state(p.bias_prior_sigma_rad_s ** 2)
+    assert bias.learning_gains(s, p, FloatOps) == (0.0, 0.0)
+    T = p.aperiodic_time_constant_s
+    assert _unit_weight(s, p, False) == pytest.approx(0.01 / (T + 0.01))

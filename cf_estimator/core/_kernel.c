@@ -521,7 +521,7 @@ static void aperiodic(cf_state *s, const cf_params *p, double scale, int quick, 
     rotate(s->qw, s->qx, s->qy, s->qz, s->ex * scale, s->ey * scale, s->ez * scale, w);
     double lag = s->aided ? AIDED_LAG_TIME_CONSTANT_S : p->aperiodic_time_constant_s;
     learning_gains(s, p, &k1, &k2);
-    lag = tight ? lag : mind(lag, LOOP_LAG_FRACTION / k1);
+    lag = tight ? lag : mind(lag, LOOP_LAG_FRACTION / maxd(k1, TINY));
     double weight = dt / ((quick ? QUICK_LAG_TIME_CONSTANT_S : lag) + dt);
     s->lx = s->lx + weight * (w[0] - s->lx);
     s->ly = s->ly + weight * (w[1] - s->ly);

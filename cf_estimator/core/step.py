@@ -360,7 +360,7 @@ def aperiodic(s: StepState, p: Any, scale: Any, quick: Any, tight: Any, dt: Any,
     # never slower than the linear loop it sits in (LOOP_LAG_FRACTION; k1 as raised for
     # learning); under the tight clip the loop is saturated and the thesis's unit is kept
     k1, _ = bias.learning_gains(s, p, o)
-    lag = o.where(tight, lag, o.minimum(lag, LOOP_LAG_FRACTION / k1))
+    lag = o.where(tight, lag, o.minimum(lag, LOOP_LAG_FRACTION / o.maximum(k1, TINY)))
     weight = dt / (o.where(quick, QUICK_LAG_TIME_CONSTANT_S, lag) + dt)
     s.lx = s.lx + weight * (wx - s.lx)
     s.ly = s.ly + weight * (wy - s.ly)
