@@ -3,8 +3,8 @@
 - state: every field owned by exactly one part, documented, in the compiled twin's order;
 - rest/motion classifier (core/stillness.py) alone, on real recordings: airborne phantom4
   blocks are never rest, EuRoC's ground phase is; a steady turn with a magnetometer is motion;
-- bias estimator (core/bias.py): the Kalman fusion at rest, the gains while uncertain, the
-  anti-windup (widened by the samples' scatter, unaided) and the bound;
+- bias estimator (core/bias.py): the Kalman fusion at rest, the gains while uncertain (withheld
+  in a turn), the anti-windup (widened by the samples' scatter, unaided) and the bound;
 - the aperiodic unit (core/step.py) kept at most 0.75/k1 inside a raised loop.
 """
 
@@ -155,6 +155,47 @@ def test_a_velocity_swing_caps_the_raised_learning_at_sigma_b_over_sigma_v():
     s = _bias_state(1e-10)
     s.pv_var = 100.0  # the cap never takes k2 below the shipped gain
     assert bias.learning_gains(s, p, FloatOps) == (p.k1, p.k2)
+
+
+def test_a_turn_about_the_vertical_withholds_the_learning_raise():
+    """bias.turn_share: the raise falls as (k1²/(k1² + ω²))² with the turn rate ω above the rate
+    a 2σ_b bias could fake; the shipped loop's own gains are never taken away."""
+    p = step_params(FilterParams())
+    var = 0.0025  # sigma_b = 0.05 rad/s: 2 sigma = 0.1 rad/s
+    s = _bias_state(var)
+    raised = bias.learning_gains(s, p, FloatOps)
+    assert bias.turn_share(s, p, FloatOps) == 1.0 and raised[1] > p.k2
+    s.turn_rate_lp = -0.1  # within what the bias still to be learned could show
+    assert bias.turn_share(s, p, FloatOps) == 1.0
+    for sign in (1.0, -1.0):  # a figure-8's either loop
+        s.turn_rate_lp = sign * (0.6 + 2.0 * math.sqrt(var))
+        share = bias.turn_share(s, p, FloatOps)
+        assert share == pytest.approx((p.k1 ** 2 / (p.k1 ** 2 + 0.36)) ** 2) and share < 0.1
+        k1, k2 = bias.learning_gains(s, p, FloatOps)
+        assert k2 == pytest.approx(max(p.k2, raised[1] * share)) and k2 < 0.1 * raised[1]
+    s = _bias_state(1e-10)
+    s.turn_rate_lp = 3.0  # a fast turn never takes the gains below the shipped ones
+    assert bias.learning_gains(s, p, FloatOps) == (p.k1, p.k2)
+
+
+def test_the_turn_rate_is_the_rotation_about_the_estimated_vertical():
+    """step.classify_motion low-passes the bias-corrected rate projected on the estimated up:
+    a yaw on a level body counts fully, a roll not at all, a yaw on a body rolled 90° not at
+    all (it is then a rotation about a horizontal axis)."""
+    from cf_estimator.core.step import RATE_LOWPASS_TIME_CONSTANT_S, classify_motion
+
+    p = step_params(FilterParams())
+    cases = (((0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), 0.5),
+             ((0.5, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), 0.0),
+             ((0.0, 0.0, 0.5), (math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0), 0.0))
+    for gyro, q, turn in cases:
+        s = _bias_state(1e-4)
+        s.qw, s.qx, s.qy, s.qz = q
+        accel = (0.0, 0.0, G)
+        dt = 0.01
+        for _ in range(int(10 * RATE_LOWPASS_TIME_CONSTANT_S / dt)):
+            classify_motion(s, p, gyro, accel, None, False, dt, FloatOps)
+        assert s.turn_rate_lp == pytest.approx(turn, abs=1e-3), (gyro, q)
 
 
 def test_the_velocity_swing_is_the_disagreement_integrated_and_high_passed():

@@ -27,15 +27,16 @@ The targets **missed** on the dev data are deliberately not asserted (a test wou
 looser bound would pretend); they stay open in BENCHMARKS.md:
 
 - issue 16/22: BROAD 6-D inclination ≤ 0.68° — 0.687° (VQF online 0.689°);
-- issue 22: phantom4 horizontal ≤ 3.0° — 4.02° (below VQF online's 4.05°: asserted);
-- issue 22: phantom4 horizontal, no recording above 6° — worst 7.11°;
+- issue 22: phantom4 horizontal ≤ 3.0° — 3.25° (below VQF online's 4.05° and no recording
+  above 6°: asserted);
 - issue 22: the simulated multirotor cases (rows "simulated ..."): learned-bias error < 0.05 °/s
-  and inclination RMS at most VQF online's — zig-zags 0.35 °/s, 6.03° (VQF 5.11°); figure-8s
-  at 1 kHz 2.63 °/s, 7.60° (VQF 5.01°), at 100 Hz 2.65 °/s, 7.65° (VQF 5.00°);
-- issue 23: phantom4 horizontal aided ≤ 1.2° online — 1.54° (the DOT's own filter 1.54°);
-- issue 23: EuRoC mid-air aided, 12 s-end ≤ 1.2° — 1.68 / 1.50 / 1.27° (20 / 40 / 60 s);
+  on each — zig-zags 0.58 °/s, figure-8s 1.61 °/s (1 kHz and 100 Hz); inclination RMS at most VQF
+  online's — met on the zig-zags (4.89° against 5.11°: asserted), missed on the figure-8s by
+  0.09° (5.10° against 5.01° at 1 kHz, 5.10° against 5.00° at 100 Hz);
+- issue 23: phantom4 horizontal aided ≤ 1.2° online — 1.62° (the DOT's own filter 1.54°);
+- issue 23: EuRoC mid-air aided, 12 s-end ≤ 1.2° — 1.68 / 1.64 / 1.28° (20 / 40 / 60 s);
 - issue 23: median time to < 2° after the first velocity ≤ 5 s — met on EuRoC (0 s), missed on
-  phantom4 (14.3 s) and phantom4 horizontal (19.5 s; the offline pass takes 19.5 s as well);
+  phantom4 (14.8 s) and phantom4 horizontal (19.5 s; the offline pass takes 19.5 s as well);
 - issue 23: thesis acceleration aided ≤ 15' — 25.5'.
 
 Targets of those issues that this table does not print (so not checked here): the
@@ -73,20 +74,20 @@ HOLD_MARGIN_FLOOR_S = 0.1
 #: The thesis scenarios' margin, as a fraction of the value (one deterministic run: no noise).
 SIMULATED_MARGIN = 0.05
 #: Our (online, offline) value of each row when the guards were last set (issue 26, on the
-#: tree with issues 22-25 merged; re-set with issue 22's loop lag and gate; `cf-estimator bench
-#: cross --json`, 4 decimals).
+#: tree with issues 22-25 merged; re-set with issue 22's loop lag and gate, then with the
+#: running mean in start-up and the turn share; `cf-estimator bench cross --json`, 4 decimals).
 BASELINE: dict[str, tuple[float, float | None]] = {
     "EuRoC MH, ground start, after 10 s: mean": (1.5571, 0.9503),
-    "EuRoC MH, mid-air start 20 s: 2-12 s": (2.8731, 0.8405),
-    "EuRoC MH, mid-air start 20 s: 12 s-end": (1.916, 0.9653),
-    "EuRoC MH, mid-air start 40 s: 2-12 s": (4.5638, 1.3655),
-    "EuRoC MH, mid-air start 40 s: 12 s-end": (2.0197, 0.9151),
-    "EuRoC MH, mid-air start 60 s: 2-12 s": (3.7966, 0.7631),
-    "EuRoC MH, mid-air start 60 s: 12 s-end": (2.2572, 1.0628),
-    "phantom4, after 10 s: mean": (1.6767, 1.3203),
-    "phantom4, after 10 s: worst recording": (2.4626, 3.1343),
-    "phantom4 horizontal, after 10 s: mean": (4.0158, 2.0915),
-    "phantom4 horizontal, after 10 s: worst recording": (7.1109, 4.1729),
+    "EuRoC MH, mid-air start 20 s: 2-12 s": (2.7146, 0.8381),
+    "EuRoC MH, mid-air start 20 s: 12 s-end": (1.8659, 0.9629),
+    "EuRoC MH, mid-air start 40 s: 2-12 s": (4.6708, 1.3661),
+    "EuRoC MH, mid-air start 40 s: 12 s-end": (2.2034, 0.9152),
+    "EuRoC MH, mid-air start 60 s: 2-12 s": (3.7459, 0.7692),
+    "EuRoC MH, mid-air start 60 s: 12 s-end": (1.9653, 1.0652),
+    "phantom4, after 10 s: mean": (1.6266, 1.3317),
+    "phantom4, after 10 s: worst recording": (2.1548, 3.152),
+    "phantom4 horizontal, after 10 s: mean": (3.2548, 2.0645),
+    "phantom4 horizontal, after 10 s: worst recording": (5.591, 4.2934),
     "BROAD all (18): 6-D inclination": (0.687, 0.5411),
     "BROAD undisturbed (11): 6-D inclination": (0.6484, 0.5159),
     "BROAD disturbed (7): 6-D inclination": (0.7475, 0.5807),
@@ -115,34 +116,34 @@ BASELINE: dict[str, tuple[float, float | None]] = {
     "BROAD vibration (1): 9-D total": (6.8386, 6.7015),
     "BROAD stationary_magnet (2): 9-D total": (1.7958, 1.6434),
     "BROAD attached_magnet (3): 9-D total": (2.4409, 2.2679),
-    "thesis impacts: peak (limit 90')": (17.6716, None),
-    "thesis vibration: peak (limit 90')": (15.8792, None),
-    "thesis acceleration: peak (limit 90')": (57.3448, None),
+    "thesis impacts: peak (limit 90')": (17.6939, None),
+    "thesis vibration: peak (limit 90')": (15.871, None),
+    "thesis acceleration: peak (limit 90')": (57.1272, None),
     "magnet 0.3x on a turning sensor: heading peak": (1.6807, 1.5241),
     "magnet 0.3x on a turning sensor: heading RMS": (0.7435, 0.6582),
     "magnet 0.5x on a turning sensor: heading peak": (1.4833, 1.3791),
     "magnet 0.5x on a turning sensor: heading RMS": (0.6843, 0.6266),
     "magnet 1x on a turning sensor: heading peak": (1.4733, 1.3765),
     "magnet 1x on a turning sensor: heading RMS": (0.6824, 0.6221),
-    "simulated zig-zags 4 m/s², 120 Hz: inclination RMS after 10 s": (6.0272, 2.9329),
-    "simulated zig-zags 4 m/s², 120 Hz: inclination peak after 10 s": (15.473, 6.4304),
-    "simulated zig-zags 4 m/s², 120 Hz: learned-bias error at the end": (0.3465, None),
-    "simulated figure-8s 1.8 m/s², 1 kHz: inclination RMS after 10 s": (7.5987, 5.3377),
-    "simulated figure-8s 1.8 m/s², 1 kHz: inclination peak after 10 s": (12.4157, 7.7762),
-    "simulated figure-8s 1.8 m/s², 1 kHz: learned-bias error at the end": (2.6316, None),
-    "simulated figure-8s 1.8 m/s², 100 Hz: inclination RMS after 10 s": (7.6453, 5.341),
-    "simulated figure-8s 1.8 m/s², 100 Hz: inclination peak after 10 s": (12.4039, 7.7769),
-    "simulated figure-8s 1.8 m/s², 100 Hz: learned-bias error at the end": (2.6549, None),
-    "phantom4 horizontal, aided, after 10 s: mean": (1.5397, 0.8473),
-    "phantom4 horizontal, aided: median time to < 2 deg": (19.4929, 19.4802),
-    "phantom4, aided, after 10 s: mean": (1.1506, 0.6938),
-    "phantom4, aided: median time to < 2 deg": (14.2849, 7.0011),
-    "EuRoC MH, ground start, aided, after 10 s: mean": (0.9637, 0.7501),
+    "simulated zig-zags 4 m/s², 120 Hz: inclination RMS after 10 s": (4.8883, 2.927),
+    "simulated zig-zags 4 m/s², 120 Hz: inclination peak after 10 s": (13.4286, 6.3981),
+    "simulated zig-zags 4 m/s², 120 Hz: learned-bias error at the end": (0.579, None),
+    "simulated figure-8s 1.8 m/s², 1 kHz: inclination RMS after 10 s": (5.0962, 3.5956),
+    "simulated figure-8s 1.8 m/s², 1 kHz: inclination peak after 10 s": (7.7816, 5.723),
+    "simulated figure-8s 1.8 m/s², 1 kHz: learned-bias error at the end": (1.607, None),
+    "simulated figure-8s 1.8 m/s², 100 Hz: inclination RMS after 10 s": (5.0966, 3.6023),
+    "simulated figure-8s 1.8 m/s², 100 Hz: inclination peak after 10 s": (7.7782, 5.7249),
+    "simulated figure-8s 1.8 m/s², 100 Hz: learned-bias error at the end": (1.6107, None),
+    "phantom4 horizontal, aided, after 10 s: mean": (1.617, 0.8794),
+    "phantom4 horizontal, aided: median time to < 2 deg": (19.4929, 19.4677),
+    "phantom4, aided, after 10 s: mean": (1.2019, 0.729),
+    "phantom4, aided: median time to < 2 deg": (14.8137, 7.877),
+    "EuRoC MH, ground start, aided, after 10 s: mean": (0.9637, 0.7502),
     "EuRoC MH, ground start, aided: median time to < 2 deg": (0.0, 0.0),
-    "EuRoC MH, aided, mid-air start 20 s: 12 s-end": (1.6797, 0.8163),
-    "EuRoC MH, aided, mid-air start 40 s: 12 s-end": (1.5047, 0.8391),
-    "EuRoC MH, aided, mid-air start 60 s: 12 s-end": (1.2678, 1.2225),
-    "thesis acceleration, aided: peak (limit 90')": (25.4873, None),
+    "EuRoC MH, aided, mid-air start 20 s: 12 s-end": (1.6787, 0.8184),
+    "EuRoC MH, aided, mid-air start 40 s: 12 s-end": (1.6445, 0.8588),
+    "EuRoC MH, aided, mid-air start 60 s: 12 s-end": (1.2791, 1.2045),
+    "thesis acceleration, aided: peak (limit 90')": (25.4534, None),
 }
 
 
@@ -279,11 +280,21 @@ def test_target_phantom4_vertical_at_most_2_deg_below_vqf_no_recording_above_6(t
     assert _ours(rows, "phantom4, after 10 s: worst recording") <= 6.0
 
 
-def test_target_phantom4_horizontal_below_vqf_online(table):
-    """Issue 22's second half of the target (≤ 3.0° is missed: module docstring)."""
+def test_target_phantom4_horizontal_below_vqf_online_no_recording_above_6(table):
+    """Issue 22's target but its ≤ 3.0° (missed: module docstring)."""
     rows, _ = table
     mean = "phantom4 horizontal, after 10 s: mean"
     assert _ours(rows, mean) < _ours(rows, mean, "vqf")
+    assert _ours(rows, "phantom4 horizontal, after 10 s: worst recording") <= 6.0
+
+
+def test_target_simulated_zig_zags_at_most_vqf_online(table):
+    """Issue 22's RMS target on the zig-zag case (its learned-bias target is missed; the
+    figure-8s' RMS too, by 0.09°: module docstring). Met on the printed means; the seeds'
+    standard error of ours is 0.8°."""
+    rows, _ = table
+    label = "simulated zig-zags 4 m/s², 120 Hz: inclination RMS after 10 s"
+    assert _ours(rows, label) <= _ours(rows, label, "vqf")
 
 
 def test_target_broad_9d_at_most_2_deg(table):
@@ -328,22 +339,21 @@ def test_target_magnet_on_a_turning_sensor_heading_below_5_deg_on_every_seed(tab
 
 def test_covariance_consistency_rows(table):
     """Issue 27: the reported orientation covariance against the real errors (σ² = cov[0] +
-    cov[4] for the tilt, cov[8] for the heading). Fitted on phantom4 (vertical) only; mean(e²/σ²)
-    in [0.5, 2] on every family it can be held on, the beyond-2σ share within the issue's
-    25 %. BROAD's lab-grade IMU and optical reference have errors below the fitted floor: its
-    tilt is conservative (reported, not asserted in range) but never overconfident. So is the
-    horizontal campaign's since issue 22's faster unit during in-flight learning (mean 0.19:
-    the model's disagreement term counts the swing the faster unit holds, not the error the
-    better-learned bias leaves; BENCHMARKS.md "Covariance")."""
+    cov[4] for the tilt, cov[8] for the heading). Floor fitted on phantom4 (vertical) only;
+    mean(e²/σ²) in [0.5, 2] on every family it is met on (EuRoC, phantom4, BROAD tilt since the
+    acceleration term is the correction the loop made, BROAD heading), the beyond-2σ share
+    within the issue's 25 %. The horizontal campaign sits just below the band (0.49: reported,
+    held at 0.4) and is never overconfident (BENCHMARKS.md "Covariance")."""
     rows, _ = table
-    for label in ("EuRoC MH: tilt", "phantom4: tilt", "BROAD all 9-D: heading"):
+    for label in ("EuRoC MH: tilt", "phantom4: tilt", "BROAD all: tilt",
+                  "BROAD all 9-D: heading"):
         ratio = _row(rows, f"{label} mean(e²/σ²)")["cf_estimator"]
         beyond = _row(rows, f"{label} beyond 2σ")["cf_estimator"]
         assert 0.5 <= ratio <= 2.0, (label, ratio)
         assert beyond <= 25.0, (label, beyond)
-    for label in ("BROAD all: tilt", "phantom4 horizontal: tilt"):  # conservative
-        assert _row(rows, f"{label} mean(e²/σ²)")["cf_estimator"] <= 2.0
-        assert _row(rows, f"{label} beyond 2σ")["cf_estimator"] <= 4.6
+    label = "phantom4 horizontal: tilt"
+    assert 0.4 <= _row(rows, f"{label} mean(e²/σ²)")["cf_estimator"] <= 2.0
+    assert _row(rows, f"{label} beyond 2σ")["cf_estimator"] <= 4.6
     for f in ("0.3", "0.5", "1"):  # the compass: conservative while a magnet is on
         assert _row(rows, f"magnet {f}x on a turning sensor: heading mean")["cf_estimator"] <= 2.0
 

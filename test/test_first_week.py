@@ -252,8 +252,8 @@ def test_search_boxes_keep_the_safety_nets() -> None:
 
 
 def test_tune_refuses_to_write_a_set_that_loses_on_validation(flight60, tmp_path, capsys):
-    """The simulated flight alone tunes to a slow loop (k1 0.14, T 1 s) that wins on every
-    built-in case but loses on real phantom4 recordings it never saw: refused."""
+    """The simulated flight alone tunes to a slow loop (k1 0.14, T 1 s) that loses on real
+    phantom4 recordings it never saw (and on one built-in case): refused."""
     phantom4 = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "phantom4"
     if not phantom4.is_dir():
         pytest.skip(f"{phantom4} not present")

@@ -723,15 +723,14 @@ def test_valid_parameter_changes_apply_at_the_next_sample_without_reset(changes,
         assert out.orientation_xyzw == (x, y, z, w)
     # the covariance model (docs/ros_interface.md, core/covariance.py) with the new floors and
     # gains: tilt = floor + the error norm squared while settling + half the mean square of the
-    # accelerometer channel's disagreement (the model's state) and of the vibration term
+    # accelerometer channel's correction (the model's state) and of the vibration term
     # (+ the clipped drift while clipped)
     cov = out.orientation_covariance
     status = pipe.filter.status()
     settling = status.phase in ("startup", "recovering")
     floor = pp_new.orientation_covariance_rad2
     model = pipe.covariance_model  # the mean square it holds after this step
-    assert model.tilt0 == floor and model.k1 == fp_new.k1 and model.lag_s == (
-        fp_new.aperiodic_time_constant_s)
+    assert model.tilt0 == floor and model.k1 == fp_new.k1
     tilt = floor + (status.error_norm_rad**2 if settling else 0.0)
     if dt is not None:
         noise = pipe.filter._state.noise_a2 / (6.0 * fp_new.gravity_m_s2**2) * dt  # noqa: SLF001

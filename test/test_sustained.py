@@ -134,10 +134,11 @@ def test_horizontal_zig_zags_leave_an_imu_only_filter_far_more_than_vertical_one
     for row in (horizontal, vertical):
         assert row.measured_deg["cf_estimator_aided"] < row.measured_deg["cf_estimator"]
     # the loop itself is not what fails in the zig-zags: with the bias the reference shows
-    # (learning off) it is far below ours online there, and below it on the vertical flights
-    # too; on the horizontal ones the in-flight learned bias is still wrong at the end
+    # (learning off) it is below ours online there (0.70 of it; 0.42 before the running mean in
+    # start-up), and below it on the vertical flights too; on the horizontal ones the in-flight
+    # learned bias is still wrong at the end
     assert (horizontal.measured_deg["cf_estimator_reference_bias"]
-            < 0.6 * horizontal.measured_deg["cf_estimator"])
+            < 0.85 * horizontal.measured_deg["cf_estimator"])
     assert (vertical.measured_deg["cf_estimator_reference_bias"]
             < vertical.measured_deg["cf_estimator"])
     assert horizontal.bias_error_end_deg_s > 2 * vertical.bias_error_end_deg_s

@@ -63,18 +63,18 @@ def test_the_in_flight_bias_learning_is_what_fails_as_on_the_real_flights(flight
 
 
 #: With the right bias the loop's error is below this share of ours online, on the scenario and
-#: on the real horizontal campaign alike (real 0.42, scenario 0.57 when written).
-KNOWN_BIAS_SHARE = 0.7
+#: on the real horizontal campaign alike (real 0.42, scenario 0.57 when written; 0.70 and 0.76
+#: since the running mean in start-up: less of ours is lost to the learned bias).
+KNOWN_BIAS_SHARE = 0.85
 
 
 @pytest.mark.skipif(not HORIZONTAL.is_dir(), reason=f"{HORIZONTAL} not present")
 def test_ours_and_vqf_rank_on_the_scenario_as_on_the_real_horizontal_campaign(flights):
-    """Issue 22: a scenario counts when VQF and ours rank on it as on the real family. Since the
-    loop-lag change the real campaign is a tie (ours 4.02°, VQF 4.05°, within the mean's
-    standard error of ~0.3°) while the scenario still has ours behind (6.0° vs 5.0°: its
-    10-20 s window, the start in the air, got worse where the real one got better). A tie
-    counts as either ranking; a real lead beyond its noise that the scenario does not show
-    fails here."""
+    """Issue 22: a scenario counts when VQF and ours rank on it as on the real family. With the
+    running mean in start-up ours leads on both (real 3.25° against VQF 4.05°, the mean's
+    standard error 0.23°; scenario 4.9° against 5.1°); after the loop-lag change the real
+    campaign was a tie while the scenario had ours behind. A tie counts as either ranking; a
+    real lead beyond its noise that the scenario does not show fails here."""
     pytest.importorskip("vqf")
     from cf_estimator.bench import euroc
     from cf_estimator.bench import euroc_eval as ev

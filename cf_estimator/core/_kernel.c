@@ -48,6 +48,7 @@
 #define BIAS_RANDOM_WALK_RAD_S_SQRT_S 2e-4
 #define SWING_TIME_CONSTANT_S 10.0
 #define SWING_VAR_TIME_CONSTANT_S 10.0
+#define TURN_BIAS_SIGMAS 2.0
 #define GRAVITY_TIME_CONSTANT_S 10.0
 #define MAG_REFERENCE_SAMPLES 20
 #define MAG_RELEARN_AFTER_S 20.0
@@ -96,7 +97,8 @@ typedef struct {
         mag_last_time_s, mvx, mvy, mvz, mcx, mcy, mcz, mmx, mmy, mmz, mag_cand_norm, mag_seen_time_s,
         mag_ok_timer_s, mag_cand_timer_s, mag_ref_time_s, g_ref, accel_hold, acx, acy, acz, rate_lp, ex, ey,
         ez, error_norm,
-        fx, fy, fz, yaw_error_rad, recovery_count, quick_until_s, pvx, pvy, pv_var;
+        fx, fy, fz, yaw_error_rad, recovery_count, quick_until_s, pvx, pvy, pv_var,
+        turn_rate_lp;
     char recovering, at_rest, mag_disturbed, heading_initialized, clipped, accel_used, moved,
         bias_unverified, mag_recovering, aided;
     int mag_status, phase;
@@ -143,6 +145,14 @@ static void rotate(double qw, double qx, double qy, double qz, double vx, double
     o[0] = vx + qw * tx + (qy * tz - qz * ty);
     o[1] = vy + qw * ty + (qz * tx - qx * tz);
     o[2] = vz + qw * tz + (qx * ty - qy * tx);
+}
+
+/* up_direction() of step.py: the estimated up direction in the sensor frame (third row of R) */
+static void up(const cf_state *s, double *v)
+{
+    v[0] = 2.0 * (s->qx * s->qz - s->qw * s->qy);
+    v[1] = 2.0 * (s->qy * s->qz + s->qw * s->qx);
+    v[2] = 1.0 - 2.0 * (s->qx * s->qx + s->qy * s->qy);
 }
 
 static void mul_into(cf_state *s, const double *d)
@@ -467,6 +477,10 @@ static int classify_motion(cf_state *s, const cf_params *p, const double *g, con
     double rate = sqrt(pow(gx - s->bx, 2.0) + pow(gy - s->by, 2.0) + pow(gz - s->bz, 2.0));
     double lw = dt / (RATE_LOWPASS_TIME_CONSTANT_S + dt);
     s->rate_lp = s->rate_lp + lw * (rate - s->rate_lp);
+    double v[3];
+    up(s, v); /* the turn: the rate about the estimated vertical (turn_share) */
+    double turn = (gx - s->bx) * v[0] + (gy - s->by) * v[1] + (gz - s->bz) * v[2];
+    s->turn_rate_lp = s->turn_rate_lp + lw * (turn - s->turn_rate_lp);
     return quick;
 }
 
@@ -475,9 +489,9 @@ static int classify_motion(cf_state *s, const cf_params *p, const double *g, con
 static double tilt_error(cf_state *s, const double *acc, double *u, double *v)
 {
     double ux = acc[0] / s->g_ref, uy = acc[1] / s->g_ref, uz = acc[2] / s->g_ref;
-    double vx = 2.0 * (s->qx * s->qz - s->qw * s->qy);
-    double vy = 2.0 * (s->qy * s->qz + s->qw * s->qx);
-    double vz = 1.0 - 2.0 * (s->qx * s->qx + s->qy * s->qy);
+    double up_[3];
+    up(s, up_);
+    double vx = up_[0], vy = up_[1], vz = up_[2];
     double ex = uy * vz - uz * vy, ey = uz * vx - ux * vz, ez = ux * vy - uy * vx;
     double en = sqrt(ex * ex + ey * ey + ez * ez);
     s->ex = ex;
@@ -503,13 +517,24 @@ static double saturate(const cf_state *s, const cf_params *p, double en, int qui
     return *clipped ? *limit / maxd(en, TINY) : 1.0;
 }
 
+/* bias.turn_share of bias.py: the share of the learning raise left while the vehicle turns */
+static double turn_share(const cf_state *s, const cf_params *p)
+{
+    double k1_2 = pow(maxd(p->k1, BIAS_LEARNING_MIN_K1), 2.0);
+    double w = maxd(maxd(s->turn_rate_lp, -s->turn_rate_lp) -
+                        TURN_BIAS_SIGMAS * sqrt(maxd(s->bias_var, 0.0)),
+                    0.0);
+    double share = k1_2 / (k1_2 + w * w);
+    return share * share;
+}
+
 /* bias.learning_gains of bias.py: (k1, k2) raised while the bias is uncertain, capped by the
- * velocity swing */
+ * velocity swing and withheld in a turn */
 static void learning_gains(const cf_state *s, const cf_params *p, double *k1, double *k2)
 {
     double share = mind(s->bias_var / pow(p->bias_prior_sigma_rad_s, 2.0), 1.0);
     double swing = sqrt(maxd(s->bias_var, 0.0)) / maxd(sqrt(s->pv_var), TINY);
-    *k2 = maxd(p->k2, mind(p->bias_learning_k2 * share, swing));
+    *k2 = maxd(p->k2, mind(p->bias_learning_k2 * share, swing) * turn_share(s, p));
     *k1 = maxd(p->k1, 2.0 * sqrt(*k2));
 }
 
@@ -563,7 +588,9 @@ static void regulate(cf_state *s, const cf_params *p, const double *f, double en
     s->by = s->by - ldt * (k2 * f[1] + s->cy);
     s->bz = s->bz - ldt * (k2 * f[2] + s->cz);
     s->bias_var = s->bias_var / (1.0 + ldt * k2 / maxd(k1, BIAS_LEARNING_MIN_K1));
-    k1 = quick ? maxd(k1, p->startup_k1) : k1;
+    /* start-up in motion: the running mean of the accelerometer since initialisation (1/t) */
+    int averaging = (s->time_s <= p->startup_duration_s) && s->moved;
+    k1 = averaging ? 1.0 / maxd(s->time_s, dt) : (quick ? maxd(k1, p->startup_k1) : k1);
     double gain = k1 * dt / (1.0 + k1 * dt);
     expmap(gain * f[0], gain * f[1], gain * f[2], d);
     mul_into(s, d);
@@ -997,7 +1024,7 @@ static PyMemberDef State_members[] = {
     SD(blk_d), SD(blk_mx), SD(blk_my), SD(blk_mz), SD(blk_mn), SD(prev_n), SD(pgx), SD(pgy),
     SD(pgz), SD(pax), SD(pay), SD(paz), SD(pmx), SD(pmy), SD(pmz), SD(pm_n), SD(last_n), SD(lgx),
     SD(lgy), SD(lgz), SD(lax), SD(lay), SD(laz), SD(noise_g2), SD(noise_a2), SD(g_ref), SD(bx),
-    SD(by), SD(bz), SD(bias_var), SB(bias_unverified), SD(pvx), SD(pvy), SD(pv_var), SD(z_m), SD(mag_ref_norm), SD(mag_ref_dip),
+    SD(by), SD(bz), SD(bias_var), SB(bias_unverified), SD(pvx), SD(pvy), SD(pv_var), SD(turn_rate_lp), SD(z_m), SD(mag_ref_norm), SD(mag_ref_dip),
     SD(mag_ref_count), SB(mag_disturbed), SD(mag_last_time_s), SB(heading_initialized),
     SD(mag_clip_timer_s), SB(mag_recovering), SD(mvx), SD(mvy), SD(mvz), SD(mcx), SD(mcy),
     SD(mcz), SD(mmx), SD(mmy), SD(mmz), SD(mag_cand_norm), SD(mag_seen_time_s), SD(mag_ok_timer_s), SD(mag_cand_timer_s),

@@ -84,7 +84,7 @@ class EstimateResult:
         if self.extra is None or self.params is None:
             raise ValueError("this result carries no filter signals (built by hand?)")
         cov = covariance_rows(self.extra, self.t_s, self.quaternion, self.params, tilt0_rad2,
-                              yaw0_rad2, unreferenced_yaw_rad2, self.velocity_aided)
+                              yaw0_rad2, unreferenced_yaw_rad2)
         if defaults:
             self._cov = cov
         return cov
@@ -109,19 +109,17 @@ class EstimateResult:
 
 def covariance_rows(extra: np.ndarray, t_s: np.ndarray, q: np.ndarray, params: FilterParams,
                     tilt0_rad2: float = TILT_FLOOR_RAD2, yaw0_rad2: float = YAW_FLOOR_RAD2,
-                    unreferenced_yaw_rad2: float = UNREFERENCED_YAW_RAD2,
-                    aided: np.ndarray | None = None) -> np.ndarray:
+                    unreferenced_yaw_rad2: float = UNREFERENCED_YAW_RAD2) -> np.ndarray:
     """(N, 9) orientation covariance [rad²] of a run from its ``extra`` rows (the node's model,
     :class:`~cf_estimator.core.covariance.OrientationCovariance`, row by row from the first
-    row with a finite ``q``; NaN before); ``aided``: (N,) bool, the velocity-aided samples."""
+    row with a finite ``q``; NaN before)."""
     n = extra.shape[0]
     out = np.full((n, 9), np.nan)
     ok = np.flatnonzero(np.isfinite(q[:, 0]))
     if ok.size == 0:
         return out
     model = OrientationCovariance(tilt0_rad2, yaw0_rad2, unreferenced_yaw_rad2,
-                                  params.bias_prior_sigma_rad_s, params.k1, params.gravity_m_s2,
-                                  params.aperiodic_time_constant_s)
+                                  params.bias_prior_sigma_rad_s, params.k1, params.gravity_m_s2)
     start = int(ok[0])
     x = extra[start:]
     ts = t_s[start:].tolist()
@@ -131,7 +129,6 @@ def covariance_rows(extra: np.ndarray, t_s: np.ndarray, q: np.ndarray, params: F
     phase, sigma, status = x[:, 7].tolist(), x[:, 10].tolist(), x[:, 9].tolist()
     lx, ly = x[:, 11].tolist(), x[:, 12].tolist()
     yaw_err, na2 = x[:, 13].tolist(), x[:, 14].tolist()
-    ad = [False] * (n - start) if aided is None else aided[start:].tolist()
     heading = False
     last: float | None = None
     rows = []
@@ -144,7 +141,7 @@ def covariance_rows(extra: np.ndarray, t_s: np.ndarray, q: np.ndarray, params: F
         sb = sigma[k]
         rows.append(step(dts[k], clipped[k], None if sb != sb else sb, phase[k], en[k], lx[k],
                          ly[k], na2[k], heading, yaw_err[k] if used else 0.0, used,
-                         None if last is None else ts[k] - last, ad[k]))
+                         None if last is None else ts[k] - last))
     out[start:] = rows
     return out
 

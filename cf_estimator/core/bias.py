@@ -11,7 +11,7 @@ The estimate b (sensor frame, rad/s) is the PI regulator's integral state; its v
   ``bias_learning_k2`` in proportion to the variance and k1 to at least 2√k2 (critically damped):
   learned within about 20 s of any start, in the air too; but never beyond σ_b/σ_V, the gain at
   which the vehicle's own velocity swing would move the estimate by more than its uncertainty
-  (:func:`observe_velocity_swing`);
+  (:func:`observe_velocity_swing`), and not while the vehicle turns (:func:`turn_share`);
 - :func:`integrate` — the integral itself (k2 and the k3 path on the processed error), except
   from an error too large to be a bias (:func:`learning_limit_rad`, anti-windup, no narrower
   than the samples' own scatter); the variance shrinks as it learns (time constant k1/k2);
@@ -50,6 +50,9 @@ BIAS_LEARNING_MIN_K1 = 1e-3
 SWING_TIME_CONSTANT_S = 10.0
 #: Time constant [s] of the pseudo-velocity's mean square (a growing window until then).
 SWING_VAR_TIME_CONSTANT_S = 10.0
+#: A rotation rate about the vertical counts as a turn beyond this many σ_b: less could be the
+#: bias still to be learned (the rate is bias-corrected by the estimate).
+TURN_BIAS_SIGMAS = 2.0
 
 
 def add_process_noise(s: StepState, p: Any, dt: Any, o: Any) -> None:
@@ -92,13 +95,29 @@ def learning_limit_rad(s: StepState, o: Any) -> Any:
     return BIAS_LEARNING_MAX_ERROR_RAD + o.where(s.aided, 0.0, widen)
 
 
+def turn_share(s: StepState, p: Any, o: Any) -> Any:
+    """The share [0, 1] of the learning raise left while the vehicle turns about the vertical
+    at ω = ``turn_rate_lp`` [rad/s] (less TURN_BIAS_SIGMAS·σ_b): (k1²/(k1² + ω²))², k1 the
+    shipped loop's gain. Turning, a horizontal bias b rotates in the world frame and tilts the
+    estimate by only b/|k1 + jω| (its evidence power falls as 1/ω²), while the accelerometer's
+    disagreement is the turn's centripetal acceleration ω × v over g (its power grows as ω²):
+    the evidence ratio falls as ω⁻⁴ above the loop's bandwidth. A constant-rate turn looks the
+    same in the body frame as a bias (a steady error), so raising the loop there learns the
+    turn: on a figure-8 the raised loop took 6 °/s of a de-biased gyro for bias."""
+    k1_2 = o.maximum(p.k1, BIAS_LEARNING_MIN_K1) ** 2
+    w = o.maximum(o.maximum(s.turn_rate_lp, -s.turn_rate_lp)
+                  - TURN_BIAS_SIGMAS * o.sqrt(o.maximum(s.bias_var, 0.0)), 0.0)
+    share = k1_2 / (k1_2 + w * w)
+    return share * share
+
+
 def learning_gains(s: StepState, p: Any, o: Any) -> tuple[Any, Any]:
     """(k1 [1/s], k2 [1/s²]) of the regulator at this step: raised while b is uncertain, the
     raise at most σ_b/σ_V [rad/s over rad·s] (the velocity swing moves the estimate by no more
-    than its uncertainty σ_b = √bias_var; σ_V = √pv_var)."""
+    than its uncertainty σ_b = √bias_var; σ_V = √pv_var) and scaled by :func:`turn_share`."""
     share = o.minimum(s.bias_var / (p.bias_prior_sigma_rad_s ** 2), 1.0)
     swing = o.sqrt(o.maximum(s.bias_var, 0.0)) / o.maximum(o.sqrt(s.pv_var), TINY)
-    k2 = o.maximum(p.k2, o.minimum(p.bias_learning_k2 * share, swing))
+    k2 = o.maximum(p.k2, o.minimum(p.bias_learning_k2 * share, swing) * turn_share(s, p, o))
     k1 = o.maximum(p.k1, 2.0 * o.sqrt(k2))
     return k1, k2
 

@@ -20,17 +20,19 @@ the world x and y axes::
   accelerometer is distrusted: the tilt is gyro-integrated for that long, its drift bounded by
   the bias uncertainty ``σ_b`` [rad/s], √bias_var, the prior ``bias_prior_sigma_rad_s`` before
   the first estimate).
-- ``M`` [rad²] = the mean square, over the loop's own memory ``1/k1`` [s], of the horizontal
-  error the accelerometer channel corrects the tilt by (``|l_h|``: the aperiodic unit's state in
-  the world frame, the low-passed disagreement between the accelerometer and the estimate).
-  While the vehicle accelerates by ``a_h`` the accelerometer points off the vertical by
-  ``|a_h|/g`` and the loop pulls the tilt towards it: the tilt error and the disagreement the
-  channel sees share one magnitude (one in the other's quadrature over a zig-zag, hence the
-  mean square over ``1/k1``), gain 1. When velocity aiding takes the vehicle's acceleration
-  out, or at rest, the disagreement is the real (small) tilt error: ``M`` shrinks by itself.
-  While aided the unit's lag is AIDED_LAG_TIME_CONSTANT_S ``T_a`` instead of
-  ``aperiodic_time_constant_s`` ``T``: the extra accelerometer noise it lets into ``|l_h|²``,
-  ``σ_a²/g²·dt·(1/T_a − 1/T)``, is not a disagreement and is taken off ``M`` (at least 0).
+- ``M`` [rad²] = the mean square, over the loop's own memory ``1/k1`` [s], of ``|c|``: the
+  tilt correction the accelerometer channel has made over the last SWING_TIME_CONSTANT_S,
+  ``c = k1·∫ l_h dt`` high-passed over that window [rad] (``l_h``: the aperiodic unit's state in
+  the world frame, horizontal, the low-passed disagreement between the accelerometer and the
+  estimate it corrects the tilt by). While the vehicle accelerates by ``a_h`` the accelerometer
+  points off the vertical by ``|a_h|/g``; a loop that cannot tell that from a tilt follows it,
+  and the tilt error it takes on is exactly the correction it made: ``k1·∫`` of the
+  disagreement (a leg held for long: ``|a_h|/g`` in full; a zig-zag: its legs cancel in ``c`` as
+  they do in the tilt error — the disagreement itself, ``|l_h|``, is the swing the loop did
+  *not* follow and over-counts it by ω/k1 at a zig-zag's ω; BENCHMARKS.md "Covariance"). The
+  window is the pseudo-velocity's (core/bias.py): older corrections are taken as averaged out.
+  When velocity aiding takes the vehicle's acceleration out, or at rest, the disagreement is
+  the real (small) tilt error and the corrections remove it: ``M`` shrinks by itself.
 - ``V`` [rad²] = ``σ_a²/g² · dt · k1`` with ``σ_a² = noise_a2/6`` [(m/s²)²] the accelerometer's
   white noise per axis (vibration; ``noise_a2`` = the stillness blocks' mean squared
   sample-to-sample difference summed over the axes) and ``dt`` [s] the sample interval: the
@@ -46,9 +48,10 @@ referenced (``use_mag`` false, or no usable sample yet): ``unreferenced_yaw_cova
 
 Constants: ``v0`` and ``y0`` are the only fitted ones (maximum likelihood of the errors under the
 model's Gaussian: tilt on the phantom4 vertical campaign, 6-D; yaw on BROAD's undisturbed trials,
-9-D; BENCHMARKS.md "Covariance"); the gain 1 of ``M``, its memory ``1/k1`` and ``V`` follow from
-the loop. Each variance is capped at π² (an angle error is at most π), or at its floor (yaw: also
-the unreferenced variance) if larger. Plain floats: it runs per message.
+9-D; BENCHMARKS.md "Covariance"); ``M``'s gain k1 (the shipped loop's), its window
+SWING_TIME_CONSTANT_S, its memory ``1/k1`` and ``V`` follow from the loop. Each variance is
+capped at π² (an angle error is at most π), or at its floor (yaw: also the unreferenced
+variance) if larger. Plain floats: it runs per message.
 """
 
 from __future__ import annotations
@@ -56,7 +59,8 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from cf_estimator.core.step import AIDED_LAG_TIME_CONSTANT_S, PHASE_RECOVERING, PHASE_STARTUP
+from cf_estimator.core.bias import SWING_TIME_CONSTANT_S
+from cf_estimator.core.step import PHASE_RECOVERING, PHASE_STARTUP
 
 _PI2 = math.pi * math.pi
 _SETTLING = (PHASE_STARTUP, PHASE_RECOVERING)
@@ -74,22 +78,20 @@ UNREFERENCED_YAW_RAD2 = 10.0
 class OrientationCovariance:
     """Per-message covariance model (see the module docstring); ``reset`` with the filter.
 
-    ``k1`` [1/s]: the accelerometer channel's gain (FilterParams.k1); ``gravity_m_s2``: ‖g‖;
-    ``lag_s`` [s]: the aperiodic unit's time constant (aperiodic_time_constant_s).
+    ``k1`` [1/s]: the accelerometer channel's gain (FilterParams.k1); ``gravity_m_s2``: ‖g‖.
     """
 
-    __slots__ = ("_clip_s", "_yaw_err", "_ms", "tilt0", "yaw0", "yaw_unref", "bias_prior", "k1",
-                 "lag_s", "_inv_6g2")
+    __slots__ = ("_clip_s", "_yaw_err", "_ms", "_cx", "_cy", "tilt0", "yaw0", "yaw_unref",
+                 "bias_prior", "k1", "_inv_6g2")
 
     def __init__(self, tilt0_rad2: float, yaw0_rad2: float, yaw_unreferenced_rad2: float,
                  bias_prior_sigma_rad_s: float, k1: float = 0.35,
-                 gravity_m_s2: float = 9.80665, lag_s: float = 2.0) -> None:
+                 gravity_m_s2: float = 9.80665) -> None:
         self.tilt0 = tilt0_rad2
         self.yaw0 = yaw0_rad2
         self.yaw_unref = yaw_unreferenced_rad2
         self.bias_prior = bias_prior_sigma_rad_s
         self.k1 = k1
-        self.lag_s = lag_s
         self._inv_6g2 = 1.0 / (6.0 * gravity_m_s2 * gravity_m_s2)
         self.reset()
 
@@ -98,11 +100,13 @@ class OrientationCovariance:
         self._inv_6g2 = 1.0 / (6.0 * gravity_m_s2 * gravity_m_s2)
 
     def reset(self) -> None:
-        """Forget the clip duration, the mean square of the error channel and the last heading
+        """Forget the clip duration, the correction and its mean square, and the last heading
         error (a filter reset)."""
         self._clip_s = 0.0
         self._yaw_err = 0.0
         self._ms = 0.0
+        self._cx = 0.0
+        self._cy = 0.0
 
     def update(self, dt_s: float, state: object, mag_used: bool, mag_age_s: float | None
                ) -> tuple[float, ...]:
@@ -117,34 +121,29 @@ class OrientationCovariance:
                          s.error_norm, s.lx, s.ly, s.noise_a2,  # type: ignore[attr-defined]
                          bool(s.heading_initialized),  # type: ignore[attr-defined]
                          s.yaw_error_rad if mag_used else 0.0,  # type: ignore[attr-defined]
-                         mag_used, mag_age_s, bool(s.aided))  # type: ignore[attr-defined]
+                         mag_used, mag_age_s)
 
     def step(self, dt_s: float, clipped: bool, bias_sigma_rad_s: float | None, phase: float,
              error_norm_rad: float, lx_rad: float, ly_rad: float, noise_a2: float,
              heading_initialized: bool, yaw_error_rad: float, mag_used: bool,
-             mag_age_s: float | None, aided: bool = False) -> tuple[float, ...]:
+             mag_age_s: float | None) -> tuple[float, ...]:
         """:meth:`update` from the state's figures (the bulk pipeline and ``estimate`` have them
         per row): ``bias_sigma_rad_s`` = √bias_var (None: no estimate yet, the prior is used),
         ``lx_rad``, ``ly_rad`` the aperiodic unit's world-frame state, ``noise_a2``
         [(m/s²)²] the accelerometer noise of the stillness blocks, ``yaw_error_rad`` read only
-        when ``mag_used``, ``aided``: the sample was velocity-aided (the unit's lag is
-        AIDED_LAG_TIME_CONSTANT_S)."""
+        when ``mag_used``."""
         self._clip_s = self._clip_s + dt_s if clipped else 0.0
         sigma_b = bias_sigma_rad_s if bias_sigma_rad_s is not None else self.bias_prior
         kdt = self.k1 * dt_s
+        leak = dt_s / (SWING_TIME_CONSTANT_S + dt_s)
+        cx = self._cx + kdt * lx_rad - leak * self._cx  # the correction made [rad]
+        cy = self._cy + kdt * ly_rad - leak * self._cy
         ms = self._ms
-        ms += kdt / (1.0 + kdt) * (lx_rad * lx_rad + ly_rad * ly_rad - ms)
-        self._ms = ms
+        ms += kdt / (1.0 + kdt) * (cx * cx + cy * cy - ms)
+        self._cx, self._cy, self._ms = cx, cy, ms
         e_t = error_norm_rad if phase in _SETTLING else 0.0
         drift = sigma_b * self._clip_s
         noise = noise_a2 * self._inv_6g2 * dt_s  # σ_a²/g²·dt [rad²·s]
-        if aided:  # the unit's short lag passes more noise into l_h: not a disagreement
-            more = 1.0 / AIDED_LAG_TIME_CONSTANT_S - (1.0 / self.lag_s if self.lag_s > 0.0
-                                                      else math.inf)
-            if more > 0.0:
-                ms -= noise * more
-                if ms < 0.0:
-                    ms = 0.0
         tilt = min(self.tilt0 + e_t * e_t + drift * drift + 0.5 * (ms + noise * self.k1),
                    max(_PI2, self.tilt0))
         if heading_initialized:
@@ -163,10 +162,10 @@ class OrientationCovariance:
               noise_a2: Sequence[float], heading_initialized: bool,
               yaw_error_rad: Sequence[float], mag_used: Sequence[bool],
               mag_age_s: Sequence[float | None]) -> tuple[list[float], list[float]]:
-        """:meth:`step` over rows (not aided), the same operations in the same order, as
+        """:meth:`step` over rows, the same operations in the same order, as
         (tilt, yaw) variances per row [rad²] (the bulk pipeline: one call per run instead of one
         per row). ``bias_sigma_rad_s`` NaN: no estimate yet (the prior is used)."""
-        clip_s, ms, yaw_err = self._clip_s, self._ms, self._yaw_err
+        clip_s, ms, yaw_err, cx, cy = self._clip_s, self._ms, self._yaw_err, self._cx, self._cy
         k1, prior, inv_6g2 = self.k1, self.bias_prior, self._inv_6g2
         tilt0, yaw0, yaw_unref = self.tilt0, self.yaw0, self.yaw_unref
         tilt_cap, yaw_cap = max(_PI2, tilt0), max(_PI2, yaw_unref, yaw0)
@@ -179,7 +178,9 @@ class OrientationCovariance:
             clip_s = clip_s + dt if clip else 0.0
             sigma_b = sb if sb == sb else prior
             kdt = k1 * dt
-            ms += kdt / (1.0 + kdt) * (lx * lx + ly * ly - ms)
+            leak = dt / (SWING_TIME_CONSTANT_S + dt)
+            cx, cy = cx + kdt * lx - leak * cx, cy + kdt * ly - leak * cy
+            ms += kdt / (1.0 + kdt) * (cx * cx + cy * cy - ms)
             e_t = en if ph in settling else 0.0
             drift = sigma_b * clip_s
             noise = na2 * inv_6g2 * dt
@@ -192,5 +193,5 @@ class OrientationCovariance:
                 yaws.append(min(yaw0 + yaw_err**2 + yd * yd, yaw_cap))
             else:
                 yaws.append(yaw_unref)
-        self._clip_s, self._ms, self._yaw_err = clip_s, ms, yaw_err
+        self._clip_s, self._ms, self._yaw_err, self._cx, self._cy = clip_s, ms, yaw_err, cx, cy
         return tilts, yaws

@@ -33,6 +33,7 @@ from cf_estimator.core.step import (
     StepState,
     step,
     turn_heading,
+    up_direction,
 )
 from cf_estimator.schema import as_dict
 
@@ -153,9 +154,7 @@ def state_extras(s: Any) -> tuple:
 def gyro_bias_of(s: Any) -> tuple[float, float, float]:
     """The gyro-bias estimate [rad/s, sensor] of a state: the integral b minus the heading
     channel's world-vertical rate z_m on the sensor axes (b − Rᵀ·ẑ·z_m)."""
-    upx = 2.0 * (s.qx * s.qz - s.qw * s.qy)
-    upy = 2.0 * (s.qy * s.qz + s.qw * s.qx)
-    upz = 1.0 - 2.0 * (s.qx * s.qx + s.qy * s.qy)
+    upx, upy, upz = up_direction(s)
     return (s.bx - s.z_m * upx, s.by - s.z_m * upy, s.bz - s.z_m * upz)
 
 

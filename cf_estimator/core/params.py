@@ -136,8 +136,10 @@ class FilterParams:
     startup_duration_s: float = param(
         2.0,
         "s",
-        "Start-up phase after initialisation: gain startup_k1, no clip, no aperiodic "
-        "unit, no bias learning (0 = none). The error path also runs so while at rest.",
+        "Start-up phase after initialisation: no clip, no aperiodic unit, no bias "
+        "learning; gain startup_k1 while still, the running mean of the accelerometer "
+        "since initialisation (gain 1/t) once a block was not still (0 = none). The error "
+        "path also runs so (startup_k1) while at rest.",
         minimum=0.0,
         maximum=60.0,
         group="phases",
@@ -145,7 +147,8 @@ class FilterParams:
     startup_k1: float = param(
         5.0,
         "1/s",
-        "Proportional gain of both channels during start-up, recovery and rest.",
+        "Proportional gain of both channels during recovery and rest, and of the start-up "
+        "until a block was not still (the heading's for the whole start-up).",
         minimum=0.0,
         maximum=100.0,
         group="phases",

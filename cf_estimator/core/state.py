@@ -95,6 +95,8 @@ BIAS: tuple[Field, ...] = (
     *_vec("pv", "rad*s", "pseudo-velocity over g: the accelerometer's disagreement integrated in "
           "the world frame, high-passed over SWING_TIME_CONSTANT_S", "xy"),
     _f("pv_var", "rad^2*s^2", "mean square of |pv|: the vehicle's velocity swing over g^2"),
+    _f("turn_rate_lp", "rad/s", "bias-corrected rotation rate about the estimated vertical, "
+       "low-passed: the vehicle turning"),
 )
 
 HEADING: tuple[Field, ...] = (

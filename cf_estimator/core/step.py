@@ -47,8 +47,10 @@ Linear acceleration (the tight clip) is detected when the 50 ms low-passed | |a|
 acceleration_threshold_m_s2 plus ACCEL_DETECT_SIGMAS of the vibration left in the low-pass, or
 at once for a spike (an impact).
 
-Phases: STARTUP (after initialisation, for startup_duration_s: gain startup_k1, no clip, the
-unit bypassed, no integral learning) → RUNNING → RECOVERING (error clipped without a break for
+Phases: STARTUP (after initialisation, for startup_duration_s: no clip, the unit bypassed, no
+integral learning; gain startup_k1 while still, the running mean of the accelerometer since
+initialisation, gain 1/t, once a stillness block was not still — started in the air, the
+flight's accelerations average out) → RUNNING → RECOVERING (error clipped without a break for
 recovery_trigger_s: a real attitude error, e.g. after gyro over-range; same as STARTUP until
 |e| < L/2) → RUNNING. At rest the error path also runs as in STARTUP while the block's |a| is
 within acceleration_threshold_m_s2 of ‖g‖ (nothing to reject: an error left by motion is removed
@@ -208,6 +210,12 @@ def _toward_unit(v: tuple, u: tuple, a: Any, o: Any) -> tuple:
     return x / n, y / n, z / n
 
 
+def up_direction(s: StepState) -> tuple:
+    """The estimated up (gravity) direction in the sensor frame: the third row of R(q)."""
+    return (2.0 * (s.qx * s.qz - s.qw * s.qy), 2.0 * (s.qy * s.qz + s.qw * s.qx),
+            1.0 - 2.0 * (s.qx * s.qx + s.qy * s.qy))
+
+
 def _normalize(s: StepState, o: Any) -> None:
     n = o.sqrt(s.qw * s.qw + s.qx * s.qx + s.qy * s.qy + s.qz * s.qz)
     s.qw, s.qx, s.qy, s.qz = s.qw / n, s.qx / n, s.qy / n, s.qz / n
@@ -313,6 +321,9 @@ def classify_motion(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple 
     rate = o.sqrt((gx - s.bx) ** 2 + (gy - s.by) ** 2 + (gz - s.bz) ** 2)
     lw = dt / (RATE_LOWPASS_TIME_CONSTANT_S + dt)
     s.rate_lp = s.rate_lp + lw * (rate - s.rate_lp)
+    vx, vy, vz = up_direction(s)  # the turn: the rate about the vertical (bias.turn_share)
+    turn = (gx - s.bx) * vx + (gy - s.by) * vy + (gz - s.bz) * vz
+    s.turn_rate_lp = s.turn_rate_lp + lw * (turn - s.turn_rate_lp)
     return quick, accelerating
 
 
@@ -325,9 +336,7 @@ def tilt_error(s: StepState, accel: tuple, o: Any) -> tuple[tuple, tuple, Any]:
     """
     ax, ay, az = accel
     ux, uy, uz = ax / s.g_ref, ay / s.g_ref, az / s.g_ref
-    vx = 2.0 * (s.qx * s.qz - s.qw * s.qy)
-    vy = 2.0 * (s.qy * s.qz + s.qw * s.qx)
-    vz = 1.0 - 2.0 * (s.qx * s.qx + s.qy * s.qy)
+    vx, vy, vz = up_direction(s)
     ex, ey, ez = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
     en = o.sqrt(ex * ex + ey * ey + ez * ez)
     s.ex, s.ey, s.ez, s.error_norm = ex, ey, ez, en
@@ -398,7 +407,15 @@ def regulate(s: StepState, p: Any, f: tuple, en: Any, u: tuple, v: tuple, quick:
     # the sign of the dot product too)
     small = (en < bias.learning_limit_rad(s, o)) & (ux * vx + uy * vy + uz * vz > 0.0)
     bias.integrate(s, p, (fx, fy, fz), k1, k2, learn, small, dt, o)
-    k1 = o.where(quick, o.maximum(k1, p.startup_k1), k1)
+    # start-up in motion (a block that was not still): the running mean of the accelerometer
+    # since initialisation (gain 1/t, the least-squares tilt of the samples so far, turned by
+    # the gyro): started in the air, a flight's accelerations average out instead of the last
+    # 1/startup_k1 s of one leg being taken for the vertical (and its decay for bias, once the
+    # learning begins). Still (or not yet known): startup_k1, as a long mean would lag by the
+    # gyro's bias × t/2 on a sensor at rest.
+    averaging = (s.time_s <= p.startup_duration_s) & s.moved
+    k1 = o.where(averaging, 1.0 / o.maximum(s.time_s, dt),
+                 o.where(quick, o.maximum(k1, p.startup_k1), k1))
     gain = k1 * dt / (1.0 + k1 * dt)
     dw, dx, dy, dz = _exp(gain * fx, gain * fy, gain * fz, o)
     s.qw, s.qx, s.qy, s.qz = _mul(s.qw, s.qx, s.qy, s.qz, dw, dx, dy, dz)

@@ -54,7 +54,8 @@ class PipelineParams:
         TILT_FLOOR_RAD2, "rad^2", "Floor v0 of the variance reported for roll and pitch "
         "(diagonal of orientation_covariance, rotation about the world x/y axes): what the "
         "filter cannot see (accelerometer bias, mounting). Start-up, recovery, clipped "
-        "stretches, the accelerometer channel's disagreement (accelerations) and vibration add "
+        "stretches, the tilt corrections the accelerometer channel made (accelerations it "
+        "followed) and vibration add "
         "to it (docs/ros_interface.md, Covariance); the default is fitted on the phantom4 "
         "vertical campaign.",
         minimum=0.0, maximum=100.0, minimum_exclusive=True, group="output",

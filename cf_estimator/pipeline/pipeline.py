@@ -139,7 +139,7 @@ class ImuPipeline:
         self.covariance_model = OrientationCovariance(
             self._pp.orientation_covariance_rad2, self._pp.yaw_covariance_rad2,
             self._pp.unreferenced_yaw_covariance_rad2, self._fp.bias_prior_sigma_rad_s,
-            self._fp.k1, self._fp.gravity_m_s2, self._fp.aperiodic_time_constant_s)
+            self._fp.k1, self._fp.gravity_m_s2)
         self._apply_derived()
         self._clear_time_state()
 
@@ -209,7 +209,6 @@ class ImuPipeline:
         cov.yaw_unref = pp.unreferenced_yaw_covariance_rad2
         cov.bias_prior = self._fp.bias_prior_sigma_rad_s
         cov.k1 = self._fp.k1
-        cov.lag_s = self._fp.aperiodic_time_constant_s
         cov.set_gravity(self._fp.gravity_m_s2)
         self.rules.max_dt_ns = int(round(pp.max_dt_s * 1e9))
         # 0 = never; a positive value below 0.5 ns must not round to "never"
