@@ -48,7 +48,7 @@ referenced (``use_mag`` false, or no usable sample yet): ``unreferenced_yaw_cova
 
 Constants: ``v0`` and ``y0`` are the only fitted ones (maximum likelihood of the errors under the
 model's Gaussian: tilt on the phantom4 vertical campaign, 6-D; yaw on BROAD's undisturbed trials,
-9-D; BENCHMARKS.md "Covariance"); ``M``'s gain k1 (the shipped loop's), its window
+9-D; BENCHMARKS.md "Covariance"); ``M``'s gain k1 (the configured loop gain), its window
 SWING_TIME_CONSTANT_S, its memory ``1/k1`` and ``V`` follow from the loop. Each variance is
 capped at π² (an angle error is at most π), or at its floor (yaw: also the unreferenced
 variance) if larger. Plain floats: it runs per message.
