@@ -114,7 +114,8 @@ def test_consistent_on_the_calibration_family_and_never_overconfident_on_another
     (sustained horizontal acceleration, errors 3-8 deg) is a check: there the floor alone gave
     mean(e²/σ²) ≈ 19 (issue 27's "2-5x too small"), and the disagreement's own mean square as
     the acceleration term 0.14 (the swing the loop did not follow). With the correction the loop
-    made as that term, mean 0.49 and 0.1 % beyond 2σ (consistent: 1 and 1.8 %)."""
+    made as that term (and the floor refitted with it), mean 0.50 and 0.2 % beyond 2σ
+    (consistent: 1 and 1.8 %)."""
     _need("phantom4", "phantom4_horizontal")
     fp = FilterParams()
     vertical = family_consistency(DATA / "phantom4", "phantom4", fp)["tilt"]
