@@ -264,6 +264,12 @@ class ComplementaryFilter:
         (AIDED_LAG_TIME_CONSTANT_S instead of aperiodic_time_constant_s)."""
         self._state.aided = bool(aided)
 
+    def mark_moving(self) -> None:
+        """Another sensor (velocity aiding) says the vehicle moves: it is not at rest, so the
+        start-up averages the accelerometer (gain 1/t) as after a stillness block that was not
+        still, without waiting for the blocks' verdict."""
+        self._state.moved = True
+
     def take_hold(self, duration_s: float, reopen_bias: bool = False) -> None:
         """Run the loop as in start-up (gain startup_k1, no clip, no bias learning) for the next
         ``duration_s`` [s]: a correction that has just become trustworthy (velocity aiding that

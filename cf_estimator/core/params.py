@@ -138,8 +138,8 @@ class FilterParams:
         "s",
         "Start-up phase after initialisation: no clip, no aperiodic unit, no bias "
         "learning; gain startup_k1 while still, the running mean of the accelerometer "
-        "since initialisation (gain 1/t) once a block was not still (0 = none). The error "
-        "path also runs so (startup_k1) while at rest.",
+        "since initialisation (gain 1/t) once a block was not still or a velocity says the "
+        "vehicle moves (0 = none). The error path also runs so (startup_k1) while at rest.",
         minimum=0.0,
         maximum=60.0,
         group="phases",

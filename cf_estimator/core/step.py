@@ -407,7 +407,8 @@ def regulate(s: StepState, p: Any, f: tuple, en: Any, u: tuple, v: tuple, quick:
     # the sign of the dot product too)
     small = (en < bias.learning_limit_rad(s, o)) & (ux * vx + uy * vy + uz * vz > 0.0)
     bias.integrate(s, p, (fx, fy, fz), k1, k2, learn, small, dt, o)
-    # start-up in motion (a block that was not still): the running mean of the accelerometer
+    # start-up in motion (a block that was not still, or a velocity that says so: moved is
+    # also set by ComplementaryFilter.mark_moving): the running mean of the accelerometer
     # since initialisation (gain 1/t, the least-squares tilt of the samples so far, turned by
     # the gyro): started in the air, a flight's accelerations average out instead of the last
     # 1/startup_k1 s of one leg being taken for the vertical (and its decay for bias, once the

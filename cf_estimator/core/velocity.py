@@ -87,6 +87,11 @@ REANCHOR_REJECTIONS = 5
 BUFFER_MARGIN_S = 0.5
 #: Velocity samples awaiting the IMU stamps to pass them (older ones are dropped, counted).
 MAX_PENDING = 1000
+#: A velocity sample whose norm exceeds this many σ of its noise (velocity_noise_m_s, per axis)
+#: says the vehicle moves: it is not at rest, and the filter's start-up averages the
+#: accelerometer as after a stillness block that was not still (ComplementaryFilter.mark_moving;
+#: a three-axis noise norm passes 5 σ once in about 10⁵ samples).
+MOVING_SPEED_SIGMAS = 5.0
 
 REJECT_REASONS = ("nonfinite", "stamp", "backwards", "too_old", "jump", "frame", "malformed")
 
@@ -190,6 +195,7 @@ class VelocityAiding:
         self._heading.reset()
         self._hd = HeadingOffset(0.0, math.inf, False)
         self._active = self._started = self._first = self._ever = False
+        self._moving = False  # a velocity sample beyond MOVING_SPEED_SIGMAS was queued
         self._since = math.nan  # IMU stamp of the first sample of the current aided stretch
         self._first_v_t = math.nan  # stamp of the first accepted velocity sample
         self._first_aided_t = math.nan  # IMU stamp of the first aided sample
@@ -232,6 +238,8 @@ class VelocityAiding:
             reason = "too_old"
         else:
             self._last_stamp = t
+            limit = MOVING_SPEED_SIGMAS * self._params.velocity_noise_m_s
+            self._moving = self._moving or vx * vx + vy * vy + vz * vz > limit * limit
             self._pending.append((t, (vx, vy, vz)))
             if len(self._pending) > MAX_PENDING:
                 self._pending.pop(0)
@@ -438,6 +446,11 @@ class VelocityAiding:
 
     # -- status --------------------------------------------------------------------------------
     @property
+    def moving(self) -> bool:
+        """True once a queued velocity sample said the vehicle moves (MOVING_SPEED_SIGMAS)."""
+        return self._moving
+
+    @property
     def active(self) -> bool:
         """True when the last IMU sample was aided (vertically or fully)."""
         return self._active
@@ -489,9 +502,11 @@ class VelocityAiding:
 
 def apply_aiding(f: Any, aiding: VelocityAiding) -> None:
     """What the aiding tells the filter before its update (after
-    :meth:`VelocityAiding.aided_accel`): take hold when aiding began, whether the sample is
-    aided, the heading correction due. One place for the per-message pipeline and
-    :func:`~cf_estimator.core.batch.estimate`."""
+    :meth:`VelocityAiding.aided_accel`): the vehicle moves (the start-up averages), take hold
+    when aiding began, whether the sample is aided, the heading correction due. One place for
+    the per-message pipeline and :func:`~cf_estimator.core.batch.estimate`."""
+    if aiding.moving:
+        f.mark_moving()
     if aiding.started:
         f.take_hold(AIDING_TAKE_HOLD_S, reopen_bias=aiding.first_start)
     f.set_aided(aiding.active)
