@@ -102,9 +102,9 @@ def turn_share(s: StepState, p: Any, o: Any) -> Any:
     rotates in the world frame and tilts the estimate by only b/|k1 + jω| (its evidence power
     falls as 1/ω²), while the accelerometer's disagreement is the turn's centripetal
     acceleration ω × v over g (its power grows as ω²): the evidence ratio falls as ω⁻⁴ above
-    the loop's bandwidth. A constant-rate turn looks the
-    same in the body frame as a bias (a steady error), so raising the loop there learns the
-    turn: on a figure-8 the raised loop took up to 6 °/s of a de-biased gyro for bias."""
+    the loop's bandwidth. A constant-rate turn looks the same in the body frame as a bias (a
+    steady error), so raising the loop there learns the turn: on a figure-8 the raised loop took
+    up to 6 °/s of a de-biased gyro for bias."""
     k1_2 = o.maximum(p.k1, BIAS_LEARNING_MIN_K1) ** 2
     w = o.maximum(o.maximum(s.turn_rate_lp, -s.turn_rate_lp)
                   - TURN_BIAS_SIGMAS * o.sqrt(o.maximum(s.bias_var, 0.0)), 0.0)
