@@ -257,6 +257,23 @@ def test_unknown_and_uninstalled_peers(monkeypatch):
         ev.select_peers(["kalman"])
 
 
+def test_onboard_filter_is_read_from_the_recording_and_only_when_named():
+    """`--peers onboard`: the sensor's own filter as recorded (phantom4's Xsens DOTs), scored
+    like every column; never part of 'all'; NaN where a recording has none (EuRoC)."""
+    assert "onboard" not in ev.peer_names() and "onboard" in ev.peer_names(recorded=True)
+    assert ev.select_peers(["onboard"]) == (["onboard"], [])
+    flight = euroc.load_flight(REAL_DATA.parent / "phantom4_horizontal" / "H01_imu1")
+    q = ev.ALGORITHMS["onboard"].run(flight, FilterParams())
+    covered = np.isfinite(q).all(axis=1)
+    assert covered.all()  # the last few ms beyond the file's stamps are held
+    np.testing.assert_allclose(np.linalg.norm(q[covered], axis=1), 1.0, atol=1e-9)
+    score = ev.score_flight(flight, q)["inclination_rms_deg"]
+    assert 0.3 < score < 3.0  # the DOT's filter: about 1-1.5° against the DJI reference
+    # a recording without the file: NaN rows, scored NaN (not a fake 0)
+    mh = euroc.load_flight(REAL_DATA / "MH_04_difficult")
+    assert np.isnan(ev.ALGORITHMS["onboard"].run(mh, FilterParams())).all()
+
+
 def test_peer_adapters_give_up_in_the_sensor_frame():
     """vqf offline and RIANN (when installed) find a static tilt from the accelerometer."""
     n, rate = 600, 200.0

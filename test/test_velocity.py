@@ -1,4 +1,5 @@
-"""Velocity aiding (issue 17): the core module, the heading offset and estimate(velocity=...)."""
+"""Velocity aiding (issues 17, 23): the core module, the in-motion alignment and
+estimate(velocity=...)."""
 
 from __future__ import annotations
 
@@ -12,8 +13,9 @@ import pytest
 from cf_estimator.bench import euroc
 from cf_estimator.bench.scenarios import peak_rms_arcmin, scenario_masks
 from cf_estimator.cli.main import main
+from cf_estimator.core import quaternion as quat
+from cf_estimator.core.alignment import InMotionAlignment
 from cf_estimator.core.batch import estimate
-from cf_estimator.core.heading_offset import HeadingOffsetEstimator
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.velocity import VelocityAiding
 from cf_estimator.metrics import tilt_error_rad
@@ -58,28 +60,51 @@ def _rms(e):
     return float(np.sqrt(np.mean(e * e)))
 
 
-# -- heading offset --------------------------------------------------------------------------
-def test_heading_offset_recovers_a_rotation_between_the_frames():
+# -- in-motion alignment --------------------------------------------------------------------
+def _feed_alignment(est, x0, bias, accel_world, rng, noise=0.05, n=200, dt=0.1):
+    """Windows of a gyro frame P that stays at the sensor (P = I, b̂ = 0) while the true gyro
+    bias ``bias`` turns it: X(t) = X0·Exp(−t·b) maps P to the world; α = X(t)ᵀ·β + noise."""
+    g_up = np.array([0.0, 0.0, 9.81])
+    for k in range(n):
+        t = dt * (k + 1)
+        beta = accel_world(t) + g_up
+        x_t = quat.to_matrix(quat.multiply(quat.from_matrix(x0), quat.exp(-t * bias)))
+        alpha = x_t.T @ beta + rng.normal(0.0, noise, 3)
+        now = np.concatenate([t * np.eye(3).ravel(), np.zeros(3)])  # ∫P·dt = t·I, ∫P·b̂·dt = 0
+        est.update(t, alpha, beta, dt, now, now, (0.0, 0.0, 0.0, -1.0), np.eye(3), np.eye(3))
+    return t
+
+
+def test_alignment_recovers_the_heading_offset_tilt_and_gyro_bias():
     rng = np.random.default_rng(0)
-    est = HeadingOffsetEstimator(required_sigma_rad=0.05, memory_s=60.0)
-    delta = 0.7
-    for k in range(50):
-        av = rng.normal(0.0, 1.0, 2)
-        c, s = math.cos(delta), math.sin(delta)
-        af = (c * av[0] - s * av[1] + rng.normal(0, 0.05), s * av[0] + c * av[1]
-              + rng.normal(0, 0.05))
-        h = est.update(0.1 * k, af, tuple(av), 0.1)
-    assert h.known
-    assert abs(h.offset_rad - delta) < 0.03
-    assert h.sigma_rad < 0.05
+    est = InMotionAlignment(required_sigma_rad=0.05, memory_s=60.0, bias_prior_sigma_rad_s=0.1)
+    delta, tilt = 0.7, np.array([0.05, -0.03, 0.0])
+    bias = np.radians([1.5, -1.0, 0.8])  # [rad/s]: what the gyro frame P drifts by
+    x0 = quat.to_matrix(quat.multiply(quat.exp([0.0, 0.0, delta]), quat.exp(tilt)))
+
+    def zigzag(t):
+        return np.array([4.0 * math.sin(2.0 * math.pi * t / 6.0), 0.0, 0.0])
+
+    t = _feed_alignment(est, x0, bias, zigzag, rng)
+    x_now = quat.to_matrix(quat.multiply(quat.from_matrix(x0), quat.exp(-t * bias)))
+    h = est.estimate(np.eye(3))  # the filter's world = P: δ is X's heading, reversed
+    assert h.known and h.sigma_rad < 0.05
+    heading_now = math.atan2(x_now[1, 0] - x_now[0, 1], x_now[0, 0] + x_now[1, 1])
+    assert abs(math.remainder(h.offset_rad + heading_now, 2 * math.pi)) < 0.02
+    np.testing.assert_allclose(est.bias_rad_s, bias, atol=np.radians(0.05))
+    # the tilt correction turns the filter's vertical (P's z) onto the fit's (X_now's)
+    fix = est.tilt_correction(np.eye(3))
+    up_fit = quat.rotate(quat.exp(fix), x_now[2])
+    assert abs(fix[2]) < 1e-9 and np.linalg.norm(up_fit - [0.0, 0.0, 1.0]) < 0.003
 
 
-def test_heading_offset_unknown_without_horizontal_acceleration():
-    est = HeadingOffsetEstimator(required_sigma_rad=0.1, memory_s=60.0)
+def test_alignment_unknown_without_horizontal_acceleration():
+    est = InMotionAlignment(required_sigma_rad=0.1, memory_s=60.0)
     rng = np.random.default_rng(1)
-    for k in range(100):  # hover: only noise on both sides
-        h = est.update(0.1 * k, tuple(rng.normal(0, 0.2, 2)), tuple(rng.normal(0, 0.02, 2)), 0.1)
-    assert not h.known
+    _feed_alignment(est, np.eye(3), np.zeros(3), lambda t: np.zeros(3), rng, noise=0.2, n=100)
+    h = est.estimate(np.eye(3))
+    # not known, and the heading stays the filter's (X starts at W): nothing invented from noise
+    assert not h.known and abs(h.offset_rad) < 0.05
 
 
 # -- bit-equality when the velocity is absent or never usable --------------------------------

@@ -887,6 +887,7 @@ def _velocity_summary(pipe: Any, n_vel: int) -> dict[str, Any]:
         "aided_horizontal_fraction": st.horizontal_samples
         / max(1, pipe.counters.get("processed", 0)),
         "time_to_aid_s": _finite_or_none(st.first_aided_t_s - st.first_velocity_t_s),
+        "time_to_align_s": _finite_or_none(st.aligned_t_s - st.first_velocity_t_s),
         "aided_for_s_at_end": st.aided_for_s,
     }
 

@@ -18,6 +18,7 @@ import importlib
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -44,12 +45,15 @@ class Algorithm:
             the estimator's initialisation; ``params`` matters only to ours).
         package: PyPI package it needs (None: part of cf_estimator).
         ours: True for our filter's variants (always run), False for peers (chosen by name).
+        recorded: read from the recording, not run (the sensor's own onboard filter): only when
+            named, never in ``--peers all``.
     """
 
     name: str
     run: Runner
     package: str | None = None
     ours: bool = False
+    recorded: bool = False
 
 
 def _ours_online(flight: Flight, params: FilterParams) -> np.ndarray:
@@ -86,6 +90,35 @@ def _peer(name: str) -> Runner:
     return run
 
 
+#: The recording's own onboard filter output beside ``mav0`` (the Xsens DOTs' of the phantom4
+#: campaigns): stamp [ns], q_w, q_x, q_y, q_z, in the ground truth's frames.
+ONBOARD_FILE = "xsens_dot_orientation.csv"
+#: Longest gap [s] at either end of the recording over which its first/last sample is held.
+ONBOARD_HOLD_S = 0.1
+
+
+def _onboard(flight: Flight, _params: FilterParams) -> np.ndarray:
+    """The sensor's own onboard filter as recorded (:data:`ONBOARD_FILE`), on the flight's IMU
+    stamps (normalised linear interpolation of the quaternion, sign-aligned); NaN rows beyond
+    its stamps (by more than :data:`ONBOARD_HOLD_S`) or if the recording has no such file."""
+    out = np.full((flight.t_s.size, 4), np.nan)
+    path = Path(flight.path) / ONBOARD_FILE
+    if not path.is_file():
+        return out
+    d = np.loadtxt(path, delimiter=",", comments="#", ndmin=2)
+    t = (d[:, 0] - flight.t0_ns) * 1e-9
+    q = d[:, 1:5].copy()
+    flips = np.concatenate([[1.0], np.cumprod(np.where(np.sum(q[1:] * q[:-1], axis=1) < 0.0,
+                                                        -1.0, 1.0))])
+    q *= flips[:, None]
+    # held over a last gap of up to ONBOARD_HOLD_S at either end (the two streams' last
+    # samples differ by a few ms: a NaN there would void the whole recording's score)
+    inside = (flight.t_s >= t[0] - ONBOARD_HOLD_S) & (flight.t_s <= t[-1] + ONBOARD_HOLD_S)
+    qi = np.stack([np.interp(flight.t_s[inside], t, q[:, c]) for c in range(4)], axis=1)
+    out[inside] = qi / np.linalg.norm(qi, axis=1, keepdims=True)
+    return out
+
+
 ALGORITHMS: dict[str, Algorithm] = {}
 
 
@@ -99,11 +132,13 @@ register(Algorithm("cf_estimator_offline", _ours_offline, ours=True))
 for _name, _package in (("vqf", "vqf"), ("vqf_offline", "vqf"), ("madgwick", "ahrs"),
                         ("fusion", "imufusion"), ("complementary", None), ("riann", "riann")):
     register(Algorithm(_name, _peer(_name), _package))
+register(Algorithm("onboard", _onboard, recorded=True))
 
 
-def peer_names() -> list[str]:
-    """Names of the peers (non-``ours`` algorithms), in registration order."""
-    return [a.name for a in ALGORITHMS.values() if not a.ours]
+def peer_names(recorded: bool = False) -> list[str]:
+    """Names of the peers (non-``ours`` algorithms), in registration order; the recorded ones
+    (``onboard``) only with ``recorded``."""
+    return [a.name for a in ALGORITHMS.values() if not a.ours and (recorded or not a.recorded)]
 
 
 def installed(algorithm: Algorithm) -> bool:
@@ -120,7 +155,7 @@ def installed(algorithm: Algorithm) -> bool:
 def select_peers(names: Sequence[str]) -> tuple[list[str], list[str]]:
     """(peers to run, peers skipped because their package is not installed), order kept;
     ValueError for an unknown name."""
-    valid = peer_names()
+    valid = peer_names(recorded=True)
     for n in names:
         if n not in valid:
             raise ValueError(f"unknown peer {n!r}; valid: {', '.join(valid)}, all, none")

@@ -126,7 +126,8 @@ def mag_line(s: dict[str, Any]) -> str:
 
 def velocity_line(s: dict[str, Any]) -> str:
     """``velocity N on TOPIC: used U, stale S, rejected ...; aided A IMU samples (share,
-    share aided horizontally; from T s after the first velocity); heading ...``."""
+    share aided horizontally; from T s after the first velocity; aligned at T s); heading
+    ...``."""
     v = s["velocity"]
     topic = s["topics"].get("velocity")
     if "used" not in v:
@@ -134,10 +135,11 @@ def velocity_line(s: dict[str, Any]) -> str:
     offset, sigma = v.get("heading_offset_rad"), v.get("heading_sigma_rad")
     heading = (f"heading offset {math.degrees(offset):+.1f} deg ± {math.degrees(sigma):.1f}"
                if sigma is not None and offset is not None else "heading offset not observed")
-    to_aid = v.get("time_to_aid_s")
+    to_aid, to_align = v.get("time_to_aid_s"), v.get("time_to_align_s")
     began = (f" ({100.0 * v['aided_fraction']:.0f} %, horizontally "
              f"{100.0 * v['aided_horizontal_fraction']:.0f} %; from {to_aid:.1f} s after the "
-             "first velocity)" if to_aid is not None else "")
+             "first velocity" + (f"; aligned at {to_align:.1f} s" if to_align is not None else "")
+             + ")" if to_aid is not None else "")
     return (f"velocity {v['messages_in']} on {topic}: used {v['used']}, stale {v['stale']}, "
             f"rejected {sum(v['rejected'].values())} ({_format_counts(v['rejected'])}); aided "
             f"{v['aided_samples']} IMU samples{began}; {heading}"

@@ -258,6 +258,21 @@ class ComplementaryFilter:
             up = -1.0 if self._params.world_frame == "ned" else 1.0  # the state is ENU inside
             turn_heading(self._state, up * float(turn_rad), FloatOps)
 
+    def realign(self, tilt_rad: Vector, bias_rad_s: Vector) -> None:
+        """Take an outside estimate of tilt and gyro bias (velocity aiding's in-motion
+        alignment, once it is known): q ← Exp(tilt_rad) ⊗ q, ``tilt_rad`` the rotation vector
+        [rad] in the output world frame (ENU or NED) from the filter's tilt to the outside one;
+        the bias estimate ← ``bias_rad_s`` [rad/s] (sensor frame). The aperiodic unit's memory
+        of errors measured against the old tilt is cleared."""
+        rot = np.asarray(tilt_rad, dtype=float)
+        if self._params.world_frame == "ned":  # the state is ENU inside
+            rot = np.array([rot[1], rot[0], -rot[2]])
+        s = self._state
+        q = quat.normalize(quat.multiply(quat.exp(rot), [s.qw, s.qx, s.qy, s.qz]))
+        s.qw, s.qx, s.qy, s.qz = (float(c) for c in q)
+        s.bx, s.by, s.bz = (float(c) for c in bias_rad_s)
+        s.lx = s.ly = s.lz = 0.0
+
     def set_aided(self, aided: bool) -> None:
         """Say whether the next update's accelerometer sample is velocity-aided (the vehicle's
         acceleration taken out): the aperiodic unit then only averages vibration

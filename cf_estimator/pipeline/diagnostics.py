@@ -275,8 +275,17 @@ def velocity_values(status: Any) -> list[tuple[str, str]]:
         ("velocity_aided_axes", status.axes),
         ("velocity_aided_for_s", _f(status.aided_for_s)),
         ("velocity_time_to_aid_s", _f(_time_to_aid(status))),
+        ("velocity_aligned", str(math.isfinite(status.aligned_t_s)).lower()),
+        ("velocity_time_to_align_s", _f(_time_to_align(status))),
     ]
     return values
+
+
+def _time_to_align(status: Any) -> float | None:
+    """Seconds from the first accepted velocity sample to the in-motion alignment the filter
+    took its tilt and gyro bias from (None: not yet)."""
+    t = status.aligned_t_s - status.first_velocity_t_s
+    return t if math.isfinite(t) else None
 
 
 def _time_to_aid(status: Any) -> float | None:

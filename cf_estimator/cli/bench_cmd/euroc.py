@@ -42,8 +42,8 @@ def add_parser(sub: Any) -> None:
                    help="seconds after the first IMU sample before scoring (default %(default)s)")
     e.add_argument("--peers", default="all", metavar="LIST",
                    help="comma-separated: vqf,vqf_offline,madgwick,fusion,complementary,riann, "
-                   "'all' "
-                   "(default: those installed) or 'none'")
+                   "'all' (default: those installed), 'none', and onboard (the recording's own "
+                   "onboard filter, xsens_dot_orientation.csv beside mav0: only when named)")
     e.add_argument("--params", metavar="YAML", help="ROS 2 parameter file for our filter "
                    "(default: the shipped defaults, FilterParams())")
     e.add_argument("--start-at", metavar="LIST",
