@@ -62,18 +62,20 @@ MIN_NOISE2_M2_S4 = 1e-6
 #: 0.72°, EuRoC mid-air 60 s 1.21°; with 0.02 rad/s: 0.70°, 0.89°; with the filter's own
 #: 0.1 rad/s prior: 0.86°, 1.19°; thesis aided peak 25.0', 27.3', 38.9').
 VERTICAL_BIAS_PRIOR_SIGMA_RAD_S = 0.02
-#: Gauss–Newton iterations per window at most, until the rotation step is below CONVERGED_RAD.
-MAX_ITERATIONS = 10
-CONVERGED_RAD = 1e-3
+#: Gauss–Newton iterations per kept window at most, while the rotation step exceeds
+#: CONVERGED_RAD [rad]: a heading revealed tens of degrees off converges within the window;
+#: smaller steps go on with the next windows (each iteration costs as much as the first).
+MAX_ITERATIONS = 5
+CONVERGED_RAD = 1e-2
 #: Floor of the bias prior's variance [(rad/s)²] (1e-4 °/s: a filter that has rested long).
 MIN_BIAS_VAR = 3e-12
 #: Windows older than this many memories are dropped (weight below e⁻²).
 REMEMBER_MEMORIES = 2.0
 #: At most this many windows kept per window length (new information 1/this each): overlapping
-#: windows share most of their data, and the fit's cost (a solve per kept window, about 1 ms
-#: for the 600 windows of 2 memories of 60 s) must not grow with the velocity's rate (phantom4
-#: aided, horizontal / vertical: 10 per window 0.826 / 0.698°, 5: 0.838 / 0.695°, 2: 0.848 /
-#: 0.714°).
+#: windows share most of their data, and the fit's cost (a solve per kept window over the 600
+#: windows of 2 memories of 60 s) must not grow with the velocity's rate (phantom4 aided,
+#: horizontal / vertical: 10 per window 0.826 / 0.698°, 5: 0.838 / 0.695°, 2: 0.848 / 0.714°;
+#: the node load with 10 per window and 3 memories missed its p99 target, BENCHMARKS.md).
 ROWS_PER_WINDOW = 5.0
 
 # columns of a stored window
@@ -134,13 +136,21 @@ class InMotionAlignment:
         """The fitted gyro bias b [rad/s] (sensor frame)."""
         return self._bias.copy()
 
+    def offer(self, share: float) -> bool:
+        """A new window with this ``share`` of new information (0..1, its interval over its
+        length): True if it is to be kept (:meth:`update` it), False if its information is
+        carried over to the next one (ROWS_PER_WINDOW; the first window is always kept)."""
+        self._share += min(max(float(share), 0.0), 1.0)
+        return self._share >= 1.0 / ROWS_PER_WINDOW or not len(self._rows)
+
     def update(self, t_s: float, force_p: Sequence[float], accel_world: Sequence[float],
-               share: float, drift_mid: Sequence[float], drift_now: Sequence[float],
+               drift_mid: Sequence[float], drift_now: Sequence[float],
                filter_bias: Sequence[float], w_filter_from_p: np.ndarray,
                p_now: np.ndarray) -> None:
-        """Add one window ending at t_s [s]: the mean specific force [m/s²] over it in P (α);
-        the velocity's acceleration minus gravity [m/s²] in its world frame (β); ``share`` of
-        new information (0..1); ``drift_mid``/``drift_now``: ∫P·dt [s] (9, rows) and ∫P·b̂·dt
+        """Keep one window ending at t_s [s] (after :meth:`offer` said so; its weight is the
+        information offered since the last kept one) and fit: the mean specific force [m/s²]
+        over it in P (α); the velocity's acceleration minus gravity [m/s²] in its world frame
+        (β); ``drift_mid``/``drift_now``: ∫P·dt [s] (9, rows) and ∫P·b̂·dt
         [rad] (3) at the window's middle and now; ``filter_bias``: b̂ [rad/s] and optionally its
         variance [(rad/s)²] per axis (< 0: none yet: bias_prior_sigma_rad_s), the filter's: the
         fit's prior for b until :meth:`freeze_prior` (the filter still learns: at rest, say);
@@ -158,9 +168,6 @@ class InMotionAlignment:
         else:  # X̂ carried to now by the fitted bias (what P missed since the last window)
             self._x = self._x @ _rotation(self._missed(self._now, now[None, :])[0])
         self._now = now
-        self._share += min(max(float(share), 0.0), 1.0)
-        if self._share < 1.0 / ROWS_PER_WINDOW and len(self._rows):
-            return
         row = np.concatenate([[t_s, self._share], force_p, accel_world, drift_mid])
         self._share = 0.0
         rows = np.vstack([self._rows, row])

@@ -45,7 +45,7 @@ module builds that aided specific force for the unchanged filter step, outside i
   (:meth:`~cf_estimator.core.filter.ComplementaryFilter.realign`): the take-hold of a flight
   started in the air, seconds instead of the loop's slow pull-in (``bench cross`` aided rows,
   before → after: phantom4 horizontal 1.41° → 0.84°, phantom4 vertical 1.24° → 0.69°, EuRoC
-  mid-air 12 s–end 1.68/1.56/1.24° → 1.12/1.26/0.86°).
+  mid-air 12 s–end 1.68/1.56/1.24° → 1.13/1.26/0.86°).
 - **Fallback.** Without a fresh window (no velocity, a stamp older than ``velocity_timeout_s``,
   a dropout) the raw accelerometer sample is returned untouched: the filter's
   outputs are then bit-identical to the unaided filter's.
@@ -431,22 +431,9 @@ class VelocityAiding:
             # mean specific force in the filter's world frame: its horizontal part is the
             # acceleration as the filter sees it (heading offset δ from the velocity's)
             fwx, fwy, fwz = _rot(ww, wx, wy, wz, mx, my, mz)
-            w_mat = to_matrix((ww, wx, wy, wz))
-            g = self._params.gravity_m_s2
-            now = self._bs[-1]
-            self._heading.update(
-                t, (mx, my, mz),
-                (ax, ay, (v[2] - v0[2]) / span + (g if self._params.world_frame == "enu" else -g)),
-                (t - hist[-2][0]) / span if len(hist) > 1 else 1.0,
-                [0.5 * (u + w) for u, w in zip(s0[3:], s[3:], strict=True)], now[3:],
-                bias_state, w_mat, to_matrix(self._p))
-            fit = self._heading.estimate(w_mat)
-            self._hd = fit if self._auto else HeadingOffset(0.0, 0.0, True)
-            if fit.known and math.isnan(self._realigned_t):  # first known: realign
-                self._realigned_t = t_s
-                self._realign = (self._heading.tilt_correction(w_mat),
-                                 self._heading.bias_rad_s)
-                self._heading.freeze_prior()
+            if self._heading.offer((t - hist[-2][0]) / span if len(hist) > 1 else 1.0):
+                self._align(t, t_s, span, (mx, my, mz), v, v0, s, s0,
+                            (ww, wx, wy, wz), bias_state)
             if not self._hd.known:
                 # heading unknown: the vertical acceleration alone, which needs no heading
                 self._m = _rot(ww, -wx, -wy, -wz, fwx, fwy, fwz - (v[2] - v0[2]) / span)
@@ -466,6 +453,28 @@ class VelocityAiding:
             self._m_axes = "xy"
             if self._steer:
                 self._steer_heading(t)
+
+    def _align(self, t: float, now_s: float, span: float, force_p: tuple[float, float, float],
+               v: Sequence[float], v0: Sequence[float], s: Sequence[float],
+               s0: Sequence[float], w_quat: tuple[float, float, float, float],
+               bias_state: Sequence[float]) -> None:
+        """Feed the window [t − span, t] to the in-motion alignment (a kept window: see
+        InMotionAlignment.offer), then take δ from it ('auto') and, the first time it is known,
+        schedule the filter's realignment. ``now_s``: the last IMU stamp; ``s``, ``s0``: the
+        running sums at the window's ends; ``w_quat``: P → the filter's world."""
+        w_mat = to_matrix(w_quat)
+        g = self._params.gravity_m_s2
+        accel = ((v[0] - v0[0]) / span, (v[1] - v0[1]) / span,
+                 (v[2] - v0[2]) / span + (g if self._params.world_frame == "enu" else -g))
+        self._heading.update(t, force_p, accel,
+                             [0.5 * (u + w) for u, w in zip(s0[3:], s[3:], strict=True)],
+                             self._bs[-1][3:], bias_state, w_mat, to_matrix(self._p))
+        fit = self._heading.estimate(w_mat)
+        self._hd = fit if self._auto else HeadingOffset(0.0, 0.0, True)
+        if fit.known and math.isnan(self._realigned_t):  # first known: realign
+            self._realigned_t = now_s
+            self._realign = (self._heading.tilt_correction(w_mat), self._heading.bias_rad_s)
+            self._heading.freeze_prior()
 
     def _steer_heading(self, t: float) -> None:
         """Schedule the turn of the filter's heading towards the velocity's frame (see
