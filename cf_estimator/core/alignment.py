@@ -11,14 +11,14 @@ a perfect gyro; with the true bias b, P misses ∫P·(b − b̂)·dt, so a windo
 now as ``X_now·Exp(ΔJ_k·b − ΔL_k)·α_k`` with ΔJ_k = ∫P·dt and ΔL_k = ∫P·b̂·dt from t_k to now
 (both known). The fit is a weighted least squares over the windows of the last
 :data:`REMEMBER_MEMORIES` memories (weights fading with the memory [s]) for X_now (3 angles)
-and b (3), Gauss–Newton from the last estimate to convergence per kept window (the first
-horizontal accelerations can reveal a heading tens of degrees off), b's prior the filter's own
-bias estimate and variance until the filter takes the fit's
+and b (3), Gauss–Newton from the last estimate per kept window (iterated while a step exceeds
+:data:`CONVERGED_RAD`: the first horizontal accelerations can reveal a heading tens of degrees
+off), b's prior the filter's own bias estimate and variance until the filter takes the fit's
 (:meth:`InMotionAlignment.freeze_prior`), about the vertical at most
 :data:`VERTICAL_BIAS_PRIOR_SIGMA_RAD_S`: the classic in-motion alignment of an inertial
-navigator. Gravity fixes X's tilt at once; horizontal accelerations fix
-its heading and b about the vertical; each world axis is weighed by its own residual scatter
-(vertical velocities are often the noisier: a barometer, a quantised height).
+navigator. Gravity fixes X's tilt at once; horizontal accelerations fix its heading and b about
+the vertical; each world axis is weighed by its own residual scatter (vertical velocities are
+often the noisier: a barometer, a quantised height).
 
 **Open loop.** Nothing here depends on the filter's corrections: a heading offset fitted in the
 filter's own world frame was self-consistent at any error (the tilt the aiding makes with a

@@ -195,7 +195,7 @@ class VelocityAiding:
         self._bt: list[float] = []  # IMU stamps [s]
         self._bs: list[tuple[float, ...]] = []  # self._sum at that stamp
         self._b0 = 0  # first live index of the buffer lists
-        # Σ f_P·dt [m/s] (3), and ('auto') ∫P·dt [s] (3×3, rows) and ∫P·b̂·dt [rad] (3)
+        # Σ f_P·dt [m/s] (3), ∫P·dt [s] (3×3, rows) and ∫P·b̂·dt [rad] (3): the alignment's
         self._sum: tuple[float, ...] = (0.0,) * 15
         self._lp = (0.0, 0.0, 0.0)  # low-pass of f_P (HIGHPASS_TIME_CONSTANT_S)
         self._pending: list[tuple[float, tuple[float, float, float]]] = []
@@ -478,7 +478,8 @@ class VelocityAiding:
 
     def _steer_heading(self, t: float) -> None:
         """Schedule the turn of the filter's heading towards the velocity's frame (see
-        HEADING_STEER_GAIN_1_S); the estimator's sums and δ follow the turn at once."""
+        HEADING_STEER_GAIN_1_S); δ follows the turn at once (the alignment, fitted in P, is
+        not touched by it)."""
         first = self._steer_t is None
         dt = 0.0 if first else min(t - self._steer_t, HEADING_STEER_MAX_DT_S)
         self._steer_t = t
