@@ -274,6 +274,17 @@ def test_onboard_filter_is_read_from_the_recording_and_only_when_named():
     assert np.isnan(ev.ALGORITHMS["onboard"].run(mh, FilterParams())).all()
 
 
+def test_a_corrupt_onboard_file_is_one_line_and_exit_2(tmp_path, capsys):
+    flight = tmp_path / "V01_imu1"
+    flight.mkdir()
+    (flight / "mav0").symlink_to(REAL_DATA.parent / "phantom4" / "V01_imu1" / "mav0")
+    (flight / ev.ONBOARD_FILE).write_text("#stamp,q_w,q_x,q_y,q_z\ngarbage,x\n")
+    assert main(["bench", "euroc", "--data", str(flight), "--peers", "onboard"]) == 2
+    err = capsys.readouterr().err
+    assert "not an onboard orientation file" in err and ev.ONBOARD_FILE in err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
 def test_peer_adapters_give_up_in_the_sensor_frame():
     """vqf offline and RIANN (when installed) find a static tilt from the accelerometer."""
     n, rate = 600, 200.0

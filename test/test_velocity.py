@@ -101,6 +101,23 @@ def test_alignment_recovers_the_heading_offset_tilt_and_gyro_bias():
     assert np.linalg.norm(est._x[2] - x_now[2]) < math.radians(0.5)
 
 
+def test_realign_refuses_non_finite_input_and_keeps_the_state():
+    from cf_estimator.core.filter import ComplementaryFilter
+
+    f = ComplementaryFilter(P6)
+    f.update((0.0, 0.0, 0.0), (0.0, 0.0, 9.81), 0.01)
+    before = (f.orientation_tuple(), tuple(getattr(f.step_state, k) for k in ("bx", "by", "bz")))
+    for tilt, bias in (((math.nan, 0.0, 0.0), (0.0, 0.0, 0.0)),
+                       ((0.0, 0.0, 0.0), (0.0, math.inf, 0.0)), ((0.0, 0.0), (0.0, 0.0, 0.0))):
+        with pytest.raises(ValueError, match="realign"):
+            f.realign(tilt, bias)
+    assert (f.orientation_tuple(), tuple(getattr(f.step_state, k)
+                                         for k in ("bx", "by", "bz"))) == before
+    f.realign((0.01, 0.0, 0.0), (0.001, 0.002, 0.003))  # finite: taken
+    assert tuple(getattr(f.step_state, k) for k in ("bx", "by", "bz")) == (0.001, 0.002, 0.003)
+    assert f.orientation_tuple() != before[0]
+
+
 def test_alignment_unknown_without_horizontal_acceleration():
     est = InMotionAlignment(required_sigma_rad=0.1, memory_s=60.0)
     rng = np.random.default_rng(1)

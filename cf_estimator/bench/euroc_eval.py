@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from cf_estimator import metrics
-from cf_estimator.bench.euroc import Flight
+from cf_estimator.bench.euroc import EurocDataError, Flight
 from cf_estimator.bench.parallel import run_tasks
 from cf_estimator.core.batch import estimate
 from cf_estimator.core.params import FilterParams
@@ -100,12 +100,20 @@ ONBOARD_HOLD_S = 0.1
 def _onboard(flight: Flight, _params: FilterParams) -> np.ndarray:
     """The sensor's own onboard filter as recorded (:data:`ONBOARD_FILE`), on the flight's IMU
     stamps (normalised linear interpolation of the quaternion, sign-aligned); NaN rows beyond
-    its stamps (by more than :data:`ONBOARD_HOLD_S`) or if the recording has no such file."""
+    its stamps (by more than :data:`ONBOARD_HOLD_S`) or if the recording has no such file;
+    EurocDataError (one line) if the file is not such a table."""
     out = np.full((flight.t_s.size, 4), np.nan)
     path = Path(flight.path) / ONBOARD_FILE
     if not path.is_file():
         return out
-    d = np.loadtxt(path, delimiter=",", comments="#", ndmin=2)
+    try:
+        d = np.loadtxt(path, delimiter=",", comments="#", ndmin=2)
+    except ValueError as exc:
+        raise EurocDataError(f"{path}: not an onboard orientation file (stamp [ns], q_w, q_x, "
+                             f"q_y, q_z per row): {exc}") from None
+    if d.shape[0] < 2 or d.shape[1] < 5 or not np.isfinite(d[:, :5]).all():
+        raise EurocDataError(f"{path}: not an onboard orientation file (stamp [ns], q_w, q_x, "
+                             "q_y, q_z per row: at least two finite rows)")
     t = (d[:, 0] - flight.t0_ns) * 1e-9
     q = d[:, 1:5].copy()
     flips = np.concatenate([[1.0], np.cumprod(np.where(np.sum(q[1:] * q[:-1], axis=1) < 0.0,

@@ -173,8 +173,9 @@ class InMotionAlignment:
         rows = np.vstack([self._rows, row])
         self._rows = rows[t_s - rows[:, _T] < REMEMBER_MEMORIES * self.memory_s]
         self._weights = (np.exp(-(t_s - self._rows[:, _T]) / self.memory_s) * self._rows[:, _W])
-        # Gauss–Newton to convergence, the axes' weights held: one step is enough once X̂ is
-        # near, not when the first horizontal accelerations reveal a heading tens of degrees off
+        # Gauss–Newton, the axes' weights held, iterated while a step exceeds CONVERGED_RAD:
+        # one step is enough once X̂ is near, not when the first horizontal accelerations reveal
+        # a heading tens of degrees off
         self._var = self._scatter()
         for _ in range(MAX_ITERATIONS):
             if self._step() < CONVERGED_RAD:

@@ -263,14 +263,20 @@ class ComplementaryFilter:
         alignment, once it is known): q ← Exp(tilt_rad) ⊗ q, ``tilt_rad`` the rotation vector
         [rad] in the output world frame (ENU or NED) from the filter's tilt to the outside one;
         the bias estimate ← ``bias_rad_s`` [rad/s] (sensor frame). The aperiodic unit's memory
-        of errors measured against the old tilt is cleared."""
+        of errors measured against the old tilt is cleared. ValueError (state untouched) unless
+        both are 3 finite values."""
         rot = np.asarray(tilt_rad, dtype=float)
+        bias = np.asarray(bias_rad_s, dtype=float)
+        if rot.shape != (3,) or bias.shape != (3,) or not (np.isfinite(rot).all()
+                                                          and np.isfinite(bias).all()):
+            raise ValueError(f"realign: tilt_rad and bias_rad_s must be 3 finite values, got "
+                             f"{rot.tolist()!r} and {bias.tolist()!r}")
         if self._params.world_frame == "ned":  # the state is ENU inside
             rot = np.array([rot[1], rot[0], -rot[2]])
         s = self._state
         q = quat.normalize(quat.multiply(quat.exp(rot), [s.qw, s.qx, s.qy, s.qz]))
         s.qw, s.qx, s.qy, s.qz = (float(c) for c in q)
-        s.bx, s.by, s.bz = (float(c) for c in bias_rad_s)
+        s.bx, s.by, s.bz = (float(c) for c in bias)
         s.lx = s.ly = s.lz = 0.0
 
     def set_aided(self, aided: bool) -> None:

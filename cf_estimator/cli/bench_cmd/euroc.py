@@ -120,7 +120,7 @@ def run(args: Any) -> int:
         with make_engine(args.cluster, args.jobs) as engine:
             result = ev.run_euroc(flights, params, peers, args.settle, jobs=engine,
                                   velocity=velocity)
-    except ClusterError as exc:
+    except (ClusterError, euroc.EurocDataError) as exc:  # a recording's onboard file, say
         raise CliError(str(exc), 2) from None
     print(f"EuRoC: {len(result.flights)} flight(s) from {args.data}; 6-D inclination error "
           f"[deg] vs ground truth after the first {args.settle:g} s: RMS / max")
