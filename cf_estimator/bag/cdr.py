@@ -176,20 +176,37 @@ def decode_block(raws: Sequence[bytes], msgtype: str, ros2: bool,
     return block
 
 
+def decode_rows(rows: np.ndarray, msgtype: str, ros2: bool) -> Block | None:
+    """The messages given as the rows of an (n, size) uint8 array (one serialized message per
+    row, all of one length) as a :class:`Block`, when every one has the plain layout and one
+    frame id (what :func:`decode_block` gives them); None otherwise (use decode_block)."""
+    imu = msgtype == IMU_TYPE
+    block = Block(int(rows.shape[0]), imu)
+    if rows.shape[0] and _decode_uniform_rows(block, rows, ros2,
+                                              IMU_DOUBLES if imu else MAG_DOUBLES):
+        return block
+    return None
+
+
 def _decode_uniform(block: Block, raws: Sequence[bytes], ros2: bool, n_doubles: int) -> bool:
     """The common case at NumPy speed: every message has the plain layout, one size and one
     frame id. False (nothing written) when that is not so."""
     n = len(raws)
     if n == 0:
         return False
-    lay = _layout(raws[0], ros2)
     size = len(raws[0])
-    if lay is None or size != lay[1] + 8 * n_doubles:
-        return False
     buf = np.frombuffer(b"".join(raws), dtype=np.uint8)
     if buf.shape[0] != n * size:
         return False  # sizes differ
-    buf = buf.reshape(n, size)
+    return _decode_uniform_rows(block, buf.reshape(n, size), ros2, n_doubles)
+
+
+def _decode_uniform_rows(block: Block, buf: np.ndarray, ros2: bool, n_doubles: int) -> bool:
+    """:func:`_decode_uniform` of messages stacked as the rows of ``buf`` (n, size)."""
+    n, size = buf.shape
+    lay = _layout(buf[0].tobytes(), ros2)
+    if lay is None or size != lay[1] + 8 * n_doubles:
+        return False
     frame_end, body = lay
     # same header prefix after the stamp (encapsulation, frame id length, frame id, its NUL)
     ref = buf[0]

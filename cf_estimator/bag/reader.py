@@ -16,6 +16,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+import numpy as np
 from rosbags.highlevel import AnyReader
 
 from cf_estimator.bag.types import IMU_TYPE, MAG_TYPE, BagError, one_line, typestore
@@ -253,6 +254,10 @@ class InputBag:
         by rosbags when asked for (:meth:`MessageChunk.msg`). Failures as :meth:`messages`."""
         from cf_estimator.bag import cdr
 
+        fast = self._mcap_source(topics)
+        if fast is not None:
+            yield from self._fast_chunks(fast)
+            return
         it = self._raw_messages(topics)
         if it is None:
             return
@@ -280,6 +285,33 @@ class InputBag:
                 for k, i in enumerate(idx):
                     chunk.row[i] = k
             yield chunk
+
+    def _mcap_source(self, topics: Iterable[str]) -> Any:
+        """:mod:`cf_estimator.bag.mcapread` over ``topics`` where it reads this bag as rosbags
+        does (one indexed mcap file; ``CF_ESTIMATOR_MCAP_READER=rosbags`` turns it off), else
+        None."""
+        if os.environ.get("CF_ESTIMATOR_MCAP_READER", "") == "rosbags" or not self.is_ros2:
+            return None
+        from cf_estimator.bag import mcapread
+
+        wanted = set(topics)
+        conns = [c for c in self._reader.connections if c.topic in wanted]
+        try:
+            return mcapread.source_for(self._reader, conns)
+        except Exception:  # noqa: BLE001 - anything unexpected: rosbags reads it
+            return None
+
+    def _fast_chunks(self, source: Any) -> Iterator[FastChunk]:
+        """:meth:`chunks` from an :class:`cf_estimator.bag.mcapread.McapSource`."""
+        it = source.batches(_BULK_CHUNK)
+        while True:
+            try:
+                batch = next(it)
+            except StopIteration:
+                return
+            except Exception as exc:  # noqa: BLE001 - any reader failure is a bad bag
+                raise BagError(f"{self.path}: cannot read messages: {one_line(exc)}") from exc
+            yield FastChunk(self, source.connections, batch)
 
     def to_jazzy(self, msg: Any, msgtype: str) -> Any:
         """``msg`` (from this bag's typestore) as a Jazzy message object (ROS 1 ``seq`` dropped)."""
@@ -325,6 +357,81 @@ class MessageChunk:
     def msg(self, i: int) -> Any:
         """Message i as an object (a light view for a decoded row, else rosbags')."""
         block = self.blocks.get(self.msgtype[i])
+        if block is not None:
+            return block.message(self.row[i])
+        return self._decode(i)
+
+
+class FastChunk:
+    """:class:`MessageChunk` over a batch of :mod:`cf_estimator.bag.mcapread` (arrays, no
+    object per message): the same ``topic``, ``msgtype``, ``log_ns``, ``row``, ``blocks`` and
+    :meth:`msg`, and :meth:`kinds`."""
+
+    def __init__(self, bag: InputBag, connections: Sequence[Any], batch: Any) -> None:
+        from cf_estimator.bag import cdr
+
+        self._bag = bag
+        self._conns = connections
+        self._batch = batch
+        self.log_ns = batch.log_ns.tolist()
+        self.blocks: dict[str, Any] = {}
+        conn = batch.conn
+        n = len(batch)
+        row = np.full(n, -1, dtype=np.int64)
+        ros2 = bag.is_ros2
+        for msgtype in (IMU_TYPE, MAG_TYPE):
+            ks = [k for k, c in enumerate(connections) if c.msgtype == msgtype]
+            if not ks:
+                continue
+            sel = np.flatnonzero(conn == ks[0]) if len(ks) == 1 else \
+                np.flatnonzero(np.isin(conn, ks))
+            if sel.size == 0:
+                continue
+            rows = batch.rows(sel)
+            block = cdr.decode_rows(rows, msgtype, ros2) if rows is not None else None
+            if block is None:
+                idx = sel.tolist()
+                raws = [batch.raw(i) for i in idx]
+                by_raw = {id(r): i for r, i in zip(raws, idx, strict=True)}
+                block = cdr.decode_block(raws, msgtype, ros2,
+                                         lambda raw, _mt, m=by_raw: self._decode(m[id(raw)]))
+            self.blocks[msgtype] = block
+            row[sel] = np.arange(sel.size)
+        self.row = row.tolist()
+
+    def __len__(self) -> int:
+        return len(self._batch)
+
+    @functools.cached_property
+    def topic(self) -> list[str]:
+        names = [c.topic for c in self._conns]
+        return [names[k] for k in self._batch.conn.tolist()]
+
+    @functools.cached_property
+    def msgtype(self) -> list[str]:
+        types = [c.msgtype for c in self._conns]
+        return [types[k] for k in self._batch.conn.tolist()]
+
+    def kinds(self, table: dict[str, int], default: int) -> list[int]:
+        """Per message: ``table[topic]`` (``default`` for a topic not in it)."""
+        lut = np.asarray([table.get(c.topic, default) for c in self._conns], dtype=np.int64)
+        return lut[self._batch.conn].tolist()
+
+    def _decode(self, i: int) -> Any:
+        conn = self._conns[int(self._batch.conn[i])]
+        raw = self._batch.raw(i)
+        try:
+            return self._bag._reader.deserialize(raw, conn.msgtype)  # noqa: SLF001
+        except Exception as exc:  # noqa: BLE001
+            raise BagError(
+                f"{self._bag.path}: cannot decode a {conn.msgtype} message on {conn.topic} at "
+                f"log time {self.log_ns[i]} ns: {one_line(exc)}"
+            ) from exc
+
+    def msg(self, i: int) -> Any:
+        """Message i as an object (a light view for a decoded row, else rosbags')."""
+        conn = self._conns[int(self._batch.conn[i])]
+        block = self.blocks.get(conn.msgtype)
         if block is not None:
             return block.message(self.row[i])
         return self._decode(i)

@@ -211,6 +211,51 @@ _MIN_BULK_RUN = 16
 _BIAS_SAMPLE_PERIOD_S = 0.02
 
 
+class _Col:
+    """One per-output series of a replay: values appended one at a time (the per-message
+    path; None in a ``width``-wide series: no value, NaN) or a run's block at once (the bulk
+    path: an array, no Python object per row)."""
+
+    __slots__ = ("_blocks", "_cur", "_width", "_dtype")
+
+    def __init__(self, width: int = 0, values: list[Any] | None = None,
+                 dtype: type = float) -> None:
+        self._blocks: list[np.ndarray] = []
+        self._cur: list[Any] = values if values is not None else []
+        self._width, self._dtype = width, dtype
+
+    def append(self, value: Any) -> None:
+        self._cur.append(value)
+
+    def add(self, block: np.ndarray) -> None:
+        """Values of several outputs at once (rows of ``block``)."""
+        if self._cur:
+            self._blocks.append(self._stack(self._cur))
+            self._cur = []
+        self._blocks.append(block)
+
+    def _stack(self, values: list[Any]) -> np.ndarray:
+        if self._width:
+            nan = (np.nan,) * self._width
+            return np.array([x if x is not None else nan for x in values],
+                            dtype=float).reshape(-1, self._width)
+        return np.asarray(values, dtype=self._dtype)
+
+    def __len__(self) -> int:
+        return sum(b.shape[0] for b in self._blocks) + len(self._cur)
+
+    def array(self) -> np.ndarray:
+        """The whole series as one array ((n,) or (n, width))."""
+        parts = [*self._blocks, self._stack(self._cur)]
+        return parts[0] if len(parts) == 1 else np.concatenate(parts)
+
+    def values(self) -> list[Any]:
+        """The values as appended (the offline replay's, which never adds blocks)."""
+        if not self._blocks:
+            return list(self._cur)
+        return [tuple(r) if isinstance(r, list) else r for r in self.array().tolist()]
+
+
 class _RecordingFilter(ComplementaryFilter):
     """The pipeline's filter, recording what the pipeline passes it (accepted samples only) and
     where it resets: the offline replay runs :mod:`cf_estimator.core.offline` on them."""
@@ -278,17 +323,17 @@ class _Run:
         self.publish_rpy = bool(self.pparams.publish_rpy)
         self.out_path = Path(variant.output_path) if variant.output_path is not None else None
         self.bag: io.OutputBag | None = None
-        self.t: list[float] = []
-        self.q: list[Sequence[float] | None] = []  #: w, x, y, z per output (None: no attitude)
-        self.rpy: list[Any] = []
-        self.clipped: list[bool] = []
-        self.enorm: list[float] = []
+        self.t = _Col()  #: header stamp [s] per output
+        self.q = _Col(4)  #: w, x, y, z per output (None: no attitude)
+        self.rpy = _Col(3)
+        self.clipped = _Col(dtype=bool)
+        self.enorm = _Col()
         self.bias_t: list[float] = []
         self.bias: list[tuple[float, float, float]] = []
         self.bias_sigma: list[float] = []
-        self.rest: list[bool] = []
-        self.tilt_var: list[float] = []
-        self.yaw_var: list[float] = []
+        self.rest = _Col(dtype=bool)
+        self.tilt_var = _Col()
+        self.yaw_var = _Col()
         self.next_bias_t = -math.inf
         self.warnings: list[str] = []
         self._seen: set[str] = set()
@@ -359,38 +404,41 @@ class _Run:
     def imu_run(self, run: bulk.Scan) -> None:
         """An ordinary run: the filter over it, then its outputs and series as :meth:`imu`
         writes them one by one."""
-        ts = [s + ns * 1e-9 for s, ns in zip(run.sec, run.nsec, strict=True)]
+        ts = run.sec + run.nsec * 1e-9  # s + ns * 1e-9, as imu() computes it
         marks = []
         next_bias = self.next_bias_t
-        for k, t in enumerate(ts):
-            if t >= next_bias:
-                marks.append(k)
-                next_bias = t + _BIAS_SAMPLE_PERIOD_S
+        t_list = ts.tolist()
+        k = int(np.searchsorted(ts, next_bias, side="left")) if ts.size else 0
+        # stamps increase in a run: the next sample is the first stamp at or after next_bias
+        while k < len(t_list):
+            marks.append(k)
+            next_bias = t_list[k] + _BIAS_SAMPLE_PERIOD_S
+            k += 1 + int(np.searchsorted(ts[k + 1:], next_bias, side="left"))
         c = bulk.commit(self.pipe, run)
         self.next_bias_t = next_bias
         if marks:  # the bias estimate after each marked row, as imu() samples it
-            self.bias_t.extend(ts[k] for k in marks)
+            self.bias_t.extend(t_list[k] for k in marks)
             self.bias.extend(tuple(r) for r in c.extra[marks, 15:18].tolist())
             self.bias_sigma.extend(c.extra[marks, 10].tolist())
         bag = self.bag
         if bag is not None:  # every output message of the run encoded and written at once
-            sec, nsec = np.asarray(run.sec, dtype=np.int64), np.asarray(run.nsec, dtype=np.int64)
+            sec, nsec = run.sec, run.nsec
             rows = cdr.imu_cdr_rows(sec, nsec, run.frame, c.q_wxyz[:, [1, 2, 3, 0]],
                                     c.covariance, c.gyro, c.av_cov, c.accel, c.la_cov)
             topics = [(OUT_IMU_TOPIC, io.IMU_TYPE, rows)]
             if self.publish_rpy:
                 topics.append((OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE,
                                cdr.vector3_stamped_rows(sec, nsec, run.frame,
-                                                        np.asarray(c.rpy, dtype=np.float64))))
-            bag.write_rows(np.asarray(run.log_ns, dtype=np.int64), topics)
-        self.t.extend(ts)
-        self.q.extend(c.q_wxyz.tolist())  # rows as lists: _series reads them as tuples
-        self.rpy.extend(c.rpy)
-        self.clipped.extend((c.extra[:, 6] != 0.0).tolist())
-        self.enorm.extend(c.error_norm)
-        self.rest.extend((c.extra[:, 8] != 0.0).tolist())
-        self.tilt_var.extend((c.covariance[:, 0] + c.covariance[:, 4]).tolist())
-        self.yaw_var.extend(c.covariance[:, 8].tolist())
+                                                        c.rpy)))
+            bag.write_rows(run.log_ns, topics)
+        self.t.add(ts)
+        self.q.add(c.q_wxyz)
+        self.rpy.add(c.rpy)
+        self.clipped.add(c.extra[:, 6] != 0.0)
+        self.enorm.add(c.error_norm)
+        self.rest.add(c.extra[:, 8] != 0.0)
+        self.tilt_var.add(c.covariance[:, 0] + c.covariance[:, 4])
+        self.yaw_var.add(c.covariance[:, 8])
 
     def imu(self, log_ns: int, msg: Any) -> None:
         out = self.pipe.on_imu(msg)
@@ -436,16 +484,17 @@ class _Run:
     def finish_offline(self) -> None:
         """Offline: replace every output's orientation by the offline estimate, then write the
         held outputs and diagnostics in log-time order."""
-        t = np.asarray(self.t, dtype=float)
+        t = self.t.array()
         q, self.offline_segments = _offline_orientations(t, self.recorder,
                                                          frames.core_params(self.fparams),
                                                          self.pparams.max_dt_s)
         q = self.pipe.output_frame.apply_array(q)  # published world frame, as online
-        self.online_rpy = list(self.rpy)  # what the online filter said, for the plots
-        self.q = [tuple(r) if np.all(np.isfinite(r)) else None for r in q.tolist()]
+        self.online_rpy = self.rpy.values()  # what the online filter said, for the plots
+        self.q = _Col(4, [tuple(r) if np.all(np.isfinite(r)) else None for r in q.tolist()])
         rpy = quat.to_euler(q)
-        self.rpy = [tuple(r) if np.all(np.isfinite(r)) else None for r in rpy.tolist()]
-        for (log_ns, out), qi, ri in zip(self.outputs, self.q, self.rpy, strict=True):
+        self.rpy = _Col(3, [tuple(r) if np.all(np.isfinite(r)) else None for r in rpy.tolist()])
+        for (log_ns, out), qi, ri in zip(self.outputs, self.q.values(), self.rpy.values(),
+                                         strict=True):
             if qi is not None:
                 w, x, y, z = qi
                 out = dataclasses.replace(out, orientation_xyzw=(x, y, z, w), rpy_rad=ri)
@@ -573,8 +622,12 @@ def _read_in_bulk(bag: Any, topics: _Topics, run: _Run, reading: _Reading,
     pipeline at once (pipeline/bulk.py); references as arrays where the reader has them."""
     for chunk in bag.chunks(topics.names):
         reading.logged(chunk.log_ns[0], chunk.log_ns[-1])
-        kinds = [bulk.IMU if t == topics.imu else bulk.MAG if t == topics.mag else bulk.OTHER
-                 for t in chunk.topic]
+        if hasattr(chunk, "kinds"):  # from arrays, without a topic list
+            table = {t: k for t, k in ((topics.mag, bulk.MAG), (topics.imu, bulk.IMU)) if t}
+            kinds = chunk.kinds(table, bulk.OTHER)
+        else:
+            kinds = [bulk.IMU if t == topics.imu else bulk.MAG if t == topics.mag
+                     else bulk.OTHER for t in chunk.topic]
         reading.n_imu += kinds.count(bulk.IMU)
         reading.n_mag += kinds.count(bulk.MAG)
         run.events(bulk.Events(kinds, chunk.log_ns, chunk.row, chunk.blocks.get(io.IMU_TYPE),
@@ -897,23 +950,20 @@ def _finite_or_none(x: float) -> float | None:
 
 
 def _series(r: _Run, ref_t: Sequence[float], ref_q: Sequence[Any]) -> ReplaySeries:
-    nan4, nan3 = (np.nan,) * 4, (np.nan,) * 3
-    q = np.array([x if x is not None else nan4 for x in r.q], dtype=float).reshape(-1, 4)
-    rpy = np.array([x if x is not None else nan3 for x in r.rpy], dtype=float).reshape(-1, 3)
     return ReplaySeries(
-        t_s=np.asarray(r.t, dtype=float),
-        q_wxyz=q,
-        rpy_rad=rpy,
-        clipped=np.asarray(r.clipped, dtype=bool),
-        error_norm_rad=np.asarray(r.enorm, dtype=float),
+        t_s=r.t.array(),
+        q_wxyz=r.q.array(),
+        rpy_rad=r.rpy.array(),
+        clipped=r.clipped.array(),
+        error_norm_rad=r.enorm.array(),
         bias_t_s=np.asarray(r.bias_t, dtype=float),
         gyro_bias_rad_s=np.asarray(r.bias, dtype=float).reshape(-1, 3),
         gyro_bias_sigma_rad_s=np.asarray(r.bias_sigma, dtype=float),
-        at_rest=np.asarray(r.rest, dtype=bool),
+        at_rest=r.rest.array(),
         online_rpy_rad=np.array([x if x is not None else (np.nan,) * 3 for x in r.online_rpy],
                                 dtype=float).reshape(-1, 3),
         ref_t_s=np.asarray(ref_t, dtype=float),
         ref_q_wxyz=np.asarray(ref_q, dtype=float).reshape(-1, 4),
-        tilt_var_rad2=np.asarray(r.tilt_var, dtype=float),
-        yaw_var_rad2=np.asarray(r.yaw_var, dtype=float),
+        tilt_var_rad2=r.tilt_var.array(),
+        yaw_var_rad2=r.yaw_var.array(),
     )

@@ -48,21 +48,24 @@ class Scan:
 
     end: int  #: index of the first event not in the run
     n_events: int = 0
-    t_ns: list[int] = field(default_factory=list)
-    sec: list[int] = field(default_factory=list)
-    nsec: list[int] = field(default_factory=list)
-    log_ns: list[int] = field(default_factory=list)
-    rows: list[int] = field(default_factory=list)  #: row of each message in ``values``
+    t_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))  #: stamps
+    sec: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    nsec: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    log_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    #: row of each message in ``values``
+    rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
     values: Any = None  #: the IMU block's (n, 37) values: gyro columns 13:16, accel 25:28
-    mag: list[tuple[float, float, float] | None] = field(default_factory=list)
-    mag_t_ns: list[int] = field(default_factory=list)  #: stamp of the row's mag sample
-    dt: list[float] = field(default_factory=list)
+    #: (n, 3) the magnetometer sample each row gives the filter (NaN: none), None: none at all
+    mag: np.ndarray | None = None
+    #: stamp of the row's magnetometer sample (0: none)
+    mag_t_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    dt: np.ndarray = field(default_factory=lambda: np.zeros(0))  #: the filter's interval [s]
     frame: str = ""
     state: dict[str, Any] = field(default_factory=dict)  #: pipeline fields to write back
 
     @property
     def n(self) -> int:
-        return len(self.t_ns)
+        return int(self.t_ns.shape[0])
 
 
 def _ordinary_start(pipe: ImuPipeline) -> bool:
@@ -105,9 +108,10 @@ class Events:
         self.kind, self.log_ns, self.row = kind, log_ns, row
         self.imu, self.mag, self.message = imu, mag, message
         self._cols: dict[str, list[float]] = {}
-        self._cov: dict[tuple[int, bytes | None], list[bool]] = {}
+        self._cov: dict[tuple[int, bytes | None], np.ndarray] = {}
         self._static: dict[str, np.ndarray] | None = None
         self._frames: dict[tuple[int, str | None], np.ndarray] = {}
+        self._stamps: tuple[np.ndarray, np.ndarray] | None = None
 
     def column(self, name: str) -> list[float]:
         """``gx gy gz ax ay az`` (IMU) or ``mx my mz`` (magnetometer) as a list of floats;
@@ -146,8 +150,17 @@ class Events:
             t_ns[sel] = sec * 1_000_000_000 + nsec
             plain = np.asarray(blk.plain, dtype=bool)[r]
             ok[sel] = plain & check(blk.values[r], sec, nsec)
-        self._static = st = {"kind": kind, "ok": ok, "t_ns": t_ns}
+        self._static = st = {"kind": kind, "ok": ok, "t_ns": t_ns, "row": row,
+                             "log_ns": np.asarray(self.log_ns, dtype=np.int64)}
         return st
+
+    def imu_stamps(self) -> tuple[np.ndarray, np.ndarray]:
+        """The IMU block's header ``sec`` and ``nanosec`` per row (int64 arrays)."""
+        if self._stamps is None:
+            blk = self.imu
+            self._stamps = (np.asarray(blk.sec, dtype=np.int64),
+                            np.asarray(blk.nsec, dtype=np.int64))
+        return self._stamps
 
     def frame_is(self, kind: int, frame: str | None) -> np.ndarray:
         """Per event: of ``kind`` and with header frame id ``frame``."""
@@ -157,23 +170,27 @@ class Events:
             blk = self.imu if kind == IMU else self.mag
             out = np.zeros(len(self.kind), dtype=bool)
             if blk is not None:
-                same = [f == frame for f in blk.frame]
-                for i, (k, r) in enumerate(zip(self.kind, self.row, strict=True)):
-                    if k == kind:
-                        out[i] = same[r]
+                st = self.static()
+                frames = blk.frame
+                if frames and frames[0] == frame and frames.count(frame) == len(frames):
+                    same = np.ones(len(frames), dtype=bool)
+                else:
+                    same = np.asarray([f == frame for f in frames], dtype=bool)
+                sel = np.flatnonzero(st["kind"] == kind)
+                out[sel] = same[st["row"][sel]]
             self._frames[key] = out
         return out
 
-    def same_covariance(self, start: int, raw: bytes | None) -> list[bool]:
+    def same_covariance(self, start: int, raw: bytes | None) -> np.ndarray:
         """Per IMU row: its covariance starting at column ``start`` has the bytes ``raw``."""
         key = (start, raw)
         same = self._cov.get(key)
         if same is None:
-            cov = np.ascontiguousarray(self.imu.values[:, start:start + 9]).view(np.uint8)
             if raw is None or len(raw) != 72:
-                same = [False] * self.imu.n
+                same = np.zeros(self.imu.n, dtype=bool)
             else:
-                same = np.all(cov == np.frombuffer(raw, dtype=np.uint8), axis=1).tolist()
+                cov = np.ascontiguousarray(self.imu.values[:, start:start + 9]).view("<u8")
+                same = np.all(cov == np.frombuffer(raw, dtype="<u8"), axis=1)
             self._cov[key] = same
         return same
 
@@ -209,9 +226,9 @@ def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = N
     ok = st["ok"][start:stop]
     if ev.imu is not None and is_imu.any():
         good &= ~is_imu | (ok & ev.frame_is(IMU, p.imu_frame)[start:stop])
-        av = np.asarray(ev.same_covariance(16, p.angular_velocity_covariance.raw), dtype=bool)
-        la = np.asarray(ev.same_covariance(28, p.linear_acceleration_covariance.raw), dtype=bool)
-        rows = np.asarray(ev.row[start:stop], dtype=np.intp)
+        av = ev.same_covariance(16, p.angular_velocity_covariance.raw)
+        la = ev.same_covariance(28, p.linear_acceleration_covariance.raw)
+        rows = st["row"][start:stop]
         imu_pos = np.flatnonzero(is_imu)
         cov_ok = np.ones(stop - start, dtype=bool)
         cov_ok[imu_pos] = av[rows[imu_pos]] & la[rows[imu_pos]]
@@ -234,11 +251,10 @@ def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = N
     end = start + (int(bad[0]) if bad.size else stop - start)
     if end <= start:
         return out
-    # -- the sequential bookkeeping over the run, in the pipeline's order ---------------------
-    kinds, rows_l, t_all = ev.kind, ev.row, st["t_ns"]
+    # -- the bookkeeping over the run, in the pipeline's order ----------------------------------
     max_dt_ns, timeout = p.rules.max_dt_ns, p.rules.mag_timeout_ns
     dt_mean, gaps = p.clock.dt_mean, p.tally.gaps
-    dropped = stale = n_mag = 0
+    stale = 0
     w = p.window
     dt_min, dt_max, dt_sum, n_dt = w.dt_min, w.dt_max, w.dt_sum, w.n_dt
     last = p.clock.last_ns
@@ -247,59 +263,101 @@ def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = N
         mxs, mys, mzs = ev.column("mx"), ev.column("my"), ev.column("mz")
         if p.rules.flip:  # body_frame FLU <-> FRD, as on_mag turns the field
             mys, mzs = ev.column("-my"), ev.column("-mz")
-    t_list = t_all[start:end].tolist()
-    logs = ev.log_ns
-    imu_sec = ev.imu.sec if ev.imu is not None else []
-    imu_nsec = ev.imu.nsec if ev.imu is not None else []
     max_dt_fallback = min(p.pipeline_params.max_dt_s, 0.01)
-    o_rows, o_t, o_sec, o_nsec, o_log = out.rows, out.t_ns, out.sec, out.nsec, out.log_ns
-    o_mag, o_mag_t, o_dt = out.mag, out.mag_t_ns, out.dt
-    for i in range(start, end):
-        kd = kinds[i]
-        if kd == OTHER:
-            continue
-        k = rows_l[i]
-        t_ns = t_list[i - start]
-        if kd == MAG:
-            if pending is not None:
-                dropped += 1
-            pending = (t_ns, mxs[k], mys[k], mzs[k])
-            n_mag += 1
-            continue
-        d_ns = t_ns - last
-        dt = d_ns * 1e-9
-        if n_dt == 0 or dt < dt_min:
-            dt_min = dt
-        if dt > dt_max:
-            dt_max = dt
-        dt_sum += dt
-        n_dt += 1
-        if d_ns > max_dt_ns:
-            gaps += 1
-            dt = dt_mean if dt_mean > 0.0 else max_dt_fallback
-        elif dt_mean > 0.0:
-            dt_mean += 0.05 * (dt - dt_mean)
-        else:
-            dt_mean = dt
-        if pending is not None:
-            if abs(t_ns - pending[0]) <= timeout:
-                o_mag.append((pending[1], pending[2], pending[3]))
-                o_mag_t.append(pending[0])
+    rel_kind = st["kind"][start:end]
+    nz = np.flatnonzero(rel_kind != OTHER)  # IMU and magnetometer events (run positions)
+    k_nz = rel_kind[nz]
+    t_run = st["t_ns"][start:end]
+    imu_at = np.flatnonzero(k_nz == IMU)  # in nz
+    imu_rel = nz[imu_at]
+    n_imu = int(imu_rel.shape[0])
+    rows = st["row"][start:end][imu_rel]
+    t_imu = t_run[imu_rel]
+    # magnetometer samples: each IMU message takes the pending sample (the magnetometer event
+    # just before it, or the one pending at the start); a sample followed by another one
+    # before an IMU message is superseded (dropped)
+    is_mag_nz = k_nz == MAG
+    n_mag = int(np.count_nonzero(is_mag_nz))
+    dropped = int(np.count_nonzero(is_mag_nz[:-1] & is_mag_nz[1:]))
+    if n_mag and pending is not None and bool(is_mag_nz[0]):
+        dropped += 1
+    prev_mag = np.zeros(n_imu, dtype=bool)
+    inner = imu_at > 0
+    prev_mag[inner] = is_mag_nz[imu_at[inner] - 1]
+    mag_ev = np.where(prev_mag, nz[np.maximum(imu_at - 1, 0)], -1)  # run position, or -1
+    first_takes_pending = n_imu > 0 and int(imu_at[0]) == 0 and pending is not None
+    has = prev_mag.copy()
+    mag_t = np.where(prev_mag, t_run[mag_ev], 0)
+    mag = None
+    if n_mag or first_takes_pending:
+        mag = np.full((n_imu, 3), np.nan)
+        if mag_block is not None and prev_mag.any():
+            mrows = st["row"][start:end][mag_ev[prev_mag]]
+            vals = mag_block.values[mrows, 0:3]
+            if p.rules.flip:  # body_frame FLU <-> FRD, as on_mag turns the field
+                vals = np.column_stack([vals[:, 0], -vals[:, 1], -vals[:, 2]])
+            mag[prev_mag] = vals
+        if first_takes_pending:
+            assert pending is not None
+            has[0] = True
+            mag_t[0] = pending[0]
+            mag[0] = pending[1:4]
+        # stale: logged too far from the IMU message it would go with
+        fresh = np.abs(t_imu - mag_t) <= timeout
+        stale = int(np.count_nonzero(has & ~fresh))
+        has &= fresh
+        mag[~has] = np.nan
+        mag_t = np.where(has, mag_t, 0)
+        if not has.any():
+            mag = None
+    # the pending sample after the run: the last magnetometer event when no IMU message
+    # followed it
+    if n_mag and bool(is_mag_nz[-1]):
+        r = int(st["row"][start + int(nz[-1])])
+        pending = (int(t_run[int(nz[-1])]), mxs[r], mys[r], mzs[r])
+    elif n_imu:
+        pending = None
+    # intervals: the window statistics see the raw interval, the filter the mean one across
+    # a gap (pipeline.on_imu's order of operations, its float arithmetic)
+    d_ns = np.diff(t_imu, prepend=np.int64(last))
+    dt_raw = (d_ns * 1e-9).tolist()
+    if n_imu:
+        lo, hi = min(dt_raw), max(dt_raw)
+        if n_dt == 0 or lo < dt_min:
+            dt_min = lo
+        if hi > dt_max:
+            dt_max = hi
+        n_dt += n_imu
+        last = int(t_imu[-1])
+    if n_imu and int(d_ns.max()) > max_dt_ns:
+        dts = []
+        for d, dt in zip(d_ns.tolist(), dt_raw, strict=True):
+            dt_sum += dt
+            if d > max_dt_ns:
+                gaps += 1
+                dt = dt_mean if dt_mean > 0.0 else max_dt_fallback
+            elif dt_mean > 0.0:
+                dt_mean += 0.05 * (dt - dt_mean)
             else:
-                stale += 1
-                o_mag.append(None)
-                o_mag_t.append(0)
-            pending = None
-        else:
-            o_mag.append(None)
-            o_mag_t.append(0)
-        o_rows.append(k)
-        o_t.append(t_ns)
-        o_sec.append(imu_sec[k])
-        o_nsec.append(imu_nsec[k])
-        o_log.append(logs[i])
-        o_dt.append(dt)
-        last = t_ns
+                dt_mean = dt
+            dts.append(dt)
+        out.dt = np.asarray(dts, dtype=np.float64)
+    else:
+        for dt in dt_raw:
+            dt_sum += dt
+            if dt_mean > 0.0:
+                dt_mean += 0.05 * (dt - dt_mean)
+            else:
+                dt_mean = dt
+        out.dt = np.asarray(dt_raw, dtype=np.float64)
+    out.rows = rows
+    out.t_ns = t_imu
+    if ev.imu is not None:
+        out.sec = ev.imu_stamps()[0][rows]
+        out.nsec = ev.imu_stamps()[1][rows]
+    out.log_ns = st["log_ns"][start:end][imu_rel]
+    out.mag = mag
+    out.mag_t_ns = mag_t
     out.end = end
     out.n_events = end - start
     out.frame = p.output_frame_id(str(p.imu_frame))
@@ -317,9 +375,9 @@ class Committed:
     """The run's outputs (one row per IMU message), as ``on_imu`` would have returned them."""
 
     q_wxyz: np.ndarray  #: (n, 4) q_world_from_sensor
-    rpy: list[tuple[float, float, float]]
+    rpy: np.ndarray  #: (n, 3) roll, pitch, yaw [rad]
     extra: np.ndarray  #: (n, EXTRA_COLUMNS): state_extras after each sample
-    error_norm: list[float]
+    error_norm: np.ndarray  #: (n,)
     covariance: np.ndarray  #: (n, 9) orientation covariance of each row (pipeline/covariance.py)
     av_cov: tuple[float, ...]
     la_cov: tuple[float, ...]
@@ -334,57 +392,61 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
     p = pipe
     n = run.n
     f = p.filter
-    sel = run.values[np.asarray(run.rows, dtype=np.intp)]
+    sel = run.values[run.rows]
     gyro = np.ascontiguousarray(sel[:, 13:16])
     acc = np.ascontiguousarray(sel[:, 25:28])
     if p.rules.flip:  # body_frame FLU <-> FRD, as on_imu turns the vectors
         gyro[:, 1:] = -gyro[:, 1:]
         acc[:, 1:] = -acc[:, 1:]
-    mag_rows = [k for k, m in enumerate(run.mag) if m is not None]
-    mag = None
-    if mag_rows:
-        mag = np.full((n, 3), np.nan)
-        for k in mag_rows:
-            mag[k] = run.mag[k]
-    dt = np.array(run.dt, dtype=np.float64)
+    mag = run.mag
+    dt = run.dt
     q = np.empty((n, 4))
     extra = np.empty((n, EXTRA_COLUMNS))
     # the filter over the run (the covariance model's inputs and the bias estimate after each
     # row are columns of extra)
     f.run_rows(gyro, acc, mag, dt, 0, q, extra)
     state = f.step_state
-    # -- counters, statistics and the covariance model, row by row ------------------------------
+    # -- counters, statistics and the covariance model ----------------------------------------
     st = run.state
-    status = extra[:, 9].tolist()
     ex, ey, ez = extra[:, 0], extra[:, 1], extra[:, 2]
-    en = np.sqrt(ex * ex + ey * ey + ez * ez).tolist()
-    clipped = (extra[:, 6] != 0.0).tolist()
-    phase = extra[:, 7].tolist()
-    sigma = extra[:, 10].tolist()
-    lx, ly, yaw_err, noise_a2 = (extra[:, 11].tolist(), extra[:, 12].tolist(),
-                                 extra[:, 13].tolist(), extra[:, 14].tolist())
+    en_arr = np.sqrt(ex * ex + ey * ey + ez * ez)
+    en = en_arr.tolist()
+    clipped_col = extra[:, 6] != 0.0
     heading = bool(state.heading_initialized)  # constant over the run
     model = p.covariance_model
     last_mag = p.mag_input.last_used_ns
-    t_ns = run.t_ns
-    used = [False] * n
-    ages: list[float | None] = [None] * n
-    if mag_rows or last_mag is not None:
-        for k in range(n):
-            if run.mag[k] is not None:
-                ms = status[k]
-                if ms == MAG_USED:
-                    p.tally.mag_used += 1
-                    used[k] = True
-                    last_mag = run.mag_t_ns[k]
-                elif ms == MAG_REJECTED:
-                    p.tally.mag_rejected += 1
-                elif ms == MAG_DISABLED:
-                    p.tally.mag_disabled += 1
-            if last_mag is not None:
-                ages[k] = (t_ns[k] - last_mag) * 1e-9
-    tilts, yaws = model.steps(run.dt, clipped, sigma, phase, en, lx, ly, noise_a2, heading,
-                              yaw_err, used, ages)
+    ages: Any
+    if mag is not None:
+        has = ~np.isnan(mag[:, 0])
+        status = extra[:, 9]
+        used_arr = has & (status == MAG_USED)
+        p.tally.mag_used += int(np.count_nonzero(used_arr))
+        p.tally.mag_rejected += int(np.count_nonzero(has & (status == MAG_REJECTED)))
+        p.tally.mag_disabled += int(np.count_nonzero(has & (status == MAG_DISABLED)))
+        used = used_arr.tolist()
+    else:
+        used_arr = None
+        used = [False] * n
+    if used_arr is not None and used_arr.any():
+        # the stamp of the last sample used up to each row (the one before the run: -1)
+        last_at = np.maximum.accumulate(np.where(used_arr, np.arange(n), -1))
+        last_t = run.mag_t_ns[np.maximum(last_at, 0)]
+        known = last_at >= 0
+        if last_mag is not None:
+            last_t = np.where(known, last_t, last_mag)
+            known[:] = True
+        # (t - last) * 1e-9 as the per-message path computes it; unknown: 0.0, what the
+        # model takes for "never" (age or 0.0)
+        ages = np.where(known, (run.t_ns - last_t) * 1e-9, 0.0).tolist()
+        last_mag = int(run.mag_t_ns[int(last_at[-1])])
+    elif last_mag is not None:
+        ages = ((run.t_ns - last_mag) * 1e-9).tolist()
+    else:
+        ages = [None] * n
+    tilts, yaws = model.steps(dt.tolist(), clipped_col.tolist(), extra[:, 10].tolist(),
+                              extra[:, 7].tolist(), en, extra[:, 11].tolist(),
+                              extra[:, 12].tolist(), extra[:, 14].tolist(), heading,
+                              extra[:, 13].tolist(), used, ages)
     cov = np.zeros((n, 9))
     cov[:, 0] = tilts
     cov[:, 4] = tilts
@@ -399,42 +461,56 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
     p.tally.processed += n
     w = p.window
     w.dt_min, w.dt_max, w.dt_sum, w.n_dt = st["window"]
-    err_sum, err_max = w.err_sum, w.err_max
-    for e in en:
+    err_sum = w.err_sum
+    for e in en:  # in order: the per-message path's rounding
         err_sum += e
-        if e > err_max:
-            err_max = e
-    w.err_sum, w.err_max = err_sum, err_max
+    w.err_sum = err_sum
+    if n:
+        finite = en_arr[~np.isnan(en_arr)]
+        if finite.size and float(finite.max()) > w.err_max:
+            w.err_max = float(finite.max())
     w.n_err += n
-    w.n_clipped += int(np.count_nonzero(extra[:, 6]))
+    w.n_clipped += int(np.count_nonzero(clipped_col))
     if w.n == 0:
-        w.first_ns = run.t_ns[0]
+        w.first_ns = int(run.t_ns[0])
     w.n += n
-    w.last_ns = run.t_ns[-1]
+    w.last_ns = int(run.t_ns[-1])
     # -- outputs ------------------------------------------------------------------------------
     if not p.output_frame.identity:  # core world -> published (nwu, true north), as on_imu
         q = p.output_frame.apply_array(q)
-    atan2, asin = math.atan2, math.asin
-    unwrap = p.pipeline_params.rpy_unwrap
-    prev = p.clock.unwrap_prev
-    rpy = []
-    for qw, qx, qy, qz in q.tolist():
-        roll = atan2(2.0 * (qw * qx + qy * qz), 1.0 - 2.0 * (qx * qx + qy * qy))
-        sp = 2.0 * (qw * qy - qz * qx)
-        pitch = asin(1.0 if sp > 1.0 else (-1.0 if sp < -1.0 else sp))
-        yaw = atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
-        if unwrap:
-            if prev is not None:
-                roll += TWO_PI * round((prev[0] - roll) / TWO_PI)
-                yaw += TWO_PI * round((prev[2] - yaw) / TWO_PI)
-            prev = (roll, pitch, yaw)
-        rpy.append((roll, pitch, yaw))
-    if unwrap:
-        p.clock.unwrap_prev = prev
-    p.last_rpy = rpy[-1]
+    rpy = _rpy(p, q)
+    p.last_rpy = tuple(rpy[-1].tolist())
     elapsed = perf_counter() - t0  # the run's processing time, shared by its messages
     w.proc_sum += elapsed
     if elapsed / n > w.proc_max:
         w.proc_max = elapsed / n
-    return Committed(q, rpy, extra, en, cov, p.angular_velocity_covariance.value,
+    return Committed(q, rpy, extra, en_arr, cov, p.angular_velocity_covariance.value,
                      p.linear_acceleration_covariance.value, gyro, acc)
+
+
+def _rpy(p: ImuPipeline, q: np.ndarray) -> np.ndarray:
+    """(n, 3) roll, pitch, yaw of each row of ``q`` (w, x, y, z) as ``on_imu`` computes them:
+    the arguments with NumPy (the same IEEE operations, in the same order), ``math.atan2`` and
+    ``math.asin`` per row (NumPy's own differ from them in the last bit on some rows), then
+    the unwrap, sequential by nature, when it is on."""
+    qw, qx, qy, qz = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    out = np.empty((q.shape[0], 3))
+    out[:, 0] = list(map(math.atan2, (2.0 * (qw * qx + qy * qz)).tolist(),
+                         (1.0 - 2.0 * (qx * qx + qy * qy)).tolist()))
+    sp = 2.0 * (qw * qy - qz * qx)
+    sp = np.where(sp > 1.0, 1.0, np.where(sp < -1.0, -1.0, sp))
+    out[:, 1] = list(map(math.asin, sp.tolist()))
+    out[:, 2] = list(map(math.atan2, (2.0 * (qw * qz + qx * qy)).tolist(),
+                         (1.0 - 2.0 * (qy * qy + qz * qz)).tolist()))
+    if p.pipeline_params.rpy_unwrap:
+        prev = p.clock.unwrap_prev
+        rows = out.tolist()
+        for k, (roll, pitch, yaw) in enumerate(rows):
+            if prev is not None:
+                roll += TWO_PI * round((prev[0] - roll) / TWO_PI)
+                yaw += TWO_PI * round((prev[2] - yaw) / TWO_PI)
+            prev = (roll, pitch, yaw)
+            rows[k] = [roll, pitch, yaw]
+        p.clock.unwrap_prev = prev
+        out = np.asarray(rows, dtype=np.float64).reshape(-1, 3)
+    return out
