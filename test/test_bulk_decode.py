@@ -231,6 +231,21 @@ def test_write_raw_gives_the_file_rosbags_writer_writes(tmp_path, storage):
         if i % 500 == 0:
             msgs.append(("/diagnostics", io.DIAGNOSTIC_ARRAY_TYPE, 10**9 + 1000 * i,
                          io.diagnostics_message(10**9 + 1000 * i, [])))
+    # the reference: rosbags' own Writer, as OutputBag sets it up
+    from rosbags.rosbag2 import Writer
+
+    from cf_estimator.bag.writer import ROSBAG2_VERSION, STORAGES
+
+    (tmp_path / "rosbags").mkdir()
+    ref = Writer(tmp_path / "rosbags" / "bag", version=ROSBAG2_VERSION,
+                 storage_plugin=STORAGES[storage])
+    ref.open()
+    conns = {}
+    for topic, msgtype, t, m in msgs:
+        if topic not in conns:
+            conns[topic] = ref.add_connection(topic, msgtype, typestore=store)
+        ref.write(conns[topic], t, store.serialize_cdr(m, msgtype))
+    ref.close()
     for name, raw in (("objects", False), ("raw", True)):
         (tmp_path / name).mkdir()
         with io.OutputBag(tmp_path / name / "bag", storage=storage) as bag:
@@ -239,15 +254,16 @@ def test_write_raw_gives_the_file_rosbags_writer_writes(tmp_path, storage):
                     bag.write_raw(topic, msgtype, t, bytes(store.serialize_cdr(m, msgtype)))
                 else:
                     bag.write(topic, msgtype, t, m)
-    a, b = tmp_path / "objects" / "bag", tmp_path / "raw" / "bag"
-    files = sorted(p.name for p in a.iterdir())
-    assert files == sorted(p.name for p in b.iterdir())
-    if storage == "mcap":
-        assert (a / "bag.mcap").stat().st_size > 2**21
-        assert (a / "bag.mcap").read_bytes() == (b / "bag.mcap").read_bytes()
-    assert (a / "metadata.yaml").read_text() == (b / "metadata.yaml").read_text()
-    for topic in (OUT_IMU_TOPIC, OUT_RPY_TOPIC, "/diagnostics"):
-        assert raw_messages(a, topic) == raw_messages(b, topic)
+    a = tmp_path / "rosbags" / "bag"
+    for b in (tmp_path / "objects" / "bag", tmp_path / "raw" / "bag"):
+        files = sorted(p.name for p in a.iterdir())
+        assert files == sorted(p.name for p in b.iterdir())
+        if storage == "mcap":
+            assert (a / "bag.mcap").stat().st_size > 2**21
+            assert (a / "bag.mcap").read_bytes() == (b / "bag.mcap").read_bytes()
+        assert (a / "metadata.yaml").read_text() == (b / "metadata.yaml").read_text()
+        for topic in (OUT_IMU_TOPIC, OUT_RPY_TOPIC, "/diagnostics"):
+            assert raw_messages(a, topic) == raw_messages(b, topic)
 
 
 def test_bulk_encoding_and_write_rows_give_the_bytes_of_message_by_message_writes(tmp_path):
@@ -273,16 +289,28 @@ def test_bulk_encoding_and_write_rows_give_the_bytes_of_message_by_message_write
                                                                  frame, rpy[k].tolist())
     (tmp_path / "one").mkdir()
     (tmp_path / "rows").mkdir()
+    calls = ((0, 1), (1, 4000), (4000, 4001), (4001, 6500), (6500, n))  # several calls
+    # a diagnostics message (bag.write) after each call but the last, as the replay writes
+    diag_after = {hi - 1 for _lo, hi in calls[:-1]}
+
+    def diagnostics(bag: io.OutputBag, k: int) -> None:
+        bag.write("/diagnostics", io.DIAGNOSTIC_ARRAY_TYPE, int(log[k]),
+                  io.diagnostics_message(int(log[k]), []))
+
     with io.OutputBag(tmp_path / "one" / "bag") as bag:
         for k in range(n):
             bag.write_raw(OUT_IMU_TOPIC, io.IMU_TYPE, int(log[k]), rows[k].tobytes())
             bag.write_raw(OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE, int(log[k]),
                           vrows[k].tobytes())
+            if k in diag_after:
+                diagnostics(bag, k)
     with io.OutputBag(tmp_path / "rows" / "bag") as bag:
-        for lo, hi in ((0, 1), (1, 4000), (4000, 4001), (4001, n)):  # several calls
+        for lo, hi in calls:
             bag.write_rows(log[lo:hi], [(OUT_IMU_TOPIC, io.IMU_TYPE, rows[lo:hi]),
                                         (OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE,
                                          vrows[lo:hi])])
+            if hi - 1 in diag_after:
+                diagnostics(bag, hi - 1)
     one, many = tmp_path / "one" / "bag", tmp_path / "rows" / "bag"
     assert (one / "bag.mcap").stat().st_size > 3 * 2**20
     assert (one / "bag.mcap").read_bytes() == (many / "bag.mcap").read_bytes()

@@ -18,6 +18,7 @@ With a reference topic the estimate is scored against it (see :func:`error_stati
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import math
 import os
@@ -408,12 +409,14 @@ class _Run:
         marks = []
         next_bias = self.next_bias_t
         t_list = ts.tolist()
-        k = int(np.searchsorted(ts, next_bias, side="left")) if ts.size else 0
-        # stamps increase in a run: the next sample is the first stamp at or after next_bias
-        while k < len(t_list):
+        n = len(t_list)
+        # stamps do not decrease in a run: the next sample is the first stamp at or after
+        # next_bias (imu()'s test, message by message)
+        k = bisect.bisect_left(t_list, next_bias)
+        while k < n:
             marks.append(k)
             next_bias = t_list[k] + _BIAS_SAMPLE_PERIOD_S
-            k += 1 + int(np.searchsorted(ts[k + 1:], next_bias, side="left"))
+            k = bisect.bisect_left(t_list, next_bias, k + 1)
         c = bulk.commit(self.pipe, run)
         self.next_bias_t = next_bias
         if marks:  # the bias estimate after each marked row, as imu() samples it

@@ -138,6 +138,9 @@ class OutputBag:
             self.add_topic(topic, msgtype)
             conn = self._connections[key]
         data = self._store.serialize_cdr(msg, msgtype)
+        if self._mcap is not None:  # the direct path owns the pending chunk (see commit)
+            self.write_raw(topic, msgtype, log_time_ns, bytes(data))
+            return
         self._writer.write(conn, int(log_time_ns), data)
         self.counts[topic] += 1
 
@@ -225,7 +228,7 @@ class OutputBag:
         r_all = np.arange(n * m + 1, dtype=np.int64)
         starts = (r_all // m) * int(sum(sizes)) + prefix[r_all % m]
         cids = [c.id for c in conns]
-        ts_list = ts.tolist()
+        ts_u8 = ts.astype("<u8")
         w = self._writer
         pos, total = 0, n * m
         while pos < total:
@@ -235,9 +238,9 @@ class OutputBag:
             ends = tell + starts[pos + 1:] - starts[pos]  # chunk size after each record
             over = int(np.searchsorted(ends, _MCAP_CHUNK_BYTES, side="right"))
             last = min(pos + over, total - 1)  # the record after which the chunk closes
-            offsets = (tell + starts[pos:last + 1] - starts[pos]).tolist()
+            offsets_arr = tell + starts[pos:last + 1] - starts[pos]
             lo, hi = pos // m, last // m
-            t_min, t_max = min(ts_list[lo:hi + 1]), max(ts_list[lo:hi + 1])
+            t_min, t_max = int(ts[lo:hi + 1].min()), int(ts[lo:hi + 1].max())
             if t_min < chunk.message_start_time:
                 chunk.message_start_time = t_min
             if t_max > chunk.message_end_time:
@@ -254,9 +257,13 @@ class OutputBag:
                 cid = cids[j]
                 first = pos + ((j - pos) % m)
                 count = len(range(first, last + 1, m))
-                chunk.msgs[cid].extend(zip(ts_list[first // m:first // m + count],
-                                           offsets[first - pos:last + 1 - pos:m],
-                                           strict=True))
+                # the (log time, offset) pairs of the chunk's message index as one array
+                # (_close_chunk writes them; the pending chunk never reaches rosbags' own
+                # close_chunk: commit closes it first)
+                pairs = np.empty((count, 2), dtype="<u8")
+                pairs[:, 0] = ts_u8[first // m:first // m + count]
+                pairs[:, 1] = offsets_arr[first - pos:last + 1 - pos:m]
+                chunk.msgs[cid].append(pairs)
                 st.channel_stats[cid] += count
                 w.counts[cid] += count
                 self.counts[topics[j][0]] += count
@@ -288,6 +295,9 @@ class OutputBag:
             raise BagError(f"{self.path}: bag already closed")
         self._open = False
         try:
+            st = self._mcap
+            if st is not None and st.chunk.bio.tell():
+                _close_chunk(st)  # what Writer.close would do with its own close_chunk
             self._writer.close()
             if self.path.exists() or self.path.is_symlink():
                 if not self.overwrite:  # appeared while we were writing
@@ -322,6 +332,24 @@ class OutputBag:
             self.abort()
 
 
+def _index_pairs(msgs: list[Any]) -> np.ndarray:
+    """(n, 2) uint64 (log time, offset) of a channel's messages in a pending chunk: tuples
+    (:meth:`OutputBag.write_raw`) and (k, 2) arrays (:meth:`OutputBag.write_rows`), in order."""
+    parts: list[np.ndarray] = []
+    run: list[tuple[int, int]] = []
+    for m in msgs:
+        if type(m) is tuple:
+            run.append(m)
+            continue
+        if run:
+            parts.append(np.array(run, dtype="<u8").reshape(-1, 2))
+            run = []
+        parts.append(m)
+    if run or not parts:
+        parts.append(np.array(run, dtype="<u8").reshape(-1, 2))
+    return parts[0] if len(parts) == 1 else np.concatenate(parts)
+
+
 def _close_chunk(st: Any) -> None:
     """rosbags' ``McapWriter.close_chunk`` with the message indexes packed by NumPy: the same
     records, byte for byte (tested against rosbags' writer over several chunks)."""
@@ -351,7 +379,7 @@ def _close_chunk(st: Any) -> None:
     offsets: list[tuple[int, int]] = []
     for cid, msgs in chunk.msgs.items():
         offsets.append((cid, st.bio.tell()))
-        body = np.array(msgs, dtype="<u8").tobytes()
+        body = _index_pairs(msgs).tobytes()
         st.bio.write(struct.pack("<BQHI", 0x07, 6 + len(body), cid, len(body)))
         st.bio.write(body)
     rec = BytesIO()
