@@ -36,6 +36,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 _MESSAGE, _MESSAGE_INDEX = 0x05, 0x07
 _U64 = struct.Struct("<Q")
 _HIQQ = struct.Struct("<HIQQ")
+_MAX_SEEK = 2**63 - 1
 
 
 @dataclass
@@ -228,9 +229,11 @@ class McapSource:
             parts.append(pairs[1::2])
             pos = body + rec_len
         size = buf.shape[0]
-        offs = np.sort(np.concatenate(parts)).astype(np.int64) if parts else None
-        if offs is None or offs.shape[0] == 0 or offs[0] != 0 or offs[-1] + 31 > size:
+        listed = np.sort(np.concatenate(parts)) if parts else None  # uint64
+        if listed is None or listed.shape[0] == 0 or int(listed[0]) != 0 or \
+                int(listed[-1]) + 31 > size:
             return None
+        offs = listed.astype(np.int64)
         if not bool(np.all(buf[offs] == _MESSAGE)):
             return None
         lens = _gather(buf, offs + 1, 8, "<u8").astype(np.int64)
@@ -260,9 +263,11 @@ def _walk(data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
             raise ReaderError(f"Truncated record at offset {pos + 1}.")
         n = _U64.unpack_from(data, pos + 1)[0]
         body = pos + 9
-        if body + n > size:
-            raise ReaderError(f"Truncated record at offset {body}: expected {n} bytes.")
+        # rosbags skips another record by seeking (past the end: the walk stops there) and
+        # reads a Message record (running past the end: an error)
         if op == _MESSAGE:
+            if body + n > size:
+                raise ReaderError(f"Truncated record at offset {body}: expected {n} bytes.")
             if n < 22:
                 raise ReaderError(f"Invalid message record length {n}.")
             cid, _seq, log, _pub = _HIQQ.unpack_from(data, body)
@@ -270,6 +275,8 @@ def _walk(data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
             logs.append(log)
             starts.append(body + 22)
             lens.append(n - 22)
+        elif body + n > _MAX_SEEK:  # rosbags' seek past it overflows
+            raise ReaderError(f"Invalid record length {n} at offset {body}.")
         pos = body + n
     return (np.asarray(cids, dtype=np.intp), np.asarray(logs, dtype=np.uint64).astype(np.int64),
             np.asarray(starts, dtype=np.int64), np.asarray(lens, dtype=np.int64))
