@@ -217,6 +217,32 @@ def test_output_encoding_is_what_rosbags_serializes_for_every_frame_length_and_v
             == bytes(store.serialize_cdr(io.rpy_from_output(out), io.VECTOR3_STAMPED_TYPE))
 
 
+def test_diagnostics_encoding_is_what_rosbags_serializes():
+    """cdr.diagnostic_array_cdr = rosbags' serialize_cdr of io.diagnostics_message: the
+    pipeline's own reports (before and after data) and odd ones (empty and non-ASCII strings,
+    non-string values, string lengths that need every padding)."""
+    from types import SimpleNamespace
+
+    from cf_estimator.pipeline import ImuPipeline
+
+    store = io.typestore()
+    pipe = ImuPipeline()
+    reports = [pipe.diagnostics(1.0)]
+    for i in range(300):
+        t_ns = 10**9 + 10_000_000 * i
+        pipe.on_imu(io.imu_message(t_ns // 10**9, t_ns % 10**9, "imu", (0.0, 0.0, 0.0, 1.0),
+                                   None, (0.01, 0.0, 0.0), None, (0.0, 0.0, 9.81), None))
+    reports.append(pipe.diagnostics(4.0))
+    for n in range(6):
+        reports.append(SimpleNamespace(
+            level=n % 4, name="x" * n, message=FRAMES[n], hardware_id=chr(0x1F600) * n,
+            values=[("k" * j, j * 0.5) for j in range(n)] + [("ünï", None), ("", "")]))
+    for picked in ([], reports[:1], reports[1:2], reports):
+        for t in (0, 1, 10**9 + 7, 1_700_000_000_123_456_789):
+            assert cdr.diagnostic_array_cdr(t, picked) == bytes(store.serialize_cdr(
+                io.diagnostics_message(t, picked), io.DIAGNOSTIC_ARRAY_TYPE))
+
+
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
 def test_write_raw_gives_the_file_rosbags_writer_writes(tmp_path, storage):
     """Over 1 MB (several chunks), three topics, non-monotonic log times: same bytes."""

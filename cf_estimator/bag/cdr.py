@@ -338,3 +338,34 @@ def vector3_stamped_rows(sec: np.ndarray, nsec: np.ndarray, frame_id: str, v: np
     head, _size = _header_rows(sec, nsec, frame, 3)
     body = np.ascontiguousarray(v, dtype="<f8")
     return np.concatenate([head, body.view(np.uint8)], axis=1)
+
+
+def _cdr_string(out: bytearray, text: str) -> None:
+    """A CDR string at the end of ``out`` (aligned to 4 from the encapsulation's end)."""
+    out += b"\x00" * (-(len(out) - 4) % 4)
+    b = text.encode("utf-8")
+    out += struct.pack("<I", len(b) + 1)
+    out += b
+    out += b"\x00"
+
+
+def diagnostic_array_cdr(stamp_ns: int, reports: Sequence[Any]) -> bytes:
+    """The Jazzy CDR bytes of :func:`cf_estimator.bag.messages.diagnostics_message` for the
+    same arguments (what rosbags' ``serialize_cdr`` gives it: tested)."""
+    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    out = bytearray(_CDR_LE)
+    out += struct.pack("<iI", sec, nanosec)
+    _cdr_string(out, "")  # frame_id
+    out += b"\x00" * (-(len(out) - 4) % 4)
+    out += struct.pack("<I", len(reports))
+    for r in reports:
+        out += struct.pack("<B", int(r.level))
+        for text in (str(r.name), str(r.message), str(r.hardware_id)):
+            _cdr_string(out, text)
+        values = list(r.values)
+        out += b"\x00" * (-(len(out) - 4) % 4)
+        out += struct.pack("<I", len(values))
+        for k, v in values:
+            _cdr_string(out, str(k))
+            _cdr_string(out, str(v))
+    return bytes(out)

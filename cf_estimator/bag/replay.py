@@ -368,13 +368,14 @@ class _Run:
         if log_ns >= self.next_diag_ns:
             if self.bag is not None:
                 report = self.pipe.diagnostics(self.next_diag_ns * 1e-9)
-                msg = io.diagnostics_message(self.next_diag_ns, [report])
                 if self.offline:
+                    msg = io.diagnostics_message(self.next_diag_ns, [report])
                     self.held.append((self.next_diag_ns, OUT_DIAGNOSTICS_TOPIC,
                                       io.DIAGNOSTIC_ARRAY_TYPE, msg))
-                else:
-                    self.bag.write(OUT_DIAGNOSTICS_TOPIC, io.DIAGNOSTIC_ARRAY_TYPE,
-                                   self.next_diag_ns, msg)
+                else:  # the bytes rosbags would serialize (bag/cdr.py)
+                    self.bag.write_raw(OUT_DIAGNOSTICS_TOPIC, io.DIAGNOSTIC_ARRAY_TYPE,
+                                       self.next_diag_ns,
+                                       cdr.diagnostic_array_cdr(self.next_diag_ns, [report]))
             self.n_diag += 1
             missed = (log_ns - self.next_diag_ns) // self.period_ns
             self.next_diag_ns += self.period_ns * (missed + 1)

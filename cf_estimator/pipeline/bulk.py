@@ -320,7 +320,8 @@ def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = N
     # intervals: the window statistics see the raw interval, the filter the mean one across
     # a gap (pipeline.on_imu's order of operations, its float arithmetic)
     d_ns = np.diff(t_imu, prepend=np.int64(last))
-    dt_raw = (d_ns * 1e-9).tolist()
+    dt_arr = d_ns * 1e-9
+    dt_raw = dt_arr.tolist()
     if n_imu:
         lo, hi = min(dt_raw), max(dt_raw)
         if n_dt == 0 or lo < dt_min:
@@ -329,10 +330,11 @@ def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = N
             dt_max = hi
         n_dt += n_imu
         last = int(t_imu[-1])
+    if n_imu:  # the running sum in message order (add.accumulate is sequential: same bits)
+        dt_sum = float(np.add.accumulate(np.concatenate(([dt_sum], dt_arr)))[-1])
     if n_imu and int(d_ns.max()) > max_dt_ns:
         dts = []
         for d, dt in zip(d_ns.tolist(), dt_raw, strict=True):
-            dt_sum += dt
             if d > max_dt_ns:
                 gaps += 1
                 dt = dt_mean if dt_mean > 0.0 else max_dt_fallback
@@ -343,13 +345,14 @@ def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = N
             dts.append(dt)
         out.dt = np.asarray(dts, dtype=np.float64)
     else:
-        for dt in dt_raw:
-            dt_sum += dt
-            if dt_mean > 0.0:
-                dt_mean += 0.05 * (dt - dt_mean)
-            else:
-                dt_mean = dt
-        out.dt = np.asarray(dt_raw, dtype=np.float64)
+        # the mean interval: unchanged by intervals equal to it (regular stamps), else in order
+        if not (dt_mean > 0.0 and n_imu and bool(np.all(dt_arr == dt_mean))):
+            for dt in dt_raw:
+                if dt_mean > 0.0:
+                    dt_mean += 0.05 * (dt - dt_mean)
+                else:
+                    dt_mean = dt
+        out.dt = dt_arr
     out.rows = rows
     out.t_ns = t_imu
     if ev.imu is not None:
@@ -461,10 +464,8 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
     p.tally.processed += n
     w = p.window
     w.dt_min, w.dt_max, w.dt_sum, w.n_dt = st["window"]
-    err_sum = w.err_sum
-    for e in en:  # in order: the per-message path's rounding
-        err_sum += e
-    w.err_sum = err_sum
+    # the running sum in message order (add.accumulate is sequential: the same bits)
+    w.err_sum = float(np.add.accumulate(np.concatenate(([w.err_sum], en_arr)))[-1])
     if n:
         finite = en_arr[~np.isnan(en_arr)]
         if finite.size and float(finite.max()) > w.err_max:
