@@ -32,6 +32,9 @@ ROSBAG2_VERSION = 9
 #: pending chunk (not public API), checked byte for byte against rosbags' own ``Writer.write``
 #: with 0.11.0 and 0.11.9 (test/test_bulk_decode.py). Outside the range (a rosbags installed
 #: past the pin) every message goes through ``Writer.write``: the same file, only slower.
+#: The same range gates :mod:`cf_estimator.bag.mcapread` (it reads ``McapReader``'s chunk index
+#: and matches channels as ``DirectoryReader`` does; outside it the replay reads through
+#: ``AnyReader.messages``).
 ROSBAGS_TESTED = ((0, 11), (0, 12))
 
 
