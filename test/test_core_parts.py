@@ -153,22 +153,44 @@ def test_a_velocity_swing_caps_the_raised_learning_at_sigma_b_over_sigma_v():
     s.pv_var = 1e-6  # hovering: the cap is far above the raise
     assert bias.learning_gains(s, p, FloatOps)[1] == p.bias_learning_k2
     s = _bias_state(1e-10)
-    s.pv_var = 100.0  # the cap never takes k2 below the shipped gain
-    assert bias.learning_gains(s, p, FloatOps) == (p.k1, p.k2)
+    s.pv_var = 100.0  # the cap never takes k2 below the shipped gain, nor k1 below 2 sqrt(k2)
+    assert bias.learning_gains(s, p, FloatOps) == (2.0 * math.sqrt(p.k2), p.k2)
+
+
+def test_the_loop_gain_falls_with_the_velocity_swing_and_rises_with_the_gyro_drift():
+    """bias.loop_gain: k1 = sqrt(d / sigma_V), d = sigma_b + GYRO_SCALE_UNCERTAINTY * |w|, at most
+    the configured k1: a hover keeps the thesis's loop, legs of metres per second lower it, a
+    fast rotation (the gyro's scale error) raises it again."""
+    p = step_params(FilterParams())
+    s = _bias_state(1e-6)  # sigma_b = 1e-3 rad/s: a learned bias
+    s.pv_var = 2.5e-5  # sigma_V = 0.005 rad s: a hover
+    assert bias.learning_gains(s, p, FloatOps)[0] == p.k1
+    s.pv_var = 0.25  # sigma_V = 0.5 rad s: zig-zag legs of +-5 m/s
+    k1 = bias.learning_gains(s, p, FloatOps)[0]
+    assert k1 == pytest.approx(max(math.sqrt(1e-3 / 0.5), 2.0 * math.sqrt(p.k2)))
+    assert k1 < 0.5 * p.k1
+    s.pv_var = 4e-4  # sigma_V = 0.02 rad s: a gentle flight
+    slow = bias.learning_gains(s, p, FloatOps)[0]
+    assert slow == pytest.approx(math.sqrt(1e-3 / 0.02)) and slow < p.k1
+    s.rate_lp = 3.0  # a hand-held sensor turned fast: the gyro's scale error drifts the attitude
+    fast = bias.loop_gain(s, p, 1e-3, 0.02, FloatOps)
+    assert fast == pytest.approx(min(p.k1, math.sqrt((1e-3 + bias.GYRO_SCALE_UNCERTAINTY * 3.0)
+                                                     / 0.02)))
+    assert fast > slow
 
 
 def test_a_turn_about_the_vertical_withholds_the_learning_raise():
-    """bias.turn_share: the raise falls as (k1²/(k1² + ω²))² with the turn rate ω above the rate
-    a 2σ_b bias could fake; the shipped loop's own gains are never taken away."""
+    """bias.turn_share: the raise falls as (k1²/(k1² + ω²))² with the turn rate ω; a rate the
+    size of a gyro bias barely touches it; the shipped loop's own gains are never taken away."""
     p = step_params(FilterParams())
-    var = 0.0025  # sigma_b = 0.05 rad/s: 2 sigma = 0.1 rad/s
+    var = 0.0025  # sigma_b = 0.05 rad/s
     s = _bias_state(var)
     raised = bias.learning_gains(s, p, FloatOps)
     assert bias.turn_share(s, p, FloatOps) == 1.0 and raised[1] > p.k2
-    s.turn_rate_lp = -0.1  # within what the bias still to be learned could show
-    assert bias.turn_share(s, p, FloatOps) == 1.0
+    s.turn_rate_lp = -0.05  # the size of a bias still to be learned: the raise barely moves
+    assert 0.95 < bias.turn_share(s, p, FloatOps) < 1.0
     for sign in (1.0, -1.0):  # a figure-8's either loop
-        s.turn_rate_lp = sign * (0.6 + 2.0 * math.sqrt(var))
+        s.turn_rate_lp = sign * 0.6
         share = bias.turn_share(s, p, FloatOps)
         assert share == pytest.approx((p.k1 ** 2 / (p.k1 ** 2 + 0.36)) ** 2) and share < 0.1
         k1, k2 = bias.learning_gains(s, p, FloatOps)
@@ -182,7 +204,7 @@ def test_the_turn_rate_is_the_rotation_about_the_estimated_vertical():
     """step.classify_motion low-passes the bias-corrected rate projected on the estimated up:
     a yaw on a level body counts fully, a roll not at all, a yaw on a body rolled 90° not at
     all (it is then a rotation about a horizontal axis)."""
-    from cf_estimator.core.step import RATE_LOWPASS_TIME_CONSTANT_S, classify_motion
+    from cf_estimator.core.step import TURN_LOWPASS_TIME_CONSTANT_S, classify_motion
 
     p = step_params(FilterParams())
     cases = (((0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), 0.5),
@@ -193,7 +215,7 @@ def test_the_turn_rate_is_the_rotation_about_the_estimated_vertical():
         s.qw, s.qx, s.qy, s.qz = q
         accel = (0.0, 0.0, G)
         dt = 0.01
-        for _ in range(int(10 * RATE_LOWPASS_TIME_CONSTANT_S / dt)):
+        for _ in range(int(10 * TURN_LOWPASS_TIME_CONSTANT_S / dt)):
             classify_motion(s, p, gyro, accel, None, False, dt, FloatOps)
         assert s.turn_rate_lp == pytest.approx(turn, abs=1e-3), (gyro, q)
 
@@ -201,7 +223,7 @@ def test_the_turn_rate_is_the_rotation_about_the_estimated_vertical():
 def test_the_velocity_swing_is_the_disagreement_integrated_and_high_passed():
     s = _bias_state(0.01)
     dt = 0.01
-    for _ in range(6000):  # 60 s of a steady 0.1 rad disagreement along world x
+    for _ in range(int(10 * bias.SWING_TIME_CONSTANT_S / dt)):  # a steady 0.1 rad along x
         s.time_s += dt
         bias.observe_velocity_swing(s, 0.1, 0.0, dt, FloatOps)
     # the leaky integral settles at w * T (a steady disagreement is no swing for ever)

@@ -19,7 +19,11 @@ from ros_test_helpers import Header, Imu, MagneticField, Quaternion, Time, Vecto
 from cf_estimator import metrics
 from cf_estimator.bench.consistency import consistency, family_consistency
 from cf_estimator.core.batch import estimate
-from cf_estimator.core.covariance import TILT_FLOOR_RAD2, OrientationCovariance
+from cf_estimator.core.covariance import (
+    CORRECTION_WINDOW_S,
+    TILT_FLOOR_RAD2,
+    OrientationCovariance,
+)
 from cf_estimator.core.params import FilterParams
 from cf_estimator.pipeline import ImuPipeline, PipelineParams
 
@@ -191,10 +195,10 @@ def test_model_terms_have_their_documented_sizes() -> None:
     """The formula of the module docstring, term by term (per axis = S/2)."""
     m = OrientationCovariance(1e-4, 4e-4, 10.0, 0.1, k1=0.35, gravity_m_s2=9.8)
     # a steady horizontal disagreement of 0.1 rad (a held acceleration the loop follows): the
-    # correction k1 * integral settles at k1 * 0.1 * SWING_TIME_CONSTANT_S, its square is M
+    # correction k1 * integral settles at k1 * 0.1 * CORRECTION_WINDOW_S, its square is M
     for _ in range(20000):
         c = m.step(0.01, False, 0.001, 2, 0.1, 0.06, 0.08, 0.0, False, 0.0, False, None)
-    held = (0.35 * 0.1 * 10.0) ** 2
+    held = (0.35 * 0.1 * CORRECTION_WINDOW_S) ** 2
     assert c[0] == pytest.approx(1e-4 + 0.5 * held, rel=2e-3)
     # a zig-zag: the disagreement swings +-0.3 rad every 2 s; its corrections cancel, and M stays
     # far below the swing's own mean square (0.09) that the model used to report

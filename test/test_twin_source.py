@@ -34,7 +34,8 @@ C_HELPERS = ("mul", "expmap", "rotate", "turn_heading")
 #: The step's stages, in the order step() and cf_step() call them: one name in both files.
 STAGES = ("predict", "classify_motion", "tilt_error", "saturate", "aperiodic", "regulate",
           "recover", "heading")
-C_STEP = ("toward_unit", "up", "stillness", "turn_share", "learning_gains", "cf_step") + STAGES
+C_STEP = ("toward_unit", "up", "stillness", "turn_share", "loop_gain", "learning_gains",
+          "cf_step") + STAGES
 #: Where a C constant's Python counterpart may live (the step's modules, then the checks').
 PY_HOMES = (step, stillness, bias, ops, filter)
 #: Bare numbers the algebra needs (zero, one, the 2 of rotations and sample differences, the

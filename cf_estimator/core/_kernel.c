@@ -32,6 +32,7 @@
 #define MAG_DISABLED 3
 /* constants of step.py (test_kernel.py checks they agree) */
 #define RATE_LOWPASS_TIME_CONSTANT_S 0.5
+#define TURN_LOWPASS_TIME_CONSTANT_S 2.0
 #define REST_NOISE_SIGMAS 2.0
 #define ACCEL_LOWPASS_TIME_CONSTANT_S 0.05
 #define ACCEL_SPIKE_SIGMAS 4.0
@@ -46,9 +47,9 @@
 #define REST_MAG_TOLERANCE_RAD 0.01
 #define ACCEL_DETECT_SIGMAS 3.0
 #define BIAS_RANDOM_WALK_RAD_S_SQRT_S 2e-4
-#define SWING_TIME_CONSTANT_S 10.0
+#define SWING_TIME_CONSTANT_S 30.0
 #define SWING_VAR_TIME_CONSTANT_S 10.0
-#define TURN_BIAS_SIGMAS 2.0
+#define GYRO_SCALE_UNCERTAINTY 0.01
 #define GRAVITY_TIME_CONSTANT_S 10.0
 #define MAG_REFERENCE_SAMPLES 20
 #define MAG_RELEARN_AFTER_S 20.0
@@ -480,7 +481,8 @@ static int classify_motion(cf_state *s, const cf_params *p, const double *g, con
     double v[3];
     up(s, v); /* the turn: the rate about the estimated vertical (turn_share) */
     double turn = (gx - s->bx) * v[0] + (gy - s->by) * v[1] + (gz - s->bz) * v[2];
-    s->turn_rate_lp = s->turn_rate_lp + lw * (turn - s->turn_rate_lp);
+    double tw = dt / (TURN_LOWPASS_TIME_CONSTANT_S + dt);
+    s->turn_rate_lp = s->turn_rate_lp + tw * (turn - s->turn_rate_lp);
     return quick;
 }
 
@@ -521,21 +523,27 @@ static double saturate(const cf_state *s, const cf_params *p, double en, int qui
 static double turn_share(const cf_state *s, const cf_params *p)
 {
     double k1_2 = pow(maxd(p->k1, BIAS_LEARNING_MIN_K1), 2.0);
-    double w = maxd(maxd(s->turn_rate_lp, -s->turn_rate_lp) -
-                        TURN_BIAS_SIGMAS * sqrt(maxd(s->bias_var, 0.0)),
-                    0.0);
+    double w = s->turn_rate_lp;
     double share = k1_2 / (k1_2 + w * w);
     return share * share;
 }
 
-/* bias.learning_gains of bias.py: (k1, k2) raised while the bias is uncertain, capped by the
- * velocity swing and withheld in a turn */
+/* bias.loop_gain of bias.py: the k1 the disturbance allows, sqrt(d / sigma_V), at most k1 */
+static double loop_gain(const cf_state *s, const cf_params *p, double sigma_b, double sigma_v)
+{
+    double drift = sigma_b + GYRO_SCALE_UNCERTAINTY * s->rate_lp;
+    return s->aided ? p->k1 : mind(p->k1, sqrt(drift / sigma_v));
+}
+
+/* bias.learning_gains of bias.py: k2 raised while the bias is uncertain, capped by the
+ * velocity swing and withheld in a turn; k1 as the disturbance allows, critically damped */
 static void learning_gains(const cf_state *s, const cf_params *p, double *k1, double *k2)
 {
+    double sigma_b = sqrt(maxd(s->bias_var, 0.0));
+    double sigma_v = maxd(sqrt(s->pv_var), TINY);
     double share = mind(s->bias_var / pow(p->bias_prior_sigma_rad_s, 2.0), 1.0);
-    double swing = sqrt(maxd(s->bias_var, 0.0)) / maxd(sqrt(s->pv_var), TINY);
-    *k2 = maxd(p->k2, mind(p->bias_learning_k2 * share, swing) * turn_share(s, p));
-    *k1 = maxd(p->k1, 2.0 * sqrt(*k2));
+    *k2 = maxd(p->k2, mind(p->bias_learning_k2 * share, sigma_b / sigma_v) * turn_share(s, p));
+    *k1 = maxd(loop_gain(s, p, sigma_b, sigma_v), 2.0 * sqrt(*k2));
 }
 
 /* aperiodic() of step.py: the unit in the world frame on the saturated error; f into s->fx.. */

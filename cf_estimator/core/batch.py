@@ -344,7 +344,8 @@ def estimate(
     if offline:
         from cf_estimator.core.offline import estimate_offline
 
-        out_q, extra = estimate_offline(gyro, acc, mg, t, f.params, initial_orientation, backend)
+        out_q, extra = estimate_offline(gyro, acc, mg, t, f.params, initial_orientation, backend,
+                                        aided=aided)
     elif velocity is None:
         out_q = np.full((n, 4), np.nan)
         extra = np.zeros((n, EXTRA_COLUMNS))

@@ -11,7 +11,9 @@ The estimate b (sensor frame, rad/s) is the PI regulator's integral state; its v
   ``bias_learning_k2`` in proportion to the variance and k1 to at least 2√k2 (critically damped):
   learned within about 20 s of any start, in the air too; but never beyond σ_b/σ_V, the gain at
   which the vehicle's own velocity swing would move the estimate by more than its uncertainty
-  (:func:`observe_velocity_swing`), and not while the vehicle turns (:func:`turn_share`);
+  (:func:`observe_velocity_swing`), and not while the vehicle turns (:func:`turn_share`); k1
+  itself is lowered below the configured one when the velocity swing is large
+  (:func:`loop_gain`: √(d/σ_V), the gyro's drift rate d against the swing);
 - :func:`integrate` — the integral itself (k2 and the k3 path on the processed error), except
   from an error too large to be a bias (:func:`learning_limit_rad`, anti-windup, no narrower
   than the samples' own scatter); the variance shrinks as it learns (time constant k1/k2);
@@ -46,13 +48,15 @@ BIAS_CONVERGED_SIGMA_RAD_S = 0.005
 #: Smallest k1 [1/s] in the integral's learning time constant k1/k2 (k1 = 0 learns at once).
 BIAS_LEARNING_MIN_K1 = 1e-3
 #: High-pass time constant [s] of the pseudo-velocity (the disagreement integrated in the world
-#: frame): longer than a manoeuvre's legs, so it holds the vehicle's velocity changes over g.
-SWING_TIME_CONSTANT_S = 10.0
+#: frame): longer than a manoeuvre's legs and its returns (a zig-zag's out-and-back: 10-20 s), so
+#: it holds the vehicle's velocity changes over g.
+SWING_TIME_CONSTANT_S = 30.0
 #: Time constant [s] of the pseudo-velocity's mean square (a growing window until then).
 SWING_VAR_TIME_CONSTANT_S = 10.0
-#: A rotation rate about the vertical counts as a turn beyond this many σ_b: less could be the
-#: bias still to be learned (the rate is bias-corrected by the estimate).
-TURN_BIAS_SIGMAS = 2.0
+#: The gyro's scale-factor and cross-axis error [1] (a MEMS datasheet's ±1 %, after factory
+#: trim): rotating at ω, the integrated attitude drifts by about this × ω [rad/s] on top of the
+#: bias's σ_b (:func:`loop_gain`).
+GYRO_SCALE_UNCERTAINTY = 0.01
 
 
 def add_process_noise(s: StepState, p: Any, dt: Any, o: Any) -> None:
@@ -97,30 +101,51 @@ def learning_limit_rad(s: StepState, o: Any) -> Any:
 
 def turn_share(s: StepState, p: Any, o: Any) -> Any:
     """The share [0, 1] of the learning raise left while the vehicle turns about the vertical
-    at ω = ``turn_rate_lp`` [rad/s] (less TURN_BIAS_SIGMAS·σ_b): (k1²/(k1² + ω²))², k1 the
-    configured loop gain (FilterParams.k1, not the raised one). Turning, a horizontal bias b
-    rotates in the world frame and tilts the estimate by only b/|k1 + jω| (its evidence power
-    falls as 1/ω²), while the accelerometer's disagreement is the turn's centripetal
-    acceleration ω × v over g (its power grows as ω²): the evidence ratio falls as ω⁻⁴ above
-    the loop's bandwidth. A constant-rate turn looks the same in the body frame as a bias (a
-    steady error), so raising the loop there learns the turn: on a figure-8 the raised loop took
-    up to 6 °/s of a de-biased gyro for bias."""
+    at ω = ``turn_rate_lp`` [rad/s]: (k1²/(k1² + ω²))², k1 the configured loop gain
+    (FilterParams.k1, not the raised one). Turning, a horizontal bias b rotates in the world
+    frame and tilts the estimate by only b/|k1 + jω| (its evidence power falls as 1/ω²), while
+    the accelerometer's disagreement is the turn's centripetal acceleration ω × v over g (its
+    power grows as ω²): the evidence ratio falls as ω⁻⁴ above the loop's bandwidth. A
+    constant-rate turn looks the same in the body frame as a bias (a steady error), so raising
+    the loop there learns the turn: on a figure-8 the raised loop took up to 6 °/s of a
+    de-biased gyro for bias. ω is low-passed over TURN_LOWPASS_TIME_CONSTANT_S (step.py): a
+    turn long enough to pass for a bias; a gyro bias about the vertical as large as the prior
+    (0.1 rad/s) counts as a turn too, and takes 15 % of the raise."""
     k1_2 = o.maximum(p.k1, BIAS_LEARNING_MIN_K1) ** 2
-    w = o.maximum(o.maximum(s.turn_rate_lp, -s.turn_rate_lp)
-                  - TURN_BIAS_SIGMAS * o.sqrt(o.maximum(s.bias_var, 0.0)), 0.0)
+    w = s.turn_rate_lp
     share = k1_2 / (k1_2 + w * w)
     return share * share
 
 
 def learning_gains(s: StepState, p: Any, o: Any) -> tuple[Any, Any]:
-    """(k1 [1/s], k2 [1/s²]) of the regulator at this step: raised while b is uncertain, the
-    raise at most σ_b/σ_V [rad/s over rad·s] (the velocity swing moves the estimate by no more
-    than its uncertainty σ_b = √bias_var; σ_V = √pv_var) and scaled by :func:`turn_share`."""
+    """(k1 [1/s], k2 [1/s²]) of the regulator at this step.
+
+    k2: raised while b is uncertain, the raise at most σ_b/σ_V [rad/s over rad·s] (the velocity
+    swing moves the estimate by no more than its uncertainty σ_b = √bias_var; σ_V = √pv_var)
+    and scaled by :func:`turn_share`. k1: the gain the disturbance allows (:func:`loop_gain`),
+    at least 2√k2 (the PI loop critically damped)."""
+    sigma_b = o.sqrt(o.maximum(s.bias_var, 0.0))
+    sigma_v = o.maximum(o.sqrt(s.pv_var), TINY)
     share = o.minimum(s.bias_var / (p.bias_prior_sigma_rad_s ** 2), 1.0)
-    swing = o.sqrt(o.maximum(s.bias_var, 0.0)) / o.maximum(o.sqrt(s.pv_var), TINY)
-    k2 = o.maximum(p.k2, o.minimum(p.bias_learning_k2 * share, swing) * turn_share(s, p, o))
-    k1 = o.maximum(p.k1, 2.0 * o.sqrt(k2))
+    k2 = o.maximum(p.k2, o.minimum(p.bias_learning_k2 * share, sigma_b / sigma_v)
+                   * turn_share(s, p, o))
+    k1 = o.maximum(loop_gain(s, p, sigma_b, sigma_v, o), 2.0 * o.sqrt(k2))
     return k1, k2
+
+
+def loop_gain(s: StepState, p: Any, sigma_b: Any, sigma_v: Any, o: Any) -> Any:
+    """The loop's k1 [1/s] for the disturbance measured: √(d/σ_V), at most FilterParams.k1.
+
+    The tilt error the loop leaves is about d/k1 from the gyro (its integration drifts at
+    d = σ_b + GYRO_SCALE_UNCERTAINTY·|ω| [rad/s], ω the low-passed rotation rate) and about
+    k1·σ_V from the accelerations it is told are gravity (σ_V [rad·s]: the velocity swing over
+    g, :func:`observe_velocity_swing`); their sum of squares is least at k1 = √(d/σ_V). A
+    handheld sensor or a hover swings little and keeps the configured k1; a multirotor's
+    sustained manoeuvres (velocity swings of metres per second) lower it. Velocity-aided, the
+    accelerations are taken out of the measurement (σ_V still holds the swing from before):
+    the configured k1."""
+    drift = sigma_b + GYRO_SCALE_UNCERTAINTY * s.rate_lp
+    return o.where(s.aided, p.k1, o.minimum(p.k1, o.sqrt(drift / sigma_v)))
 
 
 def integrate(s: StepState, p: Any, f: tuple, k1: Any, k2: Any, learn: Any, small: Any,

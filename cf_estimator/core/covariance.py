@@ -21,7 +21,7 @@ the world x and y axes::
   the bias uncertainty ``σ_b`` [rad/s], √bias_var, the prior ``bias_prior_sigma_rad_s`` before
   the first estimate).
 - ``M`` [rad²] = the mean square, over the loop's own memory ``1/k1`` [s], of ``|c|``: the
-  tilt correction the accelerometer channel has made over the last SWING_TIME_CONSTANT_S,
+  tilt correction the accelerometer channel has made over the last CORRECTION_WINDOW_S,
   ``c = k1·∫ l_h dt`` high-passed over that window [rad] (``l_h``: the aperiodic unit's state in
   the world frame, horizontal, the low-passed disagreement between the accelerometer and the
   estimate it corrects the tilt by). While the vehicle accelerates by ``a_h`` the accelerometer
@@ -29,8 +29,8 @@ the world x and y axes::
   and the tilt error it takes on is exactly the correction it made: ``k1·∫`` of the
   disagreement (a leg held for long: ``|a_h|/g`` in full; a zig-zag: its legs cancel in ``c`` as
   they do in the tilt error — the disagreement itself, ``|l_h|``, is the swing the loop did
-  *not* follow and over-counts it by ω/k1 at a zig-zag's ω; BENCHMARKS.md "Covariance"). The
-  window is the pseudo-velocity's (core/bias.py): older corrections are taken as averaged out.
+  *not* follow and over-counts it by ω/k1 at a zig-zag's ω; BENCHMARKS.md "Covariance"). Older
+  corrections are taken as averaged out.
   When velocity aiding takes the vehicle's acceleration out, or at rest, the disagreement is
   the real (small) tilt error and the corrections remove it: ``M`` shrinks by itself.
 - ``V`` [rad²] = ``σ_a²/g² · dt · k1`` with ``σ_a² = noise_a2/6`` [(m/s²)²] the accelerometer's
@@ -49,7 +49,7 @@ referenced (``use_mag`` false, or no usable sample yet): ``unreferenced_yaw_cova
 Constants: ``v0`` and ``y0`` are the only fitted ones (maximum likelihood of the errors under the
 model's Gaussian: tilt on the phantom4 vertical campaign, 6-D; yaw on BROAD's undisturbed trials,
 9-D; BENCHMARKS.md "Covariance"); ``M``'s gain k1 (the configured loop gain), its window
-SWING_TIME_CONSTANT_S, its memory ``1/k1`` and ``V`` follow from the loop. Each variance is
+CORRECTION_WINDOW_S, its memory ``1/k1`` and ``V`` follow from the loop. Each variance is
 capped at π² (an angle error is at most π), or at its floor (yaw: also the unreferenced
 variance) if larger. Plain floats: it runs per message.
 """
@@ -59,7 +59,6 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from cf_estimator.core.bias import SWING_TIME_CONSTANT_S
 from cf_estimator.core.step import PHASE_RECOVERING, PHASE_STARTUP
 
 _PI2 = math.pi * math.pi
@@ -69,6 +68,9 @@ _SETTLING = (PHASE_STARTUP, PHASE_RECOVERING)
 #: vertical campaign (maximum likelihood 6.4e-5 with the correction term M; 1.0e-4 with the
 #: disagreement term before it; see the module docstring).
 TILT_FLOOR_RAD2 = 6.4e-5
+#: Window [s] of the correction term ``M``: corrections older than this are taken as averaged
+#: out (a manoeuvre's legs; the pseudo-velocity's window when ``v0`` was fitted).
+CORRECTION_WINDOW_S = 10.0
 #: Default ``y0`` [rad²] (``yaw_covariance_rad2``): fitted on BROAD's undisturbed trials, 9-D
 #: (maximum likelihood 3.8e-4).
 YAW_FLOOR_RAD2 = 4e-4
@@ -136,7 +138,7 @@ class OrientationCovariance:
         self._clip_s = self._clip_s + dt_s if clipped else 0.0
         sigma_b = bias_sigma_rad_s if bias_sigma_rad_s is not None else self.bias_prior
         kdt = self.k1 * dt_s
-        leak = dt_s / (SWING_TIME_CONSTANT_S + dt_s)
+        leak = dt_s / (CORRECTION_WINDOW_S + dt_s)
         cx = self._cx + kdt * lx_rad - leak * self._cx  # the correction made [rad]
         cy = self._cy + kdt * ly_rad - leak * self._cy
         ms = self._ms
@@ -179,7 +181,7 @@ class OrientationCovariance:
             clip_s = clip_s + dt if clip else 0.0
             sigma_b = sb if sb == sb else prior
             kdt = k1 * dt
-            leak = dt / (SWING_TIME_CONSTANT_S + dt)
+            leak = dt / (CORRECTION_WINDOW_S + dt)
             cx, cy = cx + kdt * lx - leak * cx, cy + kdt * ly - leak * cy
             ms += kdt / (1.0 + kdt) * (cx * cx + cy * cy - ms)
             e_t = en if ph in settling else 0.0

@@ -88,14 +88,35 @@ def reverse_rows(gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None, dt
     return gr, ar, mr, dtr
 
 
+def _run_rows(f: ComplementaryFilter, gyro: np.ndarray, accel: np.ndarray,
+              mag: np.ndarray | None, dt: np.ndarray, start: int, q_out: np.ndarray,
+              extra_out: np.ndarray | None, aided: np.ndarray | None) -> None:
+    """``f.run_rows`` over rows start..N−1, the state's aided flag set for each run of rows
+    whose ``aided`` (N,) bool is alike (velocity-aided accelerometer rows, as the causal pass
+    flagged them); None: the flag as it is."""
+    if aided is None:
+        f.run_rows(gyro, accel, mag, dt, start, q_out, extra_out)
+        return
+    n = len(dt)
+    edges = [k for k in (np.flatnonzero(np.diff(aided[start:].astype(np.int8))) + start + 1)
+             .tolist()] + [n]
+    k = start
+    for stop in edges:
+        f.set_aided(bool(aided[k]))
+        f.run_rows(gyro[:stop], accel[:stop], None if mag is None else mag[:stop], dt[:stop], k,
+                   q_out[:stop], None if extra_out is None else extra_out[:stop])
+        k = stop
+
+
 def _pass(params: FilterParams, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None,
           dt: np.ndarray, q_out: np.ndarray, extra_out: np.ndarray | None,
           q0: Sequence[float] | None = None, bias: Sequence[float] | None = None,
-          bias_var: float | None = None, backend: str | None = None
-          ) -> ComplementaryFilter | None:
+          bias_var: float | None = None, backend: str | None = None,
+          aided: np.ndarray | None = None) -> ComplementaryFilter | None:
     """One filter pass over rows 0..N−1 (dt[0] unused). Starts from ``q0`` (world frame) with
     ``bias`` [rad/s] and its variance, or else initialises at the first valid accelerometer
-    row (rows before stay NaN). None if it never initialises."""
+    row (rows before stay NaN). None if it never initialises. ``aided``: see
+    :func:`_run_rows`."""
     f = ComplementaryFilter(params, backend=backend)
     start = 0
     if q0 is not None:
@@ -116,7 +137,7 @@ def _pass(params: FilterParams, gyro: np.ndarray, accel: np.ndarray, mag: np.nda
     if extra_out is not None:
         extra_out[start - 1] = state_extras(s)
     if start < len(dt):
-        f.run_rows(gyro, accel, mag, dt, start, q_out, extra_out)
+        _run_rows(f, gyro, accel, mag, dt, start, q_out, extra_out, aided)
     return f
 
 
@@ -124,7 +145,7 @@ def _block_means(gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None, dt
                  factor: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
     """Pass 1's input: blocks of ``factor`` rows ending at the last row (gyro and
     accelerometer averaged, the block's last valid magnetometer row, dt summed); the first row
-    alone first (it initialises)."""
+    alone first (it initialises). :func:`_block_last` takes a flag column alike."""
     n = len(dt)
     m = (n - 1) // factor
     first = n - m * factor
@@ -138,6 +159,14 @@ def _block_means(gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None, dt
         np.vstack([mag[first - 1:first], _last_valid_rows(mag[first:].reshape(m, factor, 3))]))
     d = np.concatenate([[0.0], dt[first:].reshape(m, factor).sum(axis=1)])
     return g, a, mg, d
+
+
+def _block_last(flags: np.ndarray, factor: int) -> np.ndarray:
+    """(M + 1,) the first row's flag, then each block's last row's (blocks as
+    :func:`_block_means`)."""
+    n = len(flags)
+    first = n - ((n - 1) // factor) * factor
+    return np.concatenate([flags[first - 1:first], flags[first + factor - 1::factor]])
 
 
 def _last_valid_rows(blocks: np.ndarray) -> np.ndarray:
@@ -157,7 +186,8 @@ CHUNK_ROWS = 1 << 16
 def _backward_pass(params: FilterParams, gyro: np.ndarray, accel: np.ndarray,
                    mag: np.ndarray | None, dt: np.ndarray, q_out: np.ndarray,
                    q0: Sequence[float], bias: Sequence[float], bias_var: float,
-                   backend: str | None = None) -> ComplementaryFilter:
+                   backend: str | None = None, aided: np.ndarray | None = None
+                   ) -> ComplementaryFilter:
     """The filter over the time-reversed rows (:func:`reverse_rows`), started at the last
     row from ``q0`` with ``bias`` (already negated) and its variance; writes ``q_out`` in the
     original row order. Runs in chunks of :data:`CHUNK_ROWS` reversed rows (no reversed copy
@@ -176,7 +206,8 @@ def _backward_pass(params: FilterParams, gyro: np.ndarray, accel: np.ndarray,
                                        None if mag is None else mag[n - j1:n - j0 + 1],
                                        dt[n - j1:n - j0 + 1])
         # the chunk's row 0 is the state already reached: run its rows 1..
-        f.run_rows(gr, ar, mr, dtr, 1, buf[:j1 - j0 + 1], None)
+        _run_rows(f, gr, ar, mr, dtr, 1, buf[:j1 - j0 + 1], None,
+                  None if aided is None else aided[n - j1:n - j0 + 1][::-1])
         q_out[n - j1:n - j0] = buf[1:j1 - j0 + 1][::-1]
     return f
 
@@ -205,10 +236,12 @@ def _fuse(qf: np.ndarray, qb: np.ndarray, heading_from_forward: bool) -> None:
 def smooth_segment(gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None,
                    t_s: np.ndarray, params: FilterParams, q: np.ndarray, extra: np.ndarray,
                    initial_orientation: Sequence[float] | None = None,
-                   backend: str | None = None) -> None:
+                   backend: str | None = None, aided: np.ndarray | None = None) -> None:
     """Offline estimate of one segment (C-contiguous (N, 3) rows, strictly increasing t_s)
     into ``q`` ((N, 4) q_world_from_sensor, NaN-filled: stays NaN when no accelerometer row
-    is valid) and ``extra`` ((N, EXTRA_COLUMNS) forward-pass signals), both C-contiguous."""
+    is valid) and ``extra`` ((N, EXTRA_COLUMNS) forward-pass signals), both C-contiguous.
+    ``aided`` (N,) bool: the accelerometer rows a causal pass velocity-aided (the vehicle's
+    acceleration taken out); every pass runs them as aided, as the causal pass did."""
     n = len(t_s)
     dt = np.diff(t_s, prepend=t_s[0])
     # pass 1: online, forward, decimated; only its final state is used
@@ -218,8 +251,9 @@ def smooth_segment(gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None,
         factor = 1
     g1, a1, m1, d1 = _block_means(gyro, accel, mag, dt, factor) if factor > 1 else (
         gyro, accel, mag, dt)
+    aided1 = _block_last(aided, factor) if aided is not None and factor > 1 else aided
     f1 = _pass(params, g1, a1, m1, d1, np.empty((len(d1), 4)), None, initial_orientation,
-               backend=backend)
+               backend=backend, aided=aided1)
     if f1 is None:
         return
     s1 = f1._state  # noqa: SLF001
@@ -227,22 +261,22 @@ def smooth_segment(gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None,
     # pass 2: backward from pass 1's end
     qb = np.empty((n, 4))
     fb = _backward_pass(refined, gyro, accel, mag, dt, qb, f1.orientation_tuple(),
-                        (-s1.bx, -s1.by, -s1.bz), s1.bias_var, backend)
+                        (-s1.bx, -s1.by, -s1.bz), s1.bias_var, backend, aided)
     sb = fb._state  # noqa: SLF001
     # pass 3: forward from the backward pass's start
     _pass(refined, gyro, accel, mag, dt, q, extra, qb[0], (-sb.bx, -sb.by, -sb.bz),
-          sb.bias_var, backend)
+          sb.bias_var, backend, aided)
     _fuse(q, qb, params.use_mag and mag is not None)
 
 
 def estimate_offline(gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None,
                      t_s: np.ndarray, params: FilterParams | None = None,
                      initial_orientation: Sequence[float] | None = None,
-                     backend: str | None = None, max_gap_s: float = OFFLINE_MAX_GAP_S
-                     ) -> tuple[np.ndarray, np.ndarray]:
+                     backend: str | None = None, max_gap_s: float = OFFLINE_MAX_GAP_S,
+                     aided: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """((N, 4) q, (N, EXTRA_COLUMNS) signals) over every segment of a recording (see
     :func:`segments`; rows outside segments: NaN q, zero signals). ``initial_orientation``
-    starts the first segment's first pass."""
+    starts the first segment's first pass; ``aided``: see :func:`smooth_segment`."""
     p = params if params is not None else FilterParams()
     n = len(t_s)
     q = np.full((n, 4), np.nan)
@@ -250,5 +284,5 @@ def estimate_offline(gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None
     for k, (a, b) in enumerate(segments(t_s, gyro, max_gap_s)):
         smooth_segment(gyro[a:b], accel[a:b], None if mag is None else mag[a:b], t_s[a:b], p,
                        q[a:b], extra[a:b], initial_orientation if k == 0 and a == 0 else None,
-                       backend)
+                       backend, None if aided is None else aided[a:b])
     return q, extra

@@ -15,8 +15,9 @@ stage is a function of its name here and a static function of the same name in c
     5. regulate() c ← c + k3·dt·f;  b ← b − dt·(k2'·f + c);  q ← q⁻ ⊗ Exp(g(k1')·f)
                   (W1 = k1 + k2/s + k3/s²; g(k) = k·dt/(1+k·dt), the backward-Euler gain;
                   b, the integral state, is the gyro-bias estimate; k2' = max(k2,
-                  min(bias_learning_k2·σ_b²/σ_0², σ_b/σ_V)) and k1' = max(k1, 2√k2') while
-                  the bias is uncertain; σ_V: the velocity swing, bias.py); then
+                  min(bias_learning_k2·σ_b²/σ_0², σ_b/σ_V)) while the bias is uncertain,
+                  k1' = max(min(k1, √(d/σ_V)), 2√k2'); σ_V: the velocity swing, d: the
+                  gyro's drift rate, bias.py); then
                   l ← l − p·g(k1')·l with p = aperiodic_prefilter (0 while the tight clip
                   is on): the correction also turns the unit's memory (p = 1: a pre-filter of
                   the specific force in the world frame, as VQF's; p = 0: the thesis's unit on
@@ -96,6 +97,10 @@ MAG_STATUS_NAMES = {0: "none", 1: "used", 2: "rejected", 3: "disabled"}
 
 #: Low-pass time constant of the rotation rate that selects the clip level [s].
 RATE_LOWPASS_TIME_CONSTANT_S = 0.5
+#: Low-pass time constant [s] of the rotation rate about the vertical (bias.turn_share): a turn
+#: sustained over the loop's own time scale (1/k1, seconds) looks like a bias to it; a heading
+#: change of a second, or a zig-zag's pitching seen through a tilted estimate, does not.
+TURN_LOWPASS_TIME_CONSTANT_S = 2.0
 #: Low-pass time constant [s] of the accelerometer for the linear-acceleration detector:
 #: rotor vibration (50-200 Hz) averages out, a manoeuvre does not.
 ACCEL_LOWPASS_TIME_CONSTANT_S = 0.05
@@ -323,7 +328,8 @@ def classify_motion(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple 
     s.rate_lp = s.rate_lp + lw * (rate - s.rate_lp)
     vx, vy, vz = up_direction(s)  # the turn: the rate about the vertical (bias.turn_share)
     turn = (gx - s.bx) * vx + (gy - s.by) * vy + (gz - s.bz) * vz
-    s.turn_rate_lp = s.turn_rate_lp + lw * (turn - s.turn_rate_lp)
+    tw = dt / (TURN_LOWPASS_TIME_CONSTANT_S + dt)
+    s.turn_rate_lp = s.turn_rate_lp + tw * (turn - s.turn_rate_lp)
     return quick, accelerating
 
 
@@ -391,7 +397,8 @@ def regulate(s: StepState, p: Any, f: tuple, en: Any, u: tuple, v: tuple, quick:
     While the bias is uncertain (no still phase yet) the loop runs faster: k2 up to
     bias_learning_k2 in proportion to the bias variance (at most σ_b/σ_V: the vehicle's
     velocity swing, the raw error integrated in the world frame, must not move the estimate by
-    more than its uncertainty), k1 kept at least critically damping it. The correction
+    more than its uncertainty), k1 kept at least critically damping it; a large swing lowers
+    k1 below the configured one (bias.loop_gain). The correction
     q ← q ⊗ Exp(g(k1)·f) also turns the unit's memory by the share aperiodic_prefilter (quick:
     fully; tight clip: not at all).
     """
