@@ -27,16 +27,16 @@ The targets **missed** on the dev data are deliberately not asserted (a test wou
 looser bound would pretend); they stay open in BENCHMARKS.md:
 
 - issue 16/22: BROAD 6-D inclination ≤ 0.68° — 0.687° (VQF online 0.689°);
-- issue 22: phantom4 horizontal ≤ 3.0° — 3.25° (below VQF online's 4.05° and no recording
+- issue 22: phantom4 horizontal ≤ 3.0° — 3.11° (below VQF online's 4.05° and no recording
   above 6°: asserted);
 - issue 22: the simulated multirotor cases (rows "simulated ..."): learned-bias error < 0.05 °/s
-  on each — zig-zags 0.58 °/s, figure-8s 1.61 °/s (1 kHz and 100 Hz); inclination RMS at most VQF
-  online's — met on the zig-zags (4.89° against 5.11°: asserted), missed on the figure-8s by
-  0.09° (5.10° against 5.01° at 1 kHz, 5.10° against 5.00° at 100 Hz);
-- issue 23: EuRoC mid-air aided, 12 s-end ≤ 1.2° — 1.13 / 1.26 / 0.86° (20 / 40 / 60 s): the
+  on each — zig-zags 0.58 °/s (the vertical component a level 6-D flight cannot observe),
+  figure-8s 0.26 °/s (1 kHz and 100 Hz); their inclination RMS at most VQF online's is met
+  (asserted);
+- issue 23: EuRoC mid-air aided, 12 s-end ≤ 1.2° — 1.13 / 1.27 / 0.86° (20 / 40 / 60 s): the
   40 s start missed;
 - issue 23: median time to < 2° after the first velocity ≤ 5 s — met on EuRoC (0 s), missed on
-  phantom4 (9.1 s) and phantom4 horizontal (17.5 s; the offline pass 18.0 s, and the DOT's own
+  phantom4 (9.3 s) and phantom4 horizontal (17.5 s; the offline pass 17.5 s, and the DOT's own
   filter, measured the same way against the same reference, 21 s and 31 s: the reference's own
   2° excursions set these times, BENCHMARKS.md);
 - issue 23: thesis acceleration aided ≤ 15' — 51.7' on the table's seed (seeds 0-2: 51.7 /
@@ -81,73 +81,73 @@ SIMULATED_MARGIN = 0.05
 #: running mean in start-up and the turn share, and with a velocity that says moving;
 #: `cf-estimator bench cross --json`, 4 decimals).
 BASELINE: dict[str, tuple[float, float | None]] = {
-    "EuRoC MH, ground start, after 10 s: mean": (1.5571, 0.9503),
-    "EuRoC MH, mid-air start 20 s: 2-12 s": (2.7146, 0.8381),
-    "EuRoC MH, mid-air start 20 s: 12 s-end": (1.8659, 0.9629),
-    "EuRoC MH, mid-air start 40 s: 2-12 s": (4.6708, 1.3661),
-    "EuRoC MH, mid-air start 40 s: 12 s-end": (2.2034, 0.9152),
-    "EuRoC MH, mid-air start 60 s: 2-12 s": (3.7459, 0.7692),
-    "EuRoC MH, mid-air start 60 s: 12 s-end": (1.9653, 1.0652),
-    "phantom4, after 10 s: mean": (1.6266, 1.3317),
-    "phantom4, after 10 s: worst recording": (2.1548, 3.152),
-    "phantom4 horizontal, after 10 s: mean": (3.2548, 2.0645),
-    "phantom4 horizontal, after 10 s: worst recording": (5.591, 4.2934),
-    "BROAD all (18): 6-D inclination": (0.687, 0.5411),
-    "BROAD undisturbed (11): 6-D inclination": (0.6484, 0.5159),
-    "BROAD disturbed (7): 6-D inclination": (0.7475, 0.5807),
+    "EuRoC MH, ground start, after 10 s: mean": (1.2642, 0.8586),
+    "EuRoC MH, mid-air start 20 s: 2-12 s": (2.7842, 0.7775),
+    "EuRoC MH, mid-air start 20 s: 12 s-end": (1.5873, 0.8954),
+    "EuRoC MH, mid-air start 40 s: 2-12 s": (4.7064, 1.3706),
+    "EuRoC MH, mid-air start 40 s: 12 s-end": (2.0048, 0.8631),
+    "EuRoC MH, mid-air start 60 s: 2-12 s": (3.8393, 0.6371),
+    "EuRoC MH, mid-air start 60 s: 12 s-end": (1.8329, 0.9550),
+    "phantom4, after 10 s: mean": (1.6234, 1.3243),
+    "phantom4, after 10 s: worst recording": (2.1459, 3.1312),
+    "phantom4 horizontal, after 10 s: mean": (3.1106, 1.7087),
+    "phantom4 horizontal, after 10 s: worst recording": (5.2265, 4.1233),
+    "BROAD all (18): 6-D inclination": (0.6874, 0.5406),
+    "BROAD undisturbed (11): 6-D inclination": (0.6489, 0.5152),
+    "BROAD disturbed (7): 6-D inclination": (0.7479, 0.5806),
     "BROAD rotation (5): 6-D inclination": (0.6193, 0.5759),
-    "BROAD translation (5): 6-D inclination": (0.4313, 0.3629),
-    "BROAD combined (1): 6-D inclination": (1.88, 0.9817),
-    "BROAD slow (6): 6-D inclination": (0.3806, 0.3114),
-    "BROAD fast (5): 6-D inclination": (0.9699, 0.7613),
-    "BROAD no_breaks (7): 6-D inclination": (0.7006, 0.524),
-    "BROAD with_breaks (4): 6-D inclination": (0.5571, 0.5018),
-    "BROAD tapping (1): 6-D inclination": (0.6205, 0.5562),
-    "BROAD vibration (1): 6-D inclination": (0.3583, 0.3275),
-    "BROAD stationary_magnet (2): 6-D inclination": (1.1359, 0.857),
-    "BROAD attached_magnet (3): 6-D inclination": (0.6606, 0.489),
-    "BROAD all (18): 9-D total": (1.9964, 1.8927),
-    "BROAD undisturbed (11): 9-D total": (1.5276, 1.4482),
-    "BROAD disturbed (7): 9-D total": (2.7331, 2.5913),
-    "BROAD rotation (5): 9-D total": (1.3787, 1.3605),
-    "BROAD translation (5): 9-D total": (1.2959, 1.2217),
-    "BROAD combined (1): 9-D total": (3.4309, 3.0194),
-    "BROAD slow (6): 9-D total": (1.2723, 1.2063),
-    "BROAD fast (5): 9-D total": (1.834, 1.7385),
-    "BROAD no_breaks (7): 9-D total": (1.8919, 1.7804),
-    "BROAD with_breaks (4): 9-D total": (0.8901, 0.867),
-    "BROAD tapping (1): 9-D total": (1.3783, 1.3467),
-    "BROAD vibration (1): 9-D total": (6.8386, 6.7015),
-    "BROAD stationary_magnet (2): 9-D total": (1.7958, 1.6434),
-    "BROAD attached_magnet (3): 9-D total": (2.4409, 2.2679),
-    "thesis impacts: peak (limit 90')": (17.6939, None),
-    "thesis vibration: peak (limit 90')": (15.871, None),
-    "thesis acceleration: peak (limit 90')": (57.1272, None),
+    "BROAD translation (5): 6-D inclination": (0.4318, 0.3607),
+    "BROAD combined (1): 6-D inclination": (1.8830, 0.9838),
+    "BROAD slow (6): 6-D inclination": (0.3809, 0.3097),
+    "BROAD fast (5): 6-D inclination": (0.9706, 0.7618),
+    "BROAD no_breaks (7): 6-D inclination": (0.7010, 0.5236),
+    "BROAD with_breaks (4): 6-D inclination": (0.5578, 0.5004),
+    "BROAD tapping (1): 6-D inclination": (0.6206, 0.5568),
+    "BROAD vibration (1): 6-D inclination": (0.3566, 0.3237),
+    "BROAD stationary_magnet (2): 6-D inclination": (1.1375, 0.8580),
+    "BROAD attached_magnet (3): 6-D inclination": (0.6612, 0.4892),
+    "BROAD all (18): 9-D total": (1.9981, 1.8949),
+    "BROAD undisturbed (11): 9-D total": (1.5307, 1.4527),
+    "BROAD disturbed (7): 9-D total": (2.7325, 2.5898),
+    "BROAD rotation (5): 9-D total": (1.3790, 1.3611),
+    "BROAD translation (5): 9-D total": (1.3024, 1.2312),
+    "BROAD combined (1): 9-D total": (3.4306, 3.0181),
+    "BROAD slow (6): 9-D total": (1.2777, 1.2144),
+    "BROAD fast (5): 9-D total": (1.8343, 1.7387),
+    "BROAD no_breaks (7): 9-D total": (1.8941, 1.7845),
+    "BROAD with_breaks (4): 9-D total": (0.8948, 0.8719),
+    "BROAD tapping (1): 9-D total": (1.3783, 1.3469),
+    "BROAD vibration (1): 9-D total": (6.8394, 6.6982),
+    "BROAD stationary_magnet (2): 9-D total": (1.7931, 1.6393),
+    "BROAD attached_magnet (3): 9-D total": (2.4412, 2.2684),
+    "thesis impacts: peak (limit 90')": (20.4135, None),
+    "thesis vibration: peak (limit 90')": (15.8747, None),
+    "thesis acceleration: peak (limit 90')": (55.2873, None),
     "magnet 0.3x on a turning sensor: heading peak": (1.6807, 1.5241),
     "magnet 0.3x on a turning sensor: heading RMS": (0.7435, 0.6582),
     "magnet 0.5x on a turning sensor: heading peak": (1.4833, 1.3791),
     "magnet 0.5x on a turning sensor: heading RMS": (0.6843, 0.6266),
     "magnet 1x on a turning sensor: heading peak": (1.4733, 1.3765),
     "magnet 1x on a turning sensor: heading RMS": (0.6824, 0.6221),
-    "simulated zig-zags 4 m/s², 120 Hz: inclination RMS after 10 s": (4.8883, 2.927),
-    "simulated zig-zags 4 m/s², 120 Hz: inclination peak after 10 s": (13.4286, 6.3981),
-    "simulated zig-zags 4 m/s², 120 Hz: learned-bias error at the end": (0.579, None),
-    "simulated figure-8s 1.8 m/s², 1 kHz: inclination RMS after 10 s": (5.0962, 3.5956),
-    "simulated figure-8s 1.8 m/s², 1 kHz: inclination peak after 10 s": (7.7816, 5.723),
-    "simulated figure-8s 1.8 m/s², 1 kHz: learned-bias error at the end": (1.607, None),
-    "simulated figure-8s 1.8 m/s², 100 Hz: inclination RMS after 10 s": (5.0966, 3.6023),
-    "simulated figure-8s 1.8 m/s², 100 Hz: inclination peak after 10 s": (7.7782, 5.7249),
-    "simulated figure-8s 1.8 m/s², 100 Hz: learned-bias error at the end": (1.6107, None),
-    "phantom4 horizontal, aided, after 10 s: mean": (0.8377, 0.8078),
-    "phantom4 horizontal, aided: median time to < 2 deg": (17.4851, 17.9603),
-    "phantom4, aided, after 10 s: mean": (0.6948, 0.6176),
-    "phantom4, aided: median time to < 2 deg": (9.1395, 6.6677),
-    "EuRoC MH, ground start, aided, after 10 s: mean": (0.9165, 0.7355),
-    "EuRoC MH, ground start, aided: median time to < 2 deg": (0.0, 0.0),
-    "EuRoC MH, aided, mid-air start 20 s: 12 s-end": (1.1261, 0.77),
-    "EuRoC MH, aided, mid-air start 40 s: 12 s-end": (1.2588, 0.8454),
-    "EuRoC MH, aided, mid-air start 60 s: 12 s-end": (0.8599, 1.1994),
-    "thesis acceleration, aided: peak (limit 90')": (51.6584, None),
+    "simulated zig-zags 4 m/s², 120 Hz: inclination RMS after 10 s": (3.9607, 1.6835),
+    "simulated zig-zags 4 m/s², 120 Hz: inclination peak after 10 s": (12.3590, 3.9393),
+    "simulated zig-zags 4 m/s², 120 Hz: learned-bias error at the end": (0.5846, None),
+    "simulated figure-8s 1.8 m/s², 1 kHz: inclination RMS after 10 s": (4.0476, 1.7558),
+    "simulated figure-8s 1.8 m/s², 1 kHz: inclination peak after 10 s": (6.1349, 3.6594),
+    "simulated figure-8s 1.8 m/s², 1 kHz: learned-bias error at the end": (0.2556, None),
+    "simulated figure-8s 1.8 m/s², 100 Hz: inclination RMS after 10 s": (4.0401, 1.7511),
+    "simulated figure-8s 1.8 m/s², 100 Hz: inclination peak after 10 s": (6.1736, 3.6675),
+    "simulated figure-8s 1.8 m/s², 100 Hz: learned-bias error at the end": (0.2584, None),
+    "phantom4 horizontal, aided, after 10 s: mean": (0.8396, 0.7217),
+    "phantom4 horizontal, aided: median time to < 2 deg": (17.4851, 17.4883),
+    "phantom4, aided, after 10 s: mean": (0.6962, 0.6402),
+    "phantom4, aided: median time to < 2 deg": (9.3353, 6.9181),
+    "EuRoC MH, ground start, aided, after 10 s: mean": (0.9167, 0.7421),
+    "EuRoC MH, ground start, aided: median time to < 2 deg": (0.0000, 0.0000),
+    "EuRoC MH, aided, mid-air start 20 s: 12 s-end": (1.1316, 0.7498),
+    "EuRoC MH, aided, mid-air start 40 s: 12 s-end": (1.2684, 0.7928),
+    "EuRoC MH, aided, mid-air start 60 s: 12 s-end": (0.8561, 1.0918),
+    "thesis acceleration, aided: peak (limit 90')": (51.7145, None),
 }
 
 
@@ -292,13 +292,16 @@ def test_target_phantom4_horizontal_below_vqf_online_no_recording_above_6(table)
     assert _ours(rows, "phantom4 horizontal, after 10 s: worst recording") <= 6.0
 
 
-def test_target_simulated_zig_zags_at_most_vqf_online(table):
-    """Issue 22's RMS target on the zig-zag case (its learned-bias target is missed; the
-    figure-8s' RMS too, by 0.09°: module docstring). Met on the printed means; the seeds'
-    standard error of ours is 0.8°."""
+def test_target_simulated_multirotor_cases_at_most_vqf_online(table):
+    """Issue 22's RMS target on every simulated multirotor case (zig-zags 3.96° against 5.11°,
+    figure-8s 4.05° against 5.01° since the loop gain follows the velocity swing; their
+    learned-bias target, < 0.05 °/s, is missed: module docstring)."""
     rows, _ = table
-    label = "simulated zig-zags 4 m/s², 120 Hz: inclination RMS after 10 s"
-    assert _ours(rows, label) <= _ours(rows, label, "vqf")
+    labels = [label for label in rows
+              if label.startswith("simulated") and label.endswith("inclination RMS after 10 s")]
+    assert len(labels) == 3
+    for label in labels:
+        assert _ours(rows, label) <= _ours(rows, label, "vqf"), label
 
 
 def test_target_broad_9d_at_most_2_deg(table):
@@ -346,7 +349,8 @@ def test_covariance_consistency_rows(table):
     cov[4] for the tilt, cov[8] for the heading). Floor fitted on phantom4 (vertical) only;
     mean(e²/σ²) in [0.5, 2] on every family it is met on (EuRoC, phantom4, BROAD tilt since the
     acceleration term is the correction the loop made, BROAD heading), the beyond-2σ share
-    within the issue's 25 %. The horizontal campaign sits just below the band (0.497: reported,
+    within the issue's 25 %. The horizontal campaign sits below the band (0.41 since the loop
+    gain follows the velocity swing: the model's correction term uses the configured k1;
     held at 0.4) and is never overconfident (BENCHMARKS.md "Covariance")."""
     rows, _ = table
     for label in ("EuRoC MH: tilt", "phantom4: tilt", "BROAD all: tilt",
