@@ -173,7 +173,7 @@ def test_the_loop_gain_falls_with_the_velocity_swing_and_rises_with_the_gyro_dri
     slow = bias.learning_gains(s, p, FloatOps)[0]
     assert slow == pytest.approx(math.sqrt(1e-3 / 0.02)) and slow < p.k1
     s.rate_lp = 3.0  # a hand-held sensor turned fast: the gyro's scale error drifts the attitude
-    fast = bias.loop_gain(s, p, 1e-3, 0.02, FloatOps)
+    fast = bias.loop_gain(s, p, FloatOps)  # sigma_b = 1e-3, sigma_V = 0.02 as above
     assert fast == pytest.approx(min(p.k1, math.sqrt((1e-3 + bias.GYRO_SCALE_UNCERTAINTY * 3.0)
                                                      / 0.02)))
     assert fast > slow

@@ -200,6 +200,12 @@ def test_model_terms_have_their_documented_sizes() -> None:
         c = m.step(0.01, False, 0.001, 2, 0.1, 0.06, 0.08, 0.0, False, 0.0, False, None)
     held = (0.35 * 0.1 * CORRECTION_WINDOW_S) ** 2
     assert c[0] == pytest.approx(1e-4 + 0.5 * held, rel=2e-3)
+    # the loop's running gain (loop_k1, lowered by a velocity swing) is the gain of M: half the
+    # gain, a quarter of the held term
+    m.reset()
+    for _ in range(20000):
+        c = m.step(0.01, False, 0.001, 2, 0.1, 0.06, 0.08, 0.0, False, 0.0, False, None, 0.175)
+    assert c[0] == pytest.approx(1e-4 + 0.5 * held / 4.0, rel=2e-3)
     # a zig-zag: the disagreement swings +-0.3 rad every 2 s; its corrections cancel, and M stays
     # far below the swing's own mean square (0.09) that the model used to report
     m.reset()

@@ -349,9 +349,9 @@ def test_covariance_consistency_rows(table):
     cov[4] for the tilt, cov[8] for the heading). Floor fitted on phantom4 (vertical) only;
     mean(e²/σ²) in [0.5, 2] on every family it is met on (EuRoC, phantom4, BROAD tilt since the
     acceleration term is the correction the loop made, BROAD heading), the beyond-2σ share
-    within the issue's 25 %. The horizontal campaign sits below the band (0.41 since the loop
-    gain follows the velocity swing: the model's correction term uses the configured k1;
-    held at 0.4) and is never overconfident (BENCHMARKS.md "Covariance")."""
+    within the issue's 25 %. The horizontal campaign sits just below the band (0.48, with the
+    loop's running gain in the correction term; held at 0.4) and is never overconfident
+    (BENCHMARKS.md "Covariance")."""
     rows, _ = table
     for label in ("EuRoC MH: tilt", "phantom4: tilt", "BROAD all: tilt",
                   "BROAD all 9-D: heading"):

@@ -70,7 +70,7 @@
 #define REST_MIN_VARIANCE 1e-12
 #define SQRT3 1.7320508075688772
 #define BIAS_LEARNING_MIN_K1 1e-3
-#define EXTRA_COLUMNS 18
+#define EXTRA_COLUMNS 19
 #define GYRO_LIMIT_RAD_S 1e9 /* filter.GYRO_LIMIT_RAD_S */
 /* extra columns: e(3), b(3), clipped, phase, at_rest, mag_status, bias sigma, l_x, l_y (the
  * aperiodic unit's world-frame state, horizontal: what the accelerometer channel corrects by),
@@ -99,7 +99,7 @@ typedef struct {
         mag_ok_timer_s, mag_cand_timer_s, mag_ref_time_s, g_ref, accel_hold, acx, acy, acz, rate_lp, ex, ey,
         ez, error_norm,
         fx, fy, fz, yaw_error_rad, recovery_count, quick_until_s, pvx, pvy, pv_var,
-        turn_rate_lp;
+        turn_rate_lp, loop_k1;
     char recovering, at_rest, mag_disturbed, heading_initialized, clipped, accel_used, moved,
         bias_unverified, mag_recovering, aided;
     int mag_status, phase;
@@ -529,9 +529,10 @@ static double turn_share(const cf_state *s, const cf_params *p)
 }
 
 /* bias.loop_gain of bias.py: the k1 the disturbance allows, sqrt(d / sigma_V), at most k1 */
-static double loop_gain(const cf_state *s, const cf_params *p, double sigma_b, double sigma_v)
+static double loop_gain(const cf_state *s, const cf_params *p)
 {
-    double drift = sigma_b + GYRO_SCALE_UNCERTAINTY * s->rate_lp;
+    double sigma_v = maxd(sqrt(s->pv_var), TINY);
+    double drift = sqrt(maxd(s->bias_var, 0.0)) + GYRO_SCALE_UNCERTAINTY * s->rate_lp;
     return s->aided ? p->k1 : mind(p->k1, sqrt(drift / sigma_v));
 }
 
@@ -543,7 +544,7 @@ static void learning_gains(const cf_state *s, const cf_params *p, double *k1, do
     double sigma_v = maxd(sqrt(s->pv_var), TINY);
     double share = mind(s->bias_var / pow(p->bias_prior_sigma_rad_s, 2.0), 1.0);
     *k2 = maxd(p->k2, mind(p->bias_learning_k2 * share, sigma_b / sigma_v) * turn_share(s, p));
-    *k1 = maxd(loop_gain(s, p, sigma_b, sigma_v), 2.0 * sqrt(*k2));
+    *k1 = maxd(loop_gain(s, p), 2.0 * sqrt(*k2));
 }
 
 /* aperiodic() of step.py: the unit in the world frame on the saturated error; f into s->fx.. */
@@ -583,6 +584,7 @@ static void regulate(cf_state *s, const cf_params *p, const double *f, double en
     s->pv_var = s->pv_var + sw * (s->pvx * s->pvx + s->pvy * s->pvy - s->pv_var);
     double k1, k2;
     learning_gains(s, p, &k1, &k2);
+    s->loop_k1 = maxd(loop_gain(s, p), 2.0 * sqrt(p->k2));
     double k3dt = learn ? p->k3 * dt : 0.0;
     s->cx = s->cx + k3dt * f[0];
     s->cy = s->cy + k3dt * f[1];
@@ -978,6 +980,7 @@ static PyObject *State_run(StateObject *self, PyObject *args)
             x[15] = s->bx - s->z_m * upx;
             x[16] = s->by - s->z_m * upy;
             x[17] = s->bz - s->z_m * upz;
+            x[18] = s->loop_k1;
         }
     }
     Py_END_ALLOW_THREADS
@@ -1038,7 +1041,7 @@ static PyMemberDef State_members[] = {
     SD(mcz), SD(mmx), SD(mmy), SD(mmz), SD(mag_cand_norm), SD(mag_seen_time_s), SD(mag_ok_timer_s), SD(mag_cand_timer_s),
     SD(mag_ref_time_s), SD(ex), SD(ey), SD(ez),
     SD(error_norm), SD(fx), SD(fy), SD(fz), SB(clipped), SB(accel_used), SI(mag_status),
-    SD(yaw_error_rad),
+    SD(yaw_error_rad), SD(loop_k1),
     {NULL, 0, 0, 0, NULL}};
 
 static PyTypeObject StateType = {

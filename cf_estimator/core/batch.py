@@ -128,7 +128,7 @@ def covariance_rows(extra: np.ndarray, t_s: np.ndarray, q: np.ndarray, params: F
     clipped = (x[:, 6] != 0.0).tolist()
     phase, sigma, status = x[:, 7].tolist(), x[:, 10].tolist(), x[:, 9].tolist()
     lx, ly = x[:, 11].tolist(), x[:, 12].tolist()
-    yaw_err, na2 = x[:, 13].tolist(), x[:, 14].tolist()
+    yaw_err, na2, loop_k1 = x[:, 13].tolist(), x[:, 14].tolist(), x[:, 18].tolist()
     heading = False
     last: float | None = None
     rows = []
@@ -141,7 +141,7 @@ def covariance_rows(extra: np.ndarray, t_s: np.ndarray, q: np.ndarray, params: F
         sb = sigma[k]
         rows.append(step(dts[k], clipped[k], None if sb != sb else sb, phase[k], en[k], lx[k],
                          ly[k], na2[k], heading, yaw_err[k] if used else 0.0, used,
-                         None if last is None else ts[k] - last))
+                         None if last is None else ts[k] - last, loop_k1[k]))
     out[start:] = rows
     return out
 

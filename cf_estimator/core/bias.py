@@ -129,11 +129,11 @@ def learning_gains(s: StepState, p: Any, o: Any) -> tuple[Any, Any]:
     share = o.minimum(s.bias_var / (p.bias_prior_sigma_rad_s ** 2), 1.0)
     k2 = o.maximum(p.k2, o.minimum(p.bias_learning_k2 * share, sigma_b / sigma_v)
                    * turn_share(s, p, o))
-    k1 = o.maximum(loop_gain(s, p, sigma_b, sigma_v, o), 2.0 * o.sqrt(k2))
+    k1 = o.maximum(loop_gain(s, p, o), 2.0 * o.sqrt(k2))
     return k1, k2
 
 
-def loop_gain(s: StepState, p: Any, sigma_b: Any, sigma_v: Any, o: Any) -> Any:
+def loop_gain(s: StepState, p: Any, o: Any) -> Any:
     """The loop's k1 [1/s] for the disturbance measured: √(d/σ_V), at most FilterParams.k1.
 
     The tilt error the loop leaves is about d/k1 from the gyro (its integration drifts at
@@ -144,7 +144,8 @@ def loop_gain(s: StepState, p: Any, sigma_b: Any, sigma_v: Any, o: Any) -> Any:
     sustained manoeuvres (velocity swings of metres per second) lower it. Velocity-aided, the
     accelerations are taken out of the measurement (σ_V still holds the swing from before):
     the configured k1."""
-    drift = sigma_b + GYRO_SCALE_UNCERTAINTY * s.rate_lp
+    sigma_v = o.maximum(o.sqrt(s.pv_var), TINY)
+    drift = o.sqrt(o.maximum(s.bias_var, 0.0)) + GYRO_SCALE_UNCERTAINTY * s.rate_lp
     return o.where(s.aided, p.k1, o.minimum(p.k1, o.sqrt(drift / sigma_v)))
 
 

@@ -20,19 +20,21 @@ the world x and y axes::
   accelerometer is distrusted: the tilt is gyro-integrated for that long, its drift bounded by
   the bias uncertainty ``σ_b`` [rad/s], √bias_var, the prior ``bias_prior_sigma_rad_s`` before
   the first estimate).
-- ``M`` [rad²] = the mean square, over the loop's own memory ``1/k1`` [s], of ``|c|``: the
-  tilt correction the accelerometer channel has made over the last CORRECTION_WINDOW_S,
-  ``c = k1·∫ l_h dt`` high-passed over that window [rad] (``l_h``: the aperiodic unit's state in
-  the world frame, horizontal, the low-passed disagreement between the accelerometer and the
-  estimate it corrects the tilt by). While the vehicle accelerates by ``a_h`` the accelerometer
-  points off the vertical by ``|a_h|/g``; a loop that cannot tell that from a tilt follows it,
-  and the tilt error it takes on is exactly the correction it made: ``k1·∫`` of the
-  disagreement (a leg held for long: ``|a_h|/g`` in full; a zig-zag: its legs cancel in ``c`` as
-  they do in the tilt error — the disagreement itself, ``|l_h|``, is the swing the loop did
-  *not* follow and over-counts it by ω/k1 at a zig-zag's ω; BENCHMARKS.md "Covariance"). Older
-  corrections are taken as averaged out.
-  When velocity aiding takes the vehicle's acceleration out, or at rest, the disagreement is
-  the real (small) tilt error and the corrections remove it: ``M`` shrinks by itself.
+- ``M`` [rad²] = the mean square, over the loop's own memory ``1/k1`` [s], of ``|c|``: the tilt
+  correction the accelerometer channel has made over the last CORRECTION_WINDOW_S,
+  ``c = k1·∫l_h·dt`` high-passed over that window [rad], k1 the loop's running gain (``loop_k1``
+  of the state: the configured k1, lowered where the vehicle's velocity swings, bias.loop_gain;
+  not the bias-learning raise, whose corrections are the bias's error; ``l_h``: the aperiodic
+  unit's state in the world frame, horizontal, the low-passed disagreement between the
+  accelerometer and the estimate it corrects the tilt by). While the vehicle accelerates by
+  ``a_h`` the accelerometer points off the vertical by ``|a_h|/g``; a loop that cannot tell that
+  from a tilt follows it, and the tilt error it takes on is exactly the correction it made:
+  ``k1·∫`` of the disagreement (a leg held for long: ``|a_h|/g`` in full; a zig-zag: its legs
+  cancel in ``c`` as they do in the tilt error — the disagreement itself, ``|l_h|``, is the
+  swing the loop did *not* follow and over-counts it by ω/k1 at a zig-zag's ω; BENCHMARKS.md
+  "Covariance"). Older corrections are taken as averaged out. When velocity aiding takes the
+  vehicle's acceleration out, or at rest, the disagreement is the real (small) tilt error and
+  the corrections remove it: ``M`` shrinks by itself.
 - ``V`` [rad²] = ``σ_a²/g² · dt · k1`` with ``σ_a² = noise_a2/6`` [(m/s²)²] the accelerometer's
   white noise per axis (vibration; ``noise_a2`` = the stillness blocks' mean squared
   sample-to-sample difference summed over the axes) and ``dt`` [s] the sample interval: the
@@ -48,7 +50,7 @@ referenced (``use_mag`` false, or no usable sample yet): ``unreferenced_yaw_cova
 
 Constants: ``v0`` and ``y0`` are the only fitted ones (maximum likelihood of the errors under the
 model's Gaussian: tilt on the phantom4 vertical campaign, 6-D; yaw on BROAD's undisturbed trials,
-9-D; BENCHMARKS.md "Covariance"); ``M``'s gain k1 (the configured loop gain), its window
+9-D; BENCHMARKS.md "Covariance"); ``M``'s gain k1 (the loop's running gain), its window
 CORRECTION_WINDOW_S, its memory ``1/k1`` and ``V`` follow from the loop. Each variance is
 capped at π² (an angle error is at most π), or at its floor (yaw: also the unreferenced
 variance) if larger. Plain floats: it runs per message.
@@ -114,7 +116,8 @@ class OrientationCovariance:
     def update(self, dt_s: float, state: object, mag_used: bool, mag_age_s: float | None
                ) -> tuple[float, ...]:
         """Covariance after one filter step. ``state``: the filter's step state (phase,
-        error_norm, clipped, bias_var, lx, ly, noise_a2, heading_initialized, yaw_error_rad);
+        error_norm, clipped, bias_var, lx, ly, noise_a2, heading_initialized, yaw_error_rad,
+        loop_k1);
         ``mag_used``: the step used a magnetometer sample; ``mag_age_s``: time since the last
         used one (None: never)."""
         s = state
@@ -124,20 +127,22 @@ class OrientationCovariance:
                          s.error_norm, s.lx, s.ly, s.noise_a2,  # type: ignore[attr-defined]
                          bool(s.heading_initialized),  # type: ignore[attr-defined]
                          s.yaw_error_rad if mag_used else 0.0,  # type: ignore[attr-defined]
-                         mag_used, mag_age_s)
+                         mag_used, mag_age_s, s.loop_k1)  # type: ignore[attr-defined]
 
     def step(self, dt_s: float, clipped: bool, bias_sigma_rad_s: float | None, phase: float,
              error_norm_rad: float, lx_rad: float, ly_rad: float, noise_a2: float,
              heading_initialized: bool, yaw_error_rad: float, mag_used: bool,
-             mag_age_s: float | None) -> tuple[float, ...]:
+             mag_age_s: float | None, loop_k1: float = 0.0) -> tuple[float, ...]:
         """:meth:`update` from the state's figures (the bulk pipeline and ``estimate`` have them
         per row): ``bias_sigma_rad_s`` = √bias_var (None: no estimate yet, the prior is used),
         ``lx_rad``, ``ly_rad`` the aperiodic unit's world-frame state, ``noise_a2``
         [(m/s²)²] the accelerometer noise of the stillness blocks, ``yaw_error_rad`` read only
-        when ``mag_used``."""
+        when ``mag_used``, ``loop_k1`` [1/s] the loop's running gain (≤ 0: none yet, the
+        configured k1)."""
         self._clip_s = self._clip_s + dt_s if clipped else 0.0
         sigma_b = bias_sigma_rad_s if bias_sigma_rad_s is not None else self.bias_prior
-        kdt = self.k1 * dt_s
+        k1 = loop_k1 if loop_k1 > 0.0 else self.k1
+        kdt = k1 * dt_s
         leak = dt_s / (CORRECTION_WINDOW_S + dt_s)
         cx = self._cx + kdt * lx_rad - leak * self._cx  # the correction made [rad]
         cy = self._cy + kdt * ly_rad - leak * self._cy
@@ -147,7 +152,7 @@ class OrientationCovariance:
         e_t = error_norm_rad if phase in _SETTLING else 0.0
         drift = sigma_b * self._clip_s
         noise = noise_a2 * self._inv_6g2 * dt_s  # σ_a²/g²·dt [rad²·s]
-        tilt = min(self.tilt0 + e_t * e_t + drift * drift + 0.5 * (ms + noise * self.k1),
+        tilt = min(self.tilt0 + e_t * e_t + drift * drift + 0.5 * (ms + noise * k1),
                    max(_PI2, self.tilt0))
         if heading_initialized:
             if mag_used:
@@ -164,22 +169,24 @@ class OrientationCovariance:
               error_norm_rad: Sequence[float], lx_rad: Sequence[float], ly_rad: Sequence[float],
               noise_a2: Sequence[float], heading_initialized: bool,
               yaw_error_rad: Sequence[float], mag_used: Sequence[bool],
-              mag_age_s: Sequence[float | None]) -> tuple[list[float], list[float]]:
+              mag_age_s: Sequence[float | None], loop_k1: Sequence[float]
+              ) -> tuple[list[float], list[float]]:
         """:meth:`step` over rows, the same operations in the same order, as
         (tilt, yaw) variances per row [rad²] (the bulk pipeline: one call per run instead of one
         per row). ``bias_sigma_rad_s`` NaN: no estimate yet (the prior is used)."""
         clip_s, ms, yaw_err, cx, cy = self._clip_s, self._ms, self._yaw_err, self._cx, self._cy
-        k1, prior, inv_6g2 = self.k1, self.bias_prior, self._inv_6g2
+        k1_cfg, prior, inv_6g2 = self.k1, self.bias_prior, self._inv_6g2
         tilt0, yaw0, yaw_unref = self.tilt0, self.yaw0, self.yaw_unref
         tilt_cap, yaw_cap = max(_PI2, tilt0), max(_PI2, yaw_unref, yaw0)
         settling = _SETTLING
         tilts: list[float] = []
         yaws: list[float] = []
-        for dt, clip, sb, ph, en, lx, ly, na2, ye, used, age in zip(
+        for dt, clip, sb, ph, en, lx, ly, na2, ye, used, age, kr in zip(
                 dt_s, clipped, bias_sigma_rad_s, phase, error_norm_rad, lx_rad, ly_rad,
-                noise_a2, yaw_error_rad, mag_used, mag_age_s, strict=True):
+                noise_a2, yaw_error_rad, mag_used, mag_age_s, loop_k1, strict=True):
             clip_s = clip_s + dt if clip else 0.0
             sigma_b = sb if sb == sb else prior
+            k1 = kr if kr > 0.0 else k1_cfg
             kdt = k1 * dt
             leak = dt / (CORRECTION_WINDOW_S + dt)
             cx, cy = cx + kdt * lx - leak * cx, cy + kdt * ly - leak * cy

@@ -140,7 +140,7 @@ class FilterStatus:
 #: blocks' accelerometer noise noise_a2 [(m/s²)²]: what core/covariance.py reads; then the
 #: gyro-bias estimate (3, rad/s, sensor: :attr:`ComplementaryFilter.gyro_bias_rad_s`, b minus
 #: the heading channel's rate on the sensor axes): what the replay samples.
-EXTRA_COLUMNS = 18
+EXTRA_COLUMNS = 19
 
 
 def state_extras(s: Any) -> tuple:
@@ -148,7 +148,7 @@ def state_extras(s: Any) -> tuple:
     same columns in ``State.run``)."""
     bx, by, bz = gyro_bias_of(s)
     return (s.ex, s.ey, s.ez, s.bx, s.by, s.bz, s.clipped, s.phase, s.at_rest, s.mag_status,
-            bias_sigma(s), s.lx, s.ly, s.yaw_error_rad, s.noise_a2, bx, by, bz)
+            bias_sigma(s), s.lx, s.ly, s.yaw_error_rad, s.noise_a2, bx, by, bz, s.loop_k1)
 
 
 def gyro_bias_of(s: Any) -> tuple[float, float, float]:

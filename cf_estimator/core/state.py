@@ -132,6 +132,9 @@ SIGNALS: tuple[Field, ...] = (
     _f("accel_used", "", "the last step had a valid accelerometer sample", "bool"),
     _f("mag_status", "1", "0 none, 1 used, 2 rejected, 3 disabled", "int"),
     _f("yaw_error_rad", "rad", "heading channel's last error (0 when no sample was used)"),
+    _f("loop_k1", "1/s", "the loop's running gain at the last step with an accelerometer sample, "
+       "without the bias-learning raise: the configured k1, lowered by the velocity swing "
+       "(bias.loop_gain), at least 2 sqrt(k2)"),
 )
 
 GROUPS: dict[str, tuple[Field, ...]] = {

@@ -408,6 +408,7 @@ def regulate(s: StepState, p: Any, f: tuple, en: Any, u: tuple, v: tuple, quick:
     wx, wy, _ = _rotate(s.qw, s.qx, s.qy, s.qz, s.ex, s.ey, s.ez)
     bias.observe_velocity_swing(s, wx, wy, dt, o)
     k1, k2 = bias.learning_gains(s, p, o)
+    s.loop_k1 = o.maximum(bias.loop_gain(s, p, o), 2.0 * o.sqrt(p.k2))  # without the raise
     # an error beyond the learning limit (BIAS_LEARNING_MAX_ERROR_RAD, widened by the samples'
     # scatter) is an attitude error (a gyro over range, a glitch), not a bias: the integral
     # does not learn from it (anti-windup; beyond 90° the cross product shrinks again, hence

@@ -449,7 +449,7 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
     tilts, yaws = model.steps(dt.tolist(), clipped_col.tolist(), extra[:, 10].tolist(),
                               extra[:, 7].tolist(), en, extra[:, 11].tolist(),
                               extra[:, 12].tolist(), extra[:, 14].tolist(), heading,
-                              extra[:, 13].tolist(), used, ages)
+                              extra[:, 13].tolist(), used, ages, extra[:, 18].tolist())
     cov = np.zeros((n, 9))
     cov[:, 0] = tilts
     cov[:, 4] = tilts
