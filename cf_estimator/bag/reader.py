@@ -322,6 +322,18 @@ class InputBag:
         return {}
 
 
+def _deserialize(bag: InputBag, conn: Any, raw: Any, log_ns: int) -> Any:
+    """One raw message of ``bag`` decoded by rosbags; a message that does not decode is a
+    :class:`BagError` naming the bag, the type, the topic and the log time."""
+    try:
+        return bag._reader.deserialize(raw, conn.msgtype)  # noqa: SLF001
+    except Exception as exc:  # noqa: BLE001
+        raise BagError(
+            f"{bag.path}: cannot decode a {conn.msgtype} message on {conn.topic} at "
+            f"log time {log_ns} ns: {one_line(exc)}"
+        ) from exc
+
+
 class MessageChunk:
     """Consecutive messages of :meth:`InputBag.chunks`: ``topic``, ``msgtype``, ``log_ns`` per
     message; ``blocks[msgtype]`` (Imu, MagneticField) with ``row[i]`` = message i's row."""
@@ -346,13 +358,7 @@ class MessageChunk:
 
     def _decode(self, i: int) -> Any:
         conn, log_ns, raw = self._items[i]
-        try:
-            return self._bag._reader.deserialize(raw, conn.msgtype)  # noqa: SLF001
-        except Exception as exc:  # noqa: BLE001
-            raise BagError(
-                f"{self._bag.path}: cannot decode a {conn.msgtype} message on {conn.topic} at "
-                f"log time {log_ns} ns: {one_line(exc)}"
-            ) from exc
+        return _deserialize(self._bag, conn, raw, log_ns)
 
     def msg(self, i: int) -> Any:
         """Message i as an object (a light view for a decoded row, else rosbags')."""
@@ -419,14 +425,7 @@ class FastChunk:
 
     def _decode(self, i: int) -> Any:
         conn = self._conns[int(self._batch.conn[i])]
-        raw = self._batch.raw(i)
-        try:
-            return self._bag._reader.deserialize(raw, conn.msgtype)  # noqa: SLF001
-        except Exception as exc:  # noqa: BLE001
-            raise BagError(
-                f"{self._bag.path}: cannot decode a {conn.msgtype} message on {conn.topic} at "
-                f"log time {self.log_ns[i]} ns: {one_line(exc)}"
-            ) from exc
+        return _deserialize(self._bag, conn, self._batch.raw(i), self.log_ns[i])
 
     def msg(self, i: int) -> Any:
         """Message i as an object (a light view for a decoded row, else rosbags')."""
