@@ -305,14 +305,46 @@ def test_dropout_of_seconds_falls_back_to_imu_only_and_recovers(uav, uav_unaided
     assert r.velocity_aided[(t > 36.0) & (t < 40.0)].all()  # back after one window
     assert r.velocity_status.stale_samples > 0
     # over the flight far better than IMU-only; inside the 8 s dropout the fallback is the
-    # IMU-only loop at the configured k1 (the velocity swing it measured while aided is the
-    # aided residual, small: bias.loop_gain), which follows this flight's accelerations further
-    # than the IMU-only run, whose own swing lowers its gain (352' against 283' peak)
+    # IMU-only loop, which starts from the velocity's swing (apply_aiding: seed_swing) and
+    # still follows this flight's accelerations further than the IMU-only run, whose own swing
+    # has lowered its gain for a minute (326' against 283' peak; 352' without the seed)
     e0, e1 = _tilt_arcmin(uav, uav_unaided), _tilt_arcmin(uav, r)
     assert np.all(np.isfinite(e1)) and _rms(e1) < 0.7 * _rms(e0)
     assert np.max(e1) < 1.5 * np.max(e0)
     back = _tilt_arcmin(uav, r, t_from=36.0)
     assert np.max(back) < 60.0  # recovered within 3 s of the velocity's return
+
+
+def test_the_velocity_measures_the_swing_and_hands_it_to_the_loop_when_aiding_ends():
+    """VelocityAiding's swing: the horizontal velocity high-passed and its mean square over g²
+    (what the loop's pseudo-velocity measures unaided); apply_aiding gives it to the filter at
+    the end of aiding only (seed_swing: kept if larger, never a non-finite value)."""
+    from types import SimpleNamespace
+
+    from cf_estimator.core.filter import ComplementaryFilter
+    from cf_estimator.core.velocity import apply_aiding
+
+    a = VelocityAiding(P6)
+    g = P6.gravity_m_s2
+    for k in range(600):  # 60 s of legs +-6 m/s along x (a square wave), 10 Hz
+        t = 0.1 * k
+        a._observe_swing(t, (6.0 if int(t // 3.0) % 2 == 0 else -6.0, 0.0, 0.0))  # noqa: SLF001
+    assert 0.8 * 6.0 / g < math.sqrt(a.swing_var) < 1.1 * 6.0 / g
+    f = ComplementaryFilter(P6)
+    f.initialize((1.0, 0.0, 0.0, 0.0))
+    end = SimpleNamespace(moving=False, started=False, first_start=False, active=False,
+                          swing_var=0.3, take_realignment=lambda: None,
+                          take_heading_correction=lambda: 0.0)
+    apply_aiding(f, end)  # was not aided: nothing to hand over
+    assert f.step_state.pv_var == 0.0
+    f.set_aided(True)
+    apply_aiding(f, end)
+    assert f.step_state.pv_var == 0.3 and not f.step_state.aided
+    f.set_aided(True)
+    apply_aiding(f, SimpleNamespace(**{**vars(end), "swing_var": 0.1}))  # smaller: kept
+    assert f.step_state.pv_var == 0.3
+    f.seed_swing(float("nan"))
+    assert f.step_state.pv_var == 0.3
 
 
 @pytest.mark.parametrize("rate_hz", [1.0, 50.0])

@@ -285,6 +285,14 @@ class ComplementaryFilter:
         (AIDED_LAG_TIME_CONSTANT_S instead of aperiodic_time_constant_s)."""
         self._state.aided = bool(aided)
 
+    def seed_swing(self, swing_var: float) -> None:
+        """Another sensor (the velocity, when its aiding ends) measured the vehicle's velocity
+        swing over g, mean square [rad²·s²]: the loop's swing memory (``pv_var``, which sets
+        the loop gain, bias.loop_gain) takes it if larger. Non-finite or negative: ignored."""
+        v = float(swing_var)
+        if math.isfinite(v) and v > self._state.pv_var:
+            self._state.pv_var = v
+
     def mark_moving(self) -> None:
         """Another sensor (velocity aiding) says the vehicle moves: it is not at rest, so the
         start-up averages the accelerometer (gain 1/t) as after a stillness block that was not

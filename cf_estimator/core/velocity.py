@@ -67,6 +67,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from cf_estimator.core.alignment import HeadingOffset, InMotionAlignment
+from cf_estimator.core.bias import SWING_TIME_CONSTANT_S, SWING_VAR_TIME_CONSTANT_S
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.quaternion import to_matrix
 
@@ -210,6 +211,11 @@ class VelocityAiding:
         self._hd = HeadingOffset(0.0, math.inf, False)
         self._active = self._started = self._first = self._ever = False
         self._moving = False  # a velocity sample beyond MOVING_SPEED_SIGMAS was queued
+        # the horizontal velocity low-passed over SWING_TIME_CONSTANT_S (its stamp) and the
+        # mean square of what is left, over g² (_observe_swing)
+        self._vlp: tuple[float, float] | None = None
+        self._vlp_t = 0.0
+        self._swing_var = 0.0
         self._realigned_t = math.nan  # IMU stamp at which the alignment became known
         # for the filter, once: (tilt correction [rad] in its world frame, gyro bias [rad/s])
         self._realign: tuple[Any, Any] | None = None
@@ -374,6 +380,31 @@ class VelocityAiding:
         a = (t - bt[k - 1]) / (bt[k] - bt[k - 1])
         return tuple(u + a * (w - u) for u, w in zip(bs[k - 1], bs[k], strict=True))
 
+    def _observe_swing(self, t: float, v: Sequence[float]) -> None:
+        """The vehicle's horizontal velocity swing over g from the velocity itself: v_h
+        high-passed over SWING_TIME_CONSTANT_S and its mean square over SWING_VAR_TIME_CONSTANT_S
+        [rad²·s²] — what the filter's pseudo-velocity measures unaided from the accelerometer
+        (bias.observe_velocity_swing), where aided it sees only what the aiding leaves."""
+        if self._vlp is None:
+            self._vlp, self._vlp_t = (v[0], v[1]), t
+            return
+        dt = t - self._vlp_t
+        self._vlp_t = t
+        a = dt / (SWING_TIME_CONSTANT_S + dt)
+        lx = self._vlp[0] + a * (v[0] - self._vlp[0])
+        ly = self._vlp[1] + a * (v[1] - self._vlp[1])
+        self._vlp = (lx, ly)
+        g = self._params.gravity_m_s2
+        hx, hy = (v[0] - lx) / g, (v[1] - ly) / g
+        self._swing_var += dt / (SWING_VAR_TIME_CONSTANT_S + dt) * (
+            hx * hx + hy * hy - self._swing_var)
+
+    @property
+    def swing_var(self) -> float:
+        """The vehicle's velocity swing over g, mean square [rad²·s²], from the velocity samples
+        (0 before two were accepted)."""
+        return self._swing_var
+
     def _take_pending(self, t_s: float, q_filter: Sequence[float],
                       bias_state: Sequence[float]) -> None:
         """Accept the queued velocity samples whose stamps the IMU has passed."""
@@ -416,6 +447,7 @@ class VelocityAiding:
             if self._used == 1:
                 self._first_v_t = t
             hist.append((t, v, s))
+            self._observe_swing(t, v)
             # the window: the latest earlier sample at least velocity_window_s before t
             k = len(hist) - 1
             j = k - 1
@@ -575,6 +607,10 @@ def apply_aiding(f: Any, aiding: VelocityAiding) -> None:
     realign = aiding.take_realignment()
     if realign is not None:
         f.realign(*realign)
+    if f.step_state.aided and not aiding.active:
+        # aiding ends (a dropout): what the filter measured of the swing while aided is what
+        # the aiding left; the unaided loop takes the vehicle's swing from the velocity
+        f.seed_swing(aiding.swing_var)
     f.set_aided(aiding.active)
     f.correct_heading(aiding.take_heading_correction())
 
