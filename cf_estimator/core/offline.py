@@ -98,8 +98,7 @@ def _run_rows(f: ComplementaryFilter, gyro: np.ndarray, accel: np.ndarray,
         f.run_rows(gyro, accel, mag, dt, start, q_out, extra_out)
         return
     n = len(dt)
-    edges = [k for k in (np.flatnonzero(np.diff(aided[start:].astype(np.int8))) + start + 1)
-             .tolist()] + [n]
+    edges = (np.flatnonzero(np.diff(aided[start:].astype(np.int8))) + start + 1).tolist() + [n]
     k = start
     for stop in edges:
         f.set_aided(bool(aided[k]))
