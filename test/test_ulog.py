@@ -28,6 +28,7 @@ from cf_estimator.bench import ulogwrite  # noqa: E402
 from cf_estimator.cli.main import main  # noqa: E402
 from cf_estimator.core.params import FilterParams  # noqa: E402
 from cf_estimator.pipeline import px4  # noqa: E402
+from cf_estimator.pipeline.params import PipelineParams  # noqa: E402
 
 ULOGS = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "ulogs"
 SITL = ULOGS / "sample_px4_events.ulg"
@@ -153,6 +154,40 @@ def test_real_logs_agree_with_the_autopilot_in_inclination(log, tmp_path):
     result = replay_bag(_require(log), tmp_path / "out", options=OPTS)
     assert result.summary["reference"]["rmse_deg"]["inclination"] <= 0.3
     assert _inclination_vs_log(tmp_path / "out", log) <= 0.3
+
+
+def test_declination_comes_from_the_log_and_turns_the_yaw_onto_the_autopilots(sitl, tmp_path):
+    """PX4's NED is true north: the replay takes EKF2_MAG_DECL from the log (SITL: 3.32 deg, the
+    simulated field's own declination) unless the user set it; the yaw then agrees with
+    vehicle_attitude to a fraction of a degree, and not without it."""
+    decl = float(pyulog.ULog(str(SITL), parse_header_only=True).initial_parameters[
+        "EKF2_MAG_DECL"])
+    s = sitl["result"].summary
+    assert s["parameters"]["pipeline"]["magnetic_declination_rad"] == pytest.approx(
+        math.radians(decl))
+    assert any(c.startswith("magnetic_declination_rad=") for c in s["px4"]["conventions_applied"])
+    assert s["reference"]["rpy_rmse_deg"]["yaw"] < 1.0
+    opts = ReplayOptions(progress=False, explicit_params=frozenset({"magnetic_declination_rad"}))
+    magnetic = replay_bag(SITL, tmp_path / "magnetic", options=opts).summary
+    assert magnetic["parameters"]["pipeline"]["magnetic_declination_rad"] == 0.0
+    assert magnetic["reference"]["rpy_rmse_deg"]["yaw"] > decl - 1.0
+    assert magnetic["reference"]["rmse_deg"]["inclination"] == pytest.approx(
+        s["reference"]["rmse_deg"]["inclination"], abs=1e-6)
+
+
+@pytest.mark.parametrize(("value", "expect"), [
+    (3.5, math.radians(3.5)), (-12.0, math.radians(-12.0)), (float("nan"), None), (200.0, None),
+    ("x", None)])
+def test_log_declination_is_taken_only_when_it_is_a_declination(value, expect):
+    got = px4.log_defaults({"EKF2_MAG_DECL": value})
+    assert got == ({} if expect is None else {"magnetic_declination_rad": pytest.approx(expect)})
+    assert px4.log_defaults({}) == {}
+    fp, pp, changed = px4.apply_px4_conventions(FilterParams(), PipelineParams(), (),
+                                                {"EKF2_MAG_DECL": value})
+    assert pp.magnetic_declination_rad == pytest.approx(expect if expect is not None else 0.0)
+    kept = px4.apply_px4_conventions(FilterParams(), PipelineParams(magnetic_declination_rad=0.1),
+                                     {"magnetic_declination_rad"}, {"EKF2_MAG_DECL": 3.5})[1]
+    assert kept.magnetic_declination_rad == 0.1
 
 
 def test_world_frame_set_by_the_user_is_kept_and_the_comparison_follows(sitl, tmp_path):

@@ -911,7 +911,7 @@ def _px4_input(bag: Any, opts: ReplayOptions, variants: Sequence[ReplayVariant]
     for v in variants:
         fp, pp, changed = px4.apply_px4_conventions(
             v.filter_params or FilterParams(), v.pipeline_params or PipelineParams(),
-            opts.explicit_params)
+            opts.explicit_params, bag.parameters)
         out.append(dataclasses.replace(v, filter_params=fp, pipeline_params=pp))
     notes = list(bag.notes)
     lo, hi, dur = bag.imu_coverage()

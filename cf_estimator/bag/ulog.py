@@ -82,6 +82,7 @@ class _Parsed:
     last_timestamp: int
     file_corruption: bool
     data_list: list[Any]
+    initial_parameters: dict[str, Any]
 
 
 #: Message types of a ULog file (``F``ormat, ``I``nfo, ``M``ulti info, ``P``arameter, default
@@ -163,7 +164,8 @@ def _fast_parse(data: bytes) -> tuple[_Parsed, int | None] | None:
             last = max(last, int(d.data["timestamp"].max()))
         out.append(d)
     out.sort(key=lambda ds: (ds.name, ds.multi_id))
-    return _Parsed(int(head.start_timestamp), last, False, out), cut
+    return _Parsed(int(head.start_timestamp), last, False, out,
+                   dict(head.initial_parameters)), cut
 
 
 @dataclass
@@ -218,6 +220,8 @@ class UlogBag(io.InputBag):
         except Exception as exc:  # noqa: BLE001 - pyulog on garbage raises anything
             raise io.BagError(f"{path}: not a readable PX4 ulog: {io.one_line(exc)}") from exc
         self.log_start_us = int(log.start_timestamp)
+        #: the autopilot's parameters as the log starts (name -> value; PX4's units)
+        self.parameters: dict[str, Any] = dict(log.initial_parameters)
         self.log_last_us = int(log.last_timestamp)
         size = len(data)
         del data

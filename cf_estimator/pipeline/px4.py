@@ -8,6 +8,11 @@ of ``vehicle_local_position``), so its output reads like ``vehicle_attitude``; a
 user set explicitly (a parameter file, a ROS override) is never changed: ``world_frame: enu``
 gives the REP-103 FLU → ENU orientation from the same FRD data.
 
+PX4's world frame is true north (EKF2 turns the magnetometer's heading by the declination it
+looks up, or by ``EKF2_MAG_DECL``): a ulog's replay takes ``magnetic_declination_rad`` from the
+log's ``EKF2_MAG_DECL`` [deg] (:func:`log_defaults`; the value the autopilot saved, from the
+World Magnetic Model at its last GNSS position) unless the user set it.
+
 Stamps stay the log's time since boot (``timestamp`` µs → header stamp ns), so the output lines
 up with every other topic of the log.
 """
@@ -15,7 +20,8 @@ up with every other topic of the log.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Collection
+import math
+from collections.abc import Collection, Mapping
 from typing import Any
 
 import numpy as np
@@ -36,6 +42,24 @@ RELATIVE_TIMESTAMP_INVALID = 2147483647
 GAUSS_TO_TESLA = 1e-4
 
 
+#: PX4 parameter holding the magnetic declination [deg, east positive] (EKF2's; saved on
+#: disarm when EKF2_DECL_TYPE says so).
+PX4_DECLINATION_PARAM = "EKF2_MAG_DECL"
+
+
+def log_defaults(log_parameters: Mapping[str, Any]) -> dict[str, Any]:
+    """The estimator parameters a PX4 log's own parameters imply: ``magnetic_declination_rad``
+    [rad] from :data:`PX4_DECLINATION_PARAM` [deg] when it is there, finite and within ±180°
+    (none otherwise)."""
+    try:
+        decl = float(log_parameters[PX4_DECLINATION_PARAM])
+    except (KeyError, TypeError, ValueError):
+        return {}
+    if not (math.isfinite(decl) and abs(decl) <= 180.0):
+        return {}
+    return {"magnetic_declination_rad": math.radians(decl)}
+
+
 def _defaults(cls: type) -> dict[str, Any]:
     return {s.name: s.default for s in specs_of(cls)}
 
@@ -50,22 +74,26 @@ def explicit_from_values(fp: FilterParams, pp: PipelineParams) -> set[str]:
 
 def apply_px4_conventions(
     fp: FilterParams, pp: PipelineParams, explicit: Collection[str] | None = None,
+    log_parameters: Mapping[str, Any] | None = None,
 ) -> tuple[FilterParams, PipelineParams, list[str]]:
     """``(fp, pp, changed)``: the PX4 defaults (:data:`PX4_FILTER_DEFAULTS`,
-    :data:`PX4_PIPELINE_DEFAULTS`) applied to every parameter not in ``explicit`` (None: the
-    parameters that differ from the schema default count as explicit); ``changed`` names the
-    parameters set, ``name=value``."""
+    :data:`PX4_PIPELINE_DEFAULTS`, and :func:`log_defaults` of the log's own parameters)
+    applied to every parameter not in ``explicit`` (None: the parameters that differ from the
+    schema default count as explicit); ``changed`` names the parameters set, ``name=value``."""
     given = explicit_from_values(fp, pp) if explicit is None else set(explicit)
-    changed: list[str] = []
-    f_changes = {k: v for k, v in PX4_FILTER_DEFAULTS.items()
-                 if k not in given and getattr(fp, k) != v}
-    p_changes = {k: v for k, v in PX4_PIPELINE_DEFAULTS.items()
-                 if k not in given and getattr(pp, k) != v}
+    from_log = log_defaults(log_parameters or {})
+    f_names = set(_defaults(FilterParams))
+    f_changes = {k: v for k, v in {**PX4_FILTER_DEFAULTS, **from_log}.items()
+                 if k in f_names and k not in given and getattr(fp, k) != v}
+    p_changes = {k: v for k, v in {**PX4_PIPELINE_DEFAULTS, **from_log}.items()
+                 if k not in f_names and k not in given and getattr(pp, k) != v}
     if f_changes:
         fp = dataclasses.replace(fp, **f_changes)
     if p_changes:
         pp = dataclasses.replace(pp, **p_changes)
-    changed = [f"{k}={v}" for k, v in {**f_changes, **p_changes}.items()]
+    changed = [f"{k}={v:.6g} ({PX4_DECLINATION_PARAM} {math.degrees(v):.2f} deg)"
+               if k == "magnetic_declination_rad" else f"{k}={v}"
+               for k, v in {**f_changes, **p_changes}.items()]
     return fp, pp, changed
 
 
