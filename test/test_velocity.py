@@ -332,8 +332,8 @@ def test_the_velocity_measures_the_swing_and_hands_it_to_the_loop_when_aiding_en
     assert 0.8 * 6.0 / g < math.sqrt(a.swing_var) < 1.1 * 6.0 / g
     f = ComplementaryFilter(P6)
     f.initialize((1.0, 0.0, 0.0, 0.0))
-    end = SimpleNamespace(moving=False, started=False, first_start=False, active=False,
-                          swing_var=0.3, take_realignment=lambda: None,
+    end = SimpleNamespace(moving=False, moving_now=False, started=False, first_start=False,
+                          active=False, swing_var=0.3, take_realignment=lambda: None,
                           take_heading_correction=lambda: 0.0)
     apply_aiding(f, end)  # was not aided: nothing to hand over
     assert f.step_state.pv_var == 0.0
@@ -514,6 +514,41 @@ def test_time_to_hold_counts_from_the_first_velocity_sample_until_it_stays_below
     assert math.isnan(time_to_hold_s(flight, quat.from_euler(np.radians(5.0) + 0 * t, 0 * t,
                                                               0 * t)))
     assert time_to_hold_s(SimpleNamespace(**{**vars(flight), "velocity_t_s": None}), est) != 0.0
+
+
+@pytest.mark.parametrize("backend", ["python", "compiled"])
+def test_a_vehicle_the_velocity_says_moves_is_never_at_rest(backend):
+    """A slow steady turn (0.3 deg/s, within the stillness blocks' tolerance: a multirotor
+    slowing down in the air passes them) is taken for rest, and its rate for gyro bias, when
+    nothing says otherwise; while the velocity says the vehicle moves (2 m/s, beyond
+    MOVING_SPEED_SIGMAS) it is never at rest and the bias stays unlearned from it. Once the
+    velocity falls to zero, rest comes back after rest_time_s of still blocks."""
+    from cf_estimator.core.kernel import compiled_available
+
+    if backend == "compiled" and not compiled_available():
+        pytest.skip("the compiled twin is not built here")
+    rate = math.radians(0.3)
+    t = np.arange(0.0, 12.0, 0.01)
+    gyro = np.tile([0.0, 0.0, rate], (t.size, 1))
+    acc = np.tile([0.0, 0.0, P6.gravity_m_s2], (t.size, 1))
+    t_v = np.arange(0.0, 12.0, 0.1)
+    first_rest = {}
+    for speed in (0.0, 2.0):
+        v = np.zeros((t_v.size, 3))
+        v[:, 0] = np.where(t_v < 8.0, speed, 0.0)  # stops at 8 s
+        r = estimate(gyro, acc, None, timestamps_s=t, params=P6, velocity=(t_v, v),
+                     backend=backend)
+        before = t < 8.0
+        first_rest[speed] = float(t[np.argmax(r.at_rest)]) if r.at_rest.any() else math.inf
+        bias_z = r.gyro_bias_rad_s[before][-1, 2]
+        if speed == 0.0:
+            assert r.at_rest[before].any() and bias_z > 0.8 * rate
+        else:
+            assert not r.at_rest[before].any() and abs(bias_z) < 0.2 * rate
+    # after the stop: the latest moving sample (7.9 s) plus the timeout, then rest_time_s
+    assert 8.0 + P6.rest_time_s < first_rest[2.0] < 8.0 + P6.velocity_timeout_s + \
+        P6.rest_time_s + 2 * P6.rest_window_s
+    assert first_rest[0.0] < 3.0
 
 
 @pytest.mark.parametrize("backend", ["python", "compiled"])

@@ -299,6 +299,14 @@ class ComplementaryFilter:
         still, without waiting for the blocks' verdict."""
         self._state.moved = True
 
+    def interrupt_rest(self) -> None:
+        """Another sensor (velocity aiding) says the vehicle moves now: whatever the stillness
+        blocks say, it is not at rest — its gyro mean is no bias measurement (a multirotor
+        slowing down in the air turns smoothly enough to pass the blocks' tests, and its
+        accelerometer reads the thrust axis however it tilts). The run of still blocks starts
+        again (``rest_time_s`` of them after the vehicle stops)."""
+        self._state.rest_timer_s = 0.0
+
     def take_hold(self, duration_s: float, reopen_bias: bool = False) -> None:
         """Run the loop as in start-up (gain startup_k1, no clip, no bias learning) for the next
         ``duration_s`` [s]: a correction that has just become trustworthy (velocity aiding that
