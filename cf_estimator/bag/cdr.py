@@ -104,6 +104,16 @@ class Block:
         self.frame: list[str | None] = [None] * n
         self.plain: list[bool] = [False] * n
         self.objects: list[Any] = [None] * n
+        self._arrays: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``sec``, ``nsec`` (int64) and ``plain`` (bool) as arrays, made once: call it when
+        the block is filled (the bulk decoder gives them as it decodes)."""
+        if self._arrays is None:
+            self._arrays = (np.asarray(self.sec, dtype=np.int64),
+                            np.asarray(self.nsec, dtype=np.int64),
+                            np.asarray(self.plain, dtype=bool))
+        return self._arrays
 
     def message(self, k: int) -> Any:
         """Message k as an object (a light view, or rosbags' message for an unusual one)."""
@@ -220,10 +230,13 @@ def _decode_uniform_rows(block: Block, buf: np.ndarray, ros2: bool, n_doubles: i
         return False
     stamps = np.ascontiguousarray(buf[:, 4:12]).view("<u4").reshape(n, 2)
     secs = np.ascontiguousarray(stamps[:, 0]).view("<i4") if ros2 else stamps[:, 0]
-    block.values = np.ascontiguousarray(buf[:, body:]).view("<f8").astype(np.float64)
+    block.values = np.ascontiguousarray(buf[:, body:]).view("<f8").astype(np.float64,
+                                                                          copy=False)
     block.sec, block.nsec = secs.tolist(), stamps[:, 1].tolist()
     block.frame = [frame] * n
     block.plain = [True] * n
+    block._arrays = (secs.astype(np.int64), stamps[:, 1].astype(np.int64),
+                     np.ones(n, dtype=bool))
     return True
 
 
@@ -300,18 +313,22 @@ def vector3_stamped_cdr(sec: int, nanosec: int, frame_id: str, v: Sequence[float
 # -- bulk encoding -----------------------------------------------------------------------------
 def _header_rows(sec: np.ndarray, nsec: np.ndarray, frame: bytes, n_doubles: int
                  ) -> tuple[np.ndarray, int]:
-    """(n, header bytes) uint8: encapsulation, stamp, frame id with NUL, padding to 8."""
+    """(n, whole message) uint8 with the header filled in (encapsulation, stamp, frame id with
+    NUL, padding to 8) and the ``n_doubles`` after it left to the caller, and the header's
+    size."""
     n = sec.shape[0]
     end = 16 + len(frame) + 1
     size = end + (-(end - 4) % 8)
-    head = np.zeros((n, size), dtype=np.uint8)
+    rows = np.empty((n, size + 8 * n_doubles), dtype=np.uint8)
+    head = rows[:, :size]
+    head[:, 16:] = 0
     head[:, 0:4] = np.frombuffer(_CDR_LE, dtype=np.uint8)
     head[:, 4:8] = sec.astype("<i4").view(np.uint8).reshape(n, 4)
     head[:, 8:12] = nsec.astype("<u4").view(np.uint8).reshape(n, 4)
     head[:, 12:16] = np.frombuffer(struct.pack("<I", len(frame) + 1), dtype=np.uint8)
     if frame:
         head[:, 16:16 + len(frame)] = np.frombuffer(frame, dtype=np.uint8)
-    return head, size + 8 * n_doubles
+    return rows, size
 
 
 def imu_cdr_rows(sec: np.ndarray, nsec: np.ndarray, frame_id: str, q_xyzw: np.ndarray,
@@ -319,34 +336,43 @@ def imu_cdr_rows(sec: np.ndarray, nsec: np.ndarray, frame_id: str, q_xyzw: np.nd
                  accel: np.ndarray, accel_cov: Sequence[float]) -> np.ndarray:
     """(n, size) uint8: row k = :func:`imu_cdr_fields` of message k (one frame id for all)."""
     frame = str(frame_id).encode("utf-8")
-    head, _size = _header_rows(sec, nsec, frame, IMU_DOUBLES)
-    n = sec.shape[0]
-    body = np.empty((n, IMU_DOUBLES), dtype="<f8")
+    rows, head = _header_rows(sec, nsec, frame, IMU_DOUBLES)
+    body = rows[:, head:].view("<f8")  # (n, IMU_DOUBLES), in place
     body[:, 0:4] = q_xyzw
     body[:, 4:13] = np.asarray(orientation_cov, dtype=np.float64)
     body[:, 13:16] = gyro
     body[:, 16:25] = np.asarray(gyro_cov, dtype=np.float64)
     body[:, 25:28] = accel
     body[:, 28:37] = np.asarray(accel_cov, dtype=np.float64)
-    return np.concatenate([head, body.view(np.uint8)], axis=1)
+    return rows
 
 
 def vector3_stamped_rows(sec: np.ndarray, nsec: np.ndarray, frame_id: str, v: np.ndarray
                          ) -> np.ndarray:
     """(n, size) uint8: row k = :func:`vector3_stamped_cdr` of message k."""
     frame = str(frame_id).encode("utf-8")
-    head, _size = _header_rows(sec, nsec, frame, 3)
-    body = np.ascontiguousarray(v, dtype="<f8")
-    return np.concatenate([head, body.view(np.uint8)], axis=1)
+    rows, head = _header_rows(sec, nsec, frame, 3)
+    rows[:, head:].view("<f8")[:] = v
+    return rows
+
+
+_PAD4 = (b"", b"\x00", b"\x00\x00", b"\x00\x00\x00")
+#: the length-prefixed, NUL-ended bytes of the strings seen (diagnostics repeat their keys and
+#: most values from report to report), bounded
+_STRINGS: dict[str, bytes] = {}
+_STRINGS_MAX = 4096
 
 
 def _cdr_string(out: bytearray, text: str) -> None:
     """A CDR string at the end of ``out`` (aligned to 4 from the encapsulation's end)."""
-    out += b"\x00" * (-(len(out) - 4) % 4)
-    b = text.encode("utf-8")
-    out += struct.pack("<I", len(b) + 1)
-    out += b
-    out += b"\x00"
+    out += _PAD4[-(len(out) - 4) % 4]
+    enc = _STRINGS.get(text)
+    if enc is None:
+        b = text.encode("utf-8")
+        enc = struct.pack("<I", len(b) + 1) + b + b"\x00"
+        if len(_STRINGS) < _STRINGS_MAX:
+            _STRINGS[text] = enc
+    out += enc
 
 
 def diagnostic_array_cdr(stamp_ns: int, reports: Sequence[Any]) -> bytes:

@@ -626,8 +626,13 @@ def _read_in_bulk(bag: Any, topics: _Topics, run: _Run, reading: _Reading,
     pipeline at once (pipeline/bulk.py); references as arrays where the reader has them."""
     for chunk in bag.chunks(topics.names):
         reading.logged(chunk.log_ns[0], chunk.log_ns[-1])
-        if hasattr(chunk, "kinds"):  # from arrays, without a topic list
-            table = {t: k for t, k in ((topics.mag, bulk.MAG), (topics.imu, bulk.IMU)) if t}
+        arrays = None
+        table = {t: k for t, k in ((topics.mag, bulk.MAG), (topics.imu, bulk.IMU)) if t}
+        if hasattr(chunk, "kind_array"):  # the mcap reader's: arrays, no list to convert back
+            kind_arr = chunk.kind_array(table, bulk.OTHER)
+            kinds = kind_arr.tolist()
+            arrays = (kind_arr, chunk.log_ns_array, chunk.row_array)
+        elif hasattr(chunk, "kinds"):  # from arrays, without a topic list
             kinds = chunk.kinds(table, bulk.OTHER)
         else:
             kinds = [bulk.IMU if t == topics.imu else bulk.MAG if t == topics.mag
@@ -635,7 +640,7 @@ def _read_in_bulk(bag: Any, topics: _Topics, run: _Run, reading: _Reading,
         reading.n_imu += kinds.count(bulk.IMU)
         reading.n_mag += kinds.count(bulk.MAG)
         run.events(bulk.Events(kinds, chunk.log_ns, chunk.row, chunk.blocks.get(io.IMU_TYPE),
-                               chunk.blocks.get(io.MAG_TYPE), chunk.msg))
+                               chunk.blocks.get(io.MAG_TYPE), chunk.msg, arrays))
         ref = topics.reference
         fast_ref = getattr(chunk, "references", None)  # a ulog's, as arrays
         if ref is not None and fast_ref is not None and ref != topics.imu:

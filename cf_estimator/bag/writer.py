@@ -210,21 +210,22 @@ class OutputBag:
                 self.write_rows(ts[first:], [(t, mt, r[first:]) for t, mt, r in topics])
             return
         conns = [self._connections[(t, mt)] for t, mt, _r in topics]
-        parts, sizes = [], []
-        for conn, (_t, _m, rows) in zip(conns, topics, strict=True):
-            size = rows.shape[1]
-            rec = np.empty((n, 31 + size), dtype=np.uint8)
-            rec[:, 0] = 0x05
-            rec[:, 1:9] = np.frombuffer(struct.pack("<Q", 22 + size), dtype=np.uint8)
-            rec[:, 9:11] = np.frombuffer(struct.pack("<H", conn.id), dtype=np.uint8)
-            rec[:, 11:15] = 0
-            stamp = ts.astype("<u8").view(np.uint8).reshape(n, 8)
-            rec[:, 15:23] = stamp
-            rec[:, 23:31] = stamp
-            rec[:, 31:] = rows
-            parts.append(rec)
-            sizes.append(31 + size)
-        flat = np.concatenate(parts, axis=1).reshape(-1)
+        sizes = [31 + rows.shape[1] for _t, _m, rows in topics]
+        # row k: the k-th record of every topic, side by side, written in place
+        rec = np.empty((n, sum(sizes)), dtype=np.uint8)
+        stamp = ts.astype("<u8").view(np.uint8).reshape(n, 8)
+        off = 0
+        for conn, (_t, _m, rows), size in zip(conns, topics, sizes, strict=True):
+            rec[:, off] = 0x05
+            rec[:, off + 1:off + 9] = np.frombuffer(struct.pack("<Q", size - 9), dtype=np.uint8)
+            rec[:, off + 9:off + 11] = np.frombuffer(struct.pack("<H", conn.id), dtype=np.uint8)
+            rec[:, off + 11:off + 15] = 0
+            rec[:, off + 15:off + 23] = stamp
+            rec[:, off + 23:off + 31] = stamp
+            rec[:, off + 31:off + size] = rows
+            off += size
+        flat = rec.reshape(-1)
+        view = memoryview(flat)
         m = len(topics)
         # record r = row r // m, topic r % m: its offset in ``flat``
         prefix = np.concatenate([[0], np.cumsum(sizes[:-1])]).astype(np.int64)
@@ -270,7 +271,7 @@ class OutputBag:
                 st.channel_stats[cid] += count
                 w.counts[cid] += count
                 self.counts[topics[j][0]] += count
-            bio.write(flat[starts[pos]:starts[last + 1]].tobytes())
+            bio.write(view[int(starts[pos]):int(starts[last + 1])])
             if bio.tell() > _MCAP_CHUNK_BYTES:
                 _close_chunk(st)
             pos = last + 1
@@ -372,12 +373,23 @@ def _close_chunk(st: Any) -> None:
     write_uint64(rec, chunk.message_end_time)
     write_uint64(rec, chunk.bio.tell())
     write_uint32(rec, 0)
-    compressed = st.compressor(chunk.bio.getvalue())
-    write_string(rec, st.compression)
-    write_uint64(rec, len(compressed))
-    rec.write(compressed)
     chunk_start = st.bio.tell()
-    write_record(st.bio, 0x06, rec)
+    if st.compression == "":  # the records as they are: written from the buffer, not copied
+        with chunk.bio.getbuffer() as records:
+            n_compressed = len(records)
+            write_string(rec, st.compression)
+            write_uint64(rec, n_compressed)
+            st.bio.write(b"\x06")  # write_record's opcode and length, then the record
+            write_uint64(st.bio, rec.tell() + n_compressed)
+            st.bio.write(rec.getbuffer())
+            st.bio.write(records)
+    else:
+        compressed = st.compressor(chunk.bio.getvalue())
+        n_compressed = len(compressed)
+        write_string(rec, st.compression)
+        write_uint64(rec, n_compressed)
+        rec.write(compressed)
+        write_record(st.bio, 0x06, rec)
     chunk_end = st.bio.tell()
     offsets: list[tuple[int, int]] = []
     for cid, msgs in chunk.msgs.items():
@@ -395,7 +407,7 @@ def _close_chunk(st: Any) -> None:
         rec.write(struct.pack("<HQ", cid, offset))
     write_uint64(rec, st.bio.tell() - chunk_end)
     write_string(rec, st.compression)
-    write_uint64(rec, len(compressed))
+    write_uint64(rec, n_compressed)
     write_uint64(rec, chunk.bio.tell())
     st.chunks.append(rec)
     st.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
