@@ -422,19 +422,21 @@ class _Run:
         self.next_bias_t = next_bias
         if marks:  # the bias estimate after each marked row, as imu() samples it
             self.bias_t.extend(t_list[k] for k in marks)
-            self.bias.extend(tuple(r) for r in c.extra[marks, 15:18].tolist())
+            self.bias.extend(map(tuple, c.extra[marks, 15:18].tolist()))
             self.bias_sigma.extend(c.extra[marks, 10].tolist())
         bag = self.bag
-        if bag is not None:  # every output message of the run encoded and written at once
+        if bag is not None:  # every output message of the run encoded in place, written at once
             sec, nsec = run.sec, run.nsec
-            rows = cdr.imu_cdr_rows(sec, nsec, run.frame, c.q_wxyz[:, [1, 2, 3, 0]],
-                                    c.covariance, c.gyro, c.av_cov, c.accel, c.la_cov)
-            topics = [(OUT_IMU_TOPIC, io.IMU_TYPE, rows)]
+            topics = [(OUT_IMU_TOPIC, io.IMU_TYPE, cdr.imu_cdr_size(run.frame))]
             if self.publish_rpy:
                 topics.append((OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE,
-                               cdr.vector3_stamped_rows(sec, nsec, run.frame,
-                                                        c.rpy)))
-            bag.write_rows(run.log_ns, topics)
+                               cdr.vector3_stamped_size(run.frame)))
+            rec, payloads = io.record_rows(n, [size for _t, _m, size in topics])
+            cdr.imu_cdr_rows(sec, nsec, run.frame, c.q_wxyz[:, [1, 2, 3, 0]], c.covariance,
+                             c.gyro, c.av_cov, c.accel, c.la_cov, out=payloads[0])
+            if self.publish_rpy:
+                cdr.vector3_stamped_rows(sec, nsec, run.frame, c.rpy, out=payloads[1])
+            bag.write_records(run.log_ns, topics, rec)
         self.t.add(ts)
         self.q.add(c.q_wxyz)
         self.rpy.add(c.rpy)
