@@ -22,7 +22,7 @@ from pathlib import Path
 
 import pytest
 
-from cf_estimator.core import bias, filter, ops, step, stillness
+from cf_estimator.core import bias, covariance, filter, ops, step, stillness
 
 CORE = Path(step.__file__).parent
 #: The Python step: module → its functions that the C repeats (all top-level ones) ...
@@ -36,8 +36,9 @@ STAGES = ("predict", "classify_motion", "tilt_error", "saturate", "aperiodic", "
           "recover", "heading")
 C_STEP = ("toward_unit", "up", "stillness", "turn_share", "loop_gain", "learning_gains",
           "cf_step") + STAGES
-#: Where a C constant's Python counterpart may live (the step's modules, then the checks').
-PY_HOMES = (step, stillness, bias, ops, filter)
+#: Where a C constant's Python counterpart may live (the step's modules, then the checks', then
+#: the covariance model's, whose row loop the C repeats for the bulk replay).
+PY_HOMES = (step, stillness, bias, ops, filter, covariance)
 #: Bare numbers the algebra needs (zero, one, the 2 of rotations and sample differences, the
 #: 3 axes); the rotation helpers also hold the half angle and the series' denominator.
 STRUCTURAL = {0.0, 1.0, 2.0, 3.0}

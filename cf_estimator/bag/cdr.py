@@ -21,6 +21,7 @@ replay's ``/imu/data`` and ``/imu/rpy`` outputs with one ``struct`` call each â€
 
 from __future__ import annotations
 
+import functools
 import struct
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -99,11 +100,52 @@ class Block:
         self.n = n
         d = IMU_DOUBLES if imu else MAG_DOUBLES
         self.values = np.zeros((n, d))
-        self.sec: list[int] = [0] * n
-        self.nsec: list[int] = [0] * n
+        self._sec: list[int] | None = [0] * n
+        self._nsec: list[int] | None = [0] * n
         self.frame: list[str | None] = [None] * n
         self.plain: list[bool] = [False] * n
         self.objects: list[Any] = [None] * n
+        self._arrays: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    @property
+    def sec(self) -> list[int]:
+        """Header stamp seconds per row (a list; made from :meth:`arrays` when first asked
+        after the bulk decoder, which keeps them as arrays)."""
+        if self._sec is None:
+            self._sec = self.arrays()[0].tolist()
+        return self._sec
+
+    @sec.setter
+    def sec(self, values: list[int]) -> None:
+        self._lists()
+        self._sec, self._arrays = values, None
+
+    def _lists(self) -> None:
+        """Both stamp lists made (before the arrays they may come from are dropped)."""
+        if self._sec is None or self._nsec is None:
+            sec, nsec, _plain = self.arrays()
+            self._sec, self._nsec = sec.tolist(), nsec.tolist()
+
+    @property
+    def nsec(self) -> list[int]:
+        """Header stamp nanoseconds per row (as :attr:`sec`)."""
+        if self._nsec is None:
+            self._nsec = self.arrays()[1].tolist()
+        return self._nsec
+
+    @nsec.setter
+    def nsec(self, values: list[int]) -> None:
+        self._lists()
+        self._nsec, self._arrays = values, None
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``sec``, ``nsec`` (int64) and ``plain`` (bool) as arrays, made once: call it when
+        the block is filled (the bulk decoder gives them as it decodes)."""
+        if self._arrays is None:
+            self._arrays = (np.asarray(self.sec, dtype=np.int64),
+                            np.asarray(self.nsec, dtype=np.int64),
+                            np.asarray(self.plain, dtype=bool))
+        return self._arrays
 
     def message(self, k: int) -> Any:
         """Message k as an object (a light view, or rosbags' message for an unusual one)."""
@@ -220,10 +262,14 @@ def _decode_uniform_rows(block: Block, buf: np.ndarray, ros2: bool, n_doubles: i
         return False
     stamps = np.ascontiguousarray(buf[:, 4:12]).view("<u4").reshape(n, 2)
     secs = np.ascontiguousarray(stamps[:, 0]).view("<i4") if ros2 else stamps[:, 0]
-    block.values = np.ascontiguousarray(buf[:, body:]).view("<f8").astype(np.float64)
-    block.sec, block.nsec = secs.tolist(), stamps[:, 1].tolist()
+    block.values = np.ascontiguousarray(buf[:, body:]).view("<f8").astype(np.float64,
+                                                                          copy=False)
     block.frame = [frame] * n
     block.plain = [True] * n
+    # the stamps as arrays; the lists of Block.sec/nsec are made from them when asked
+    block._arrays = (secs.astype(np.int64), stamps[:, 1].astype(np.int64),
+                     np.ones(n, dtype=bool))
+    block._sec = block._nsec = None
     return True
 
 
@@ -298,55 +344,100 @@ def vector3_stamped_cdr(sec: int, nanosec: int, frame_id: str, v: Sequence[float
 
 
 # -- bulk encoding -----------------------------------------------------------------------------
-def _header_rows(sec: np.ndarray, nsec: np.ndarray, frame: bytes, n_doubles: int
-                 ) -> tuple[np.ndarray, int]:
-    """(n, header bytes) uint8: encapsulation, stamp, frame id with NUL, padding to 8."""
-    n = sec.shape[0]
+def _header_size(frame: bytes) -> int:
     end = 16 + len(frame) + 1
-    size = end + (-(end - 4) % 8)
-    head = np.zeros((n, size), dtype=np.uint8)
-    head[:, 0:4] = np.frombuffer(_CDR_LE, dtype=np.uint8)
+    return end + (-(end - 4) % 8)
+
+
+def imu_cdr_size(frame_id: str) -> int:
+    """Bytes of one :func:`imu_cdr_rows` row with this frame id."""
+    return _header_size(str(frame_id).encode("utf-8")) + 8 * IMU_DOUBLES
+
+
+def vector3_stamped_size(frame_id: str) -> int:
+    """Bytes of one :func:`vector3_stamped_rows` row with this frame id."""
+    return _header_size(str(frame_id).encode("utf-8")) + 8 * 3
+
+
+def _header_rows(sec: np.ndarray, nsec: np.ndarray, frame: bytes, n_doubles: int,
+                 out: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+    """(n, whole message) uint8 (``out`` if given) with the header filled in (encapsulation,
+    stamp, frame id with NUL, padding to 8) and the ``n_doubles`` after it left to the caller,
+    and the header's size."""
+    n = sec.shape[0]
+    size = _header_size(frame)
+    if out is None:
+        out = np.empty((n, size + 8 * n_doubles), dtype=np.uint8)
+    elif out.shape != (n, size + 8 * n_doubles) or out.dtype != np.uint8:
+        raise ValueError(f"out must be uint8 of shape {(n, size + 8 * n_doubles)}")
+    rows = out
+    head = rows[:, :size]
+    head[:] = _header_template(frame)  # all but the stamp, then the stamp
     head[:, 4:8] = sec.astype("<i4").view(np.uint8).reshape(n, 4)
     head[:, 8:12] = nsec.astype("<u4").view(np.uint8).reshape(n, 4)
-    head[:, 12:16] = np.frombuffer(struct.pack("<I", len(frame) + 1), dtype=np.uint8)
-    if frame:
-        head[:, 16:16 + len(frame)] = np.frombuffer(frame, dtype=np.uint8)
-    return head, size + 8 * n_doubles
+    return rows, size
+
+
+@functools.lru_cache(maxsize=64)
+def _header_template(frame: bytes) -> np.ndarray:
+    """A header's bytes with a zero stamp: encapsulation, stamp, frame id length, frame id,
+    NUL, padding to 8."""
+    head = np.zeros(_header_size(frame), dtype=np.uint8)
+    head[0:4] = np.frombuffer(_CDR_LE, dtype=np.uint8)
+    head[12:16] = np.frombuffer(struct.pack("<I", len(frame) + 1), dtype=np.uint8)
+    head[16:16 + len(frame)] = np.frombuffer(frame, dtype=np.uint8)
+    head.flags.writeable = False
+    return head
 
 
 def imu_cdr_rows(sec: np.ndarray, nsec: np.ndarray, frame_id: str, q_xyzw: np.ndarray,
                  orientation_cov: Sequence[float], gyro: np.ndarray, gyro_cov: Sequence[float],
-                 accel: np.ndarray, accel_cov: Sequence[float]) -> np.ndarray:
-    """(n, size) uint8: row k = :func:`imu_cdr_fields` of message k (one frame id for all)."""
+                 accel: np.ndarray, accel_cov: Sequence[float],
+                 out: np.ndarray | None = None) -> np.ndarray:
+    """(n, size) uint8: row k = :func:`imu_cdr_fields` of message k (one frame id for all);
+    written into ``out`` when given (e.g. a payload view of ``writer.record_rows``)."""
     frame = str(frame_id).encode("utf-8")
-    head, _size = _header_rows(sec, nsec, frame, IMU_DOUBLES)
-    n = sec.shape[0]
-    body = np.empty((n, IMU_DOUBLES), dtype="<f8")
+    rows, head = _header_rows(sec, nsec, frame, IMU_DOUBLES, out)
+    body = rows[:, head:].view("<f8")  # (n, IMU_DOUBLES), in place
     body[:, 0:4] = q_xyzw
     body[:, 4:13] = np.asarray(orientation_cov, dtype=np.float64)
     body[:, 13:16] = gyro
     body[:, 16:25] = np.asarray(gyro_cov, dtype=np.float64)
     body[:, 25:28] = accel
     body[:, 28:37] = np.asarray(accel_cov, dtype=np.float64)
-    return np.concatenate([head, body.view(np.uint8)], axis=1)
+    return rows
 
 
-def vector3_stamped_rows(sec: np.ndarray, nsec: np.ndarray, frame_id: str, v: np.ndarray
-                         ) -> np.ndarray:
-    """(n, size) uint8: row k = :func:`vector3_stamped_cdr` of message k."""
+def vector3_stamped_rows(sec: np.ndarray, nsec: np.ndarray, frame_id: str, v: np.ndarray,
+                         out: np.ndarray | None = None) -> np.ndarray:
+    """(n, size) uint8: row k = :func:`vector3_stamped_cdr` of message k (into ``out`` when
+    given)."""
     frame = str(frame_id).encode("utf-8")
-    head, _size = _header_rows(sec, nsec, frame, 3)
-    body = np.ascontiguousarray(v, dtype="<f8")
-    return np.concatenate([head, body.view(np.uint8)], axis=1)
+    rows, head = _header_rows(sec, nsec, frame, 3, out)
+    rows[:, head:].view("<f8")[:] = v
+    return rows
+
+
+_PAD4 = (b"", b"\x00", b"\x00\x00", b"\x00\x00\x00")
+#: the length-prefixed, NUL-ended bytes of the strings seen (diagnostics repeat their keys and
+#: most values from report to report), bounded
+_STRINGS: dict[str, bytes] = {}
+_STRINGS_MAX = 4096
+
+
+def _encoded(text: str) -> bytes:
+    """``text`` as a CDR string: length with the NUL, UTF-8 bytes, NUL (kept in _STRINGS)."""
+    b = text.encode("utf-8")
+    enc = struct.pack("<I", len(b) + 1) + b + b"\x00"
+    if len(_STRINGS) < _STRINGS_MAX:
+        _STRINGS[text] = enc
+    return enc
 
 
 def _cdr_string(out: bytearray, text: str) -> None:
     """A CDR string at the end of ``out`` (aligned to 4 from the encapsulation's end)."""
-    out += b"\x00" * (-(len(out) - 4) % 4)
-    b = text.encode("utf-8")
-    out += struct.pack("<I", len(b) + 1)
-    out += b
-    out += b"\x00"
+    out += _PAD4[-(len(out) - 4) % 4]
+    out += _STRINGS.get(text) or _encoded(text)
 
 
 def diagnostic_array_cdr(stamp_ns: int, reports: Sequence[Any]) -> bytes:
@@ -365,7 +456,9 @@ def diagnostic_array_cdr(stamp_ns: int, reports: Sequence[Any]) -> bytes:
         values = list(r.values)
         out += b"\x00" * (-(len(out) - 4) % 4)
         out += struct.pack("<I", len(values))
-        for k, v in values:
-            _cdr_string(out, str(k))
-            _cdr_string(out, str(v))
+        strings, pad = _STRINGS, _PAD4
+        for k, v in values:  # _cdr_string of the key and the value, inlined
+            for text in (str(k), str(v)):
+                out += pad[-(len(out) - 4) % 4]
+                out += strings.get(text) or _encoded(text)
     return bytes(out)

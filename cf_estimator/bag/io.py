@@ -57,6 +57,7 @@ from cf_estimator.bag.writer import (
     OutputBag,
     check_output_path,
     direct_mcap_supported,
+    record_rows,
     rosbags_version,
 )
 
@@ -94,6 +95,7 @@ __all__ = [
     "open_bag",
     "quaternion_stamped_message",
     "quaternion_xyzw",
+    "record_rows",
     "rosbags_version",
     "rpy_from_output",
     "stamp",

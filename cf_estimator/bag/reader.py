@@ -404,6 +404,8 @@ class FastChunk:
             self.blocks[msgtype] = block
             row[sel] = np.arange(sel.size)
         self.row = row.tolist()
+        self.row_array = row  #: ``row`` as an int64 array
+        self.log_ns_array = batch.log_ns  #: ``log_ns`` as an int64 array
 
     def __len__(self) -> int:
         return len(self._batch)
@@ -422,6 +424,11 @@ class FastChunk:
         """Per message: ``table[topic]`` (``default`` for a topic not in it)."""
         lut = np.asarray([table.get(c.topic, default) for c in self._conns], dtype=np.int64)
         return lut[self._batch.conn].tolist()
+
+    def kind_array(self, table: dict[str, int], default: int) -> np.ndarray:
+        """:meth:`kinds` as an int8 array."""
+        lut = np.asarray([table.get(c.topic, default) for c in self._conns], dtype=np.int8)
+        return lut[self._batch.conn]
 
     def _decode(self, i: int) -> Any:
         conn = self._conns[int(self._batch.conn[i])]

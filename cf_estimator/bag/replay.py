@@ -329,9 +329,9 @@ class _Run:
         self.rpy = _Col(3)
         self.clipped = _Col(dtype=bool)
         self.enorm = _Col()
-        self.bias_t: list[float] = []
-        self.bias: list[tuple[float, float, float]] = []
-        self.bias_sigma: list[float] = []
+        self.bias_t = _Col()  #: the bias samples: stamp [s], estimate (3) and sigma
+        self.bias = _Col(3)
+        self.bias_sigma = _Col()
         self.rest = _Col(dtype=bool)
         self.tilt_var = _Col()
         self.yaw_var = _Col()
@@ -421,20 +421,22 @@ class _Run:
         c = bulk.commit(self.pipe, run)
         self.next_bias_t = next_bias
         if marks:  # the bias estimate after each marked row, as imu() samples it
-            self.bias_t.extend(t_list[k] for k in marks)
-            self.bias.extend(tuple(r) for r in c.extra[marks, 15:18].tolist())
-            self.bias_sigma.extend(c.extra[marks, 10].tolist())
+            self.bias_t.add(ts[marks])
+            self.bias.add(c.extra[marks, 15:18])
+            self.bias_sigma.add(c.extra[marks, 10])
         bag = self.bag
-        if bag is not None:  # every output message of the run encoded and written at once
+        if bag is not None:  # every output message of the run encoded in place, written at once
             sec, nsec = run.sec, run.nsec
-            rows = cdr.imu_cdr_rows(sec, nsec, run.frame, c.q_wxyz[:, [1, 2, 3, 0]],
-                                    c.covariance, c.gyro, c.av_cov, c.accel, c.la_cov)
-            topics = [(OUT_IMU_TOPIC, io.IMU_TYPE, rows)]
+            topics = [(OUT_IMU_TOPIC, io.IMU_TYPE, cdr.imu_cdr_size(run.frame))]
             if self.publish_rpy:
                 topics.append((OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE,
-                               cdr.vector3_stamped_rows(sec, nsec, run.frame,
-                                                        c.rpy)))
-            bag.write_rows(run.log_ns, topics)
+                               cdr.vector3_stamped_size(run.frame)))
+            rec, payloads = io.record_rows(n, [size for _t, _m, size in topics])
+            cdr.imu_cdr_rows(sec, nsec, run.frame, c.q_wxyz[:, [1, 2, 3, 0]], c.covariance,
+                             c.gyro, c.av_cov, c.accel, c.la_cov, out=payloads[0])
+            if self.publish_rpy:
+                cdr.vector3_stamped_rows(sec, nsec, run.frame, c.rpy, out=payloads[1])
+            bag.write_records(run.log_ns, topics, rec)
         self.t.add(ts)
         self.q.add(c.q_wxyz)
         self.rpy.add(c.rpy)
@@ -626,8 +628,13 @@ def _read_in_bulk(bag: Any, topics: _Topics, run: _Run, reading: _Reading,
     pipeline at once (pipeline/bulk.py); references as arrays where the reader has them."""
     for chunk in bag.chunks(topics.names):
         reading.logged(chunk.log_ns[0], chunk.log_ns[-1])
-        if hasattr(chunk, "kinds"):  # from arrays, without a topic list
-            table = {t: k for t, k in ((topics.mag, bulk.MAG), (topics.imu, bulk.IMU)) if t}
+        arrays = None
+        table = {t: k for t, k in ((topics.mag, bulk.MAG), (topics.imu, bulk.IMU)) if t}
+        if hasattr(chunk, "kind_array"):  # the mcap reader's: arrays, no list to convert back
+            kind_arr = chunk.kind_array(table, bulk.OTHER)
+            kinds = kind_arr.tolist()
+            arrays = (kind_arr, chunk.log_ns_array, chunk.row_array)
+        elif hasattr(chunk, "kinds"):  # from arrays, without a topic list
             kinds = chunk.kinds(table, bulk.OTHER)
         else:
             kinds = [bulk.IMU if t == topics.imu else bulk.MAG if t == topics.mag
@@ -635,7 +642,7 @@ def _read_in_bulk(bag: Any, topics: _Topics, run: _Run, reading: _Reading,
         reading.n_imu += kinds.count(bulk.IMU)
         reading.n_mag += kinds.count(bulk.MAG)
         run.events(bulk.Events(kinds, chunk.log_ns, chunk.row, chunk.blocks.get(io.IMU_TYPE),
-                               chunk.blocks.get(io.MAG_TYPE), chunk.msg))
+                               chunk.blocks.get(io.MAG_TYPE), chunk.msg, arrays))
         ref = topics.reference
         fast_ref = getattr(chunk, "references", None)  # a ulog's, as arrays
         if ref is not None and fast_ref is not None and ref != topics.imu:
@@ -790,7 +797,8 @@ def _result(r: _Run, in_path: Path, in_format: str, topics: _Topics, reading: _R
         [float(c) for c in r.pipe.filter.gyro_bias_rad_s] if r.pipe.initialized else None
     )
     status = r.pipe.filter.status() if r.pipe.initialized else None
-    converged = np.asarray(r.bias_sigma) < BIAS_CONVERGED_SIGMA_RAD_S
+    bias_t = r.bias_t.array()
+    converged = r.bias_sigma.array() < BIAS_CONVERGED_SIGMA_RAD_S
     mag_in_use = topics.mag is not None and r.fparams.use_mag
     first, last = reading.first_log_ns, reading.last_log_ns
     summary: dict[str, Any] = {
@@ -819,7 +827,7 @@ def _result(r: _Run, in_path: Path, in_format: str, topics: _Topics, reading: _R
         "final_gyro_bias_sigma_rad_s": status.gyro_bias_sigma_rad_s if status else None,
         "gyro_bias_converged": status.gyro_bias_converged if status else False,
         "gyro_bias_converged_after_s": (
-            float(r.bias_t[int(np.argmax(converged))] - r.bias_t[0])
+            float(bias_t[int(np.argmax(converged))] - bias_t[0])
             if converged.any() else None),
         "still_fraction": float(np.mean(series.at_rest[init])) if init.any() else None,
         **({"velocity": _velocity_summary(r.pipe, reading.n_vel)} if topics.velocity else {}),
@@ -960,9 +968,9 @@ def _series(r: _Run, ref_t: Sequence[float], ref_q: Sequence[Any]) -> ReplaySeri
         rpy_rad=r.rpy.array(),
         clipped=r.clipped.array(),
         error_norm_rad=r.enorm.array(),
-        bias_t_s=np.asarray(r.bias_t, dtype=float),
-        gyro_bias_rad_s=np.asarray(r.bias, dtype=float).reshape(-1, 3),
-        gyro_bias_sigma_rad_s=np.asarray(r.bias_sigma, dtype=float),
+        bias_t_s=r.bias_t.array(),
+        gyro_bias_rad_s=r.bias.array(),
+        gyro_bias_sigma_rad_s=r.bias_sigma.array(),
         at_rest=r.rest.array(),
         online_rpy_rad=np.array([x if x is not None else (np.nan,) * 3 for x in r.online_rpy],
                                 dtype=float).reshape(-1, 3),

@@ -194,45 +194,77 @@ class OutputBag:
         """Write n messages on each of ``topics`` (``(topic, msgtype, (n, size) uint8 CDR
         rows)``), row by row: row k of every topic at ``log_time_ns[k]``, in the order given —
         what n × :meth:`write_raw` calls write, byte for byte, with the mcap records built as
-        one NumPy array and appended a chunk at a time."""
+        one NumPy array and appended a chunk at a time (:meth:`write_records`)."""
+        n = len(log_time_ns)
+        rec, payloads = record_rows(n, [rows.shape[1] for _t, _m, rows in topics])
+        for view, (_t, _m, rows) in zip(payloads, topics, strict=True):
+            view[...] = rows
+        self.write_records(log_time_ns, [(t, mt, rows.shape[1]) for t, mt, rows in topics],
+                           rec)
+
+    def write_records(self, log_time_ns: np.ndarray, topics: Sequence[tuple[str, str, int]],
+                      rec: np.ndarray) -> None:
+        """:meth:`write_rows` of messages already encoded in place: ``rec`` from
+        :func:`record_rows` with ``topics`` (``(topic, msgtype, payload size)``) in the order
+        of its sizes and every payload filled (the record headers are filled here)."""
         ts = np.asarray(log_time_ns, dtype=np.int64)
         n = ts.shape[0]
         if n == 0:
             return
+        sizes = [31 + size for _t, _m, size in topics]
         st = self._mcap
-        new = any((t, mt) not in self._connections for t, mt, _r in topics)
+        new = any((t, mt) not in self._connections for t, mt, _s in topics)
         if st is None or new:  # a new topic is declared where its first message is written
             first = n if st is None else 1
+            starts = np.cumsum([0] + sizes)
             for k in range(first):
-                for topic, msgtype, rows in topics:
-                    self.write_raw(topic, msgtype, int(ts[k]), rows[k].tobytes())
+                for (topic, msgtype, _s), lo, hi in zip(topics, starts[:-1], starts[1:],
+                                                        strict=True):
+                    self.write_raw(topic, msgtype, int(ts[k]), rec[k, lo + 31:hi].tobytes())
             if first < n:
-                self.write_rows(ts[first:], [(t, mt, r[first:]) for t, mt, r in topics])
+                self.write_records(ts[first:], topics, rec[first:])
             return
-        conns = [self._connections[(t, mt)] for t, mt, _r in topics]
-        parts, sizes = [], []
-        for conn, (_t, _m, rows) in zip(conns, topics, strict=True):
-            size = rows.shape[1]
-            rec = np.empty((n, 31 + size), dtype=np.uint8)
-            rec[:, 0] = 0x05
-            rec[:, 1:9] = np.frombuffer(struct.pack("<Q", 22 + size), dtype=np.uint8)
-            rec[:, 9:11] = np.frombuffer(struct.pack("<H", conn.id), dtype=np.uint8)
-            rec[:, 11:15] = 0
-            stamp = ts.astype("<u8").view(np.uint8).reshape(n, 8)
-            rec[:, 15:23] = stamp
-            rec[:, 23:31] = stamp
-            rec[:, 31:] = rows
-            parts.append(rec)
-            sizes.append(31 + size)
-        flat = np.concatenate(parts, axis=1).reshape(-1)
+        conns = [self._connections[(t, mt)] for t, mt, _s in topics]
+        # row k: the k-th record of every topic, side by side: the headers filled in place
+        stamp = ts.astype("<u8").view(np.uint8).reshape(n, 8)
+        off = 0
+        for conn, size in zip(conns, sizes, strict=True):
+            # opcode, record length, channel id, sequence 0; log and publish time
+            rec[:, off:off + 15] = np.frombuffer(
+                _MCAP_MESSAGE.pack(0x05, size - 9, conn.id, 0, 0, 0)[:15], dtype=np.uint8)
+            rec[:, off + 15:off + 23] = stamp
+            rec[:, off + 23:off + 31] = stamp
+            off += size
+        flat = rec.reshape(-1)
+        view = memoryview(flat)
         m = len(topics)
-        # record r = row r // m, topic r % m: its offset in ``flat``
-        prefix = np.concatenate([[0], np.cumsum(sizes[:-1])]).astype(np.int64)
-        r_all = np.arange(n * m + 1, dtype=np.int64)
-        starts = (r_all // m) * int(sum(sizes)) + prefix[r_all % m]
         cids = [c.id for c in conns]
         ts_u8 = ts.astype("<u8")
         w = self._writer
+        row_bytes = int(sum(sizes))
+        tell = st.chunk.bio.tell()
+        if tell + n * row_bytes <= _MCAP_CHUNK_BYTES:
+            # the usual case: every record goes into the pending chunk, which stays open (the
+            # loop below in one pass, without its search for the record that closes it)
+            chunk = st.chunk
+            _note_times(st, w, int(ts.min()), int(ts.max()))
+            row_at = tell + np.arange(n, dtype=np.int64) * row_bytes
+            off = 0
+            for j, cid in enumerate(cids):
+                pairs = np.empty((n, 2), dtype="<u8")
+                pairs[:, 0] = ts_u8
+                pairs[:, 1] = row_at + off
+                off += sizes[j]
+                chunk.msgs[cid].append(pairs)
+                st.channel_stats[cid] += n
+                w.counts[cid] += n
+                self.counts[topics[j][0]] += n
+            chunk.bio.write(view)
+            return
+        # record r = row r // m, topic r % m: its offset in ``flat``
+        prefix = np.concatenate([[0], np.cumsum(sizes[:-1])]).astype(np.int64)
+        r_all = np.arange(n * m + 1, dtype=np.int64)
+        starts = (r_all // m) * row_bytes + prefix[r_all % m]
         pos, total = 0, n * m
         while pos < total:
             chunk = st.chunk
@@ -243,19 +275,7 @@ class OutputBag:
             last = min(pos + over, total - 1)  # the record after which the chunk closes
             offsets_arr = tell + starts[pos:last + 1] - starts[pos]
             lo, hi = pos // m, last // m
-            t_min, t_max = int(ts[lo:hi + 1].min()), int(ts[lo:hi + 1].max())
-            if t_min < chunk.message_start_time:
-                chunk.message_start_time = t_min
-            if t_max > chunk.message_end_time:
-                chunk.message_end_time = t_max
-            if t_min < st.message_start_time:
-                st.message_start_time = t_min
-            if t_max > st.message_end_time:
-                st.message_end_time = t_max
-            if t_min < w.min_timestamp:
-                w.min_timestamp = t_min
-            if t_max > w.max_timestamp:
-                w.max_timestamp = t_max
+            _note_times(st, w, int(ts[lo:hi + 1].min()), int(ts[lo:hi + 1].max()))
             for j in [(pos + k) % m for k in range(m)]:  # the chunk's index keeps first-seen order
                 cid = cids[j]
                 first = pos + ((j - pos) % m)
@@ -270,7 +290,7 @@ class OutputBag:
                 st.channel_stats[cid] += count
                 w.counts[cid] += count
                 self.counts[topics[j][0]] += count
-            bio.write(flat[starts[pos]:starts[last + 1]].tobytes())
+            bio.write(view[int(starts[pos]):int(starts[last + 1])])
             if bio.tell() > _MCAP_CHUNK_BYTES:
                 _close_chunk(st)
             pos = last + 1
@@ -353,6 +373,36 @@ def _index_pairs(msgs: list[Any]) -> np.ndarray:
     return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
 
+def _note_times(st: Any, w: Any, t_min: int, t_max: int) -> None:
+    """The log-time range of records written into the pending chunk: the chunk's, the
+    storage's and the writer's."""
+    chunk = st.chunk
+    if t_min < chunk.message_start_time:
+        chunk.message_start_time = t_min
+    if t_max > chunk.message_end_time:
+        chunk.message_end_time = t_max
+    if t_min < st.message_start_time:
+        st.message_start_time = t_min
+    if t_max > st.message_end_time:
+        st.message_end_time = t_max
+    if t_min < w.min_timestamp:
+        w.min_timestamp = t_min
+    if t_max > w.max_timestamp:
+        w.max_timestamp = t_max
+
+
+def record_rows(n: int, sizes: Sequence[int]) -> tuple[np.ndarray, list[np.ndarray]]:
+    """An (n, Σ(31 + size)) uint8 array for :meth:`OutputBag.write_records` (row k: the mcap
+    message records of message k of each topic, side by side) and the (n, size) payload view of
+    each topic in it, to encode the messages into."""
+    rec = np.empty((n, sum(31 + s for s in sizes)), dtype=np.uint8)
+    views, off = [], 0
+    for size in sizes:
+        views.append(rec[:, off + 31:off + 31 + size])
+        off += 31 + size
+    return rec, views
+
+
 def _close_chunk(st: Any) -> None:
     """rosbags' ``McapWriter.close_chunk`` with the message indexes packed by NumPy: the same
     records, byte for byte (tested against rosbags' writer over several chunks)."""
@@ -372,12 +422,23 @@ def _close_chunk(st: Any) -> None:
     write_uint64(rec, chunk.message_end_time)
     write_uint64(rec, chunk.bio.tell())
     write_uint32(rec, 0)
-    compressed = st.compressor(chunk.bio.getvalue())
-    write_string(rec, st.compression)
-    write_uint64(rec, len(compressed))
-    rec.write(compressed)
     chunk_start = st.bio.tell()
-    write_record(st.bio, 0x06, rec)
+    if st.compression == "":  # the records as they are: written from the buffer, not copied
+        with chunk.bio.getbuffer() as records:
+            n_compressed = len(records)
+            write_string(rec, st.compression)
+            write_uint64(rec, n_compressed)
+            st.bio.write(b"\x06")  # write_record's opcode and length, then the record
+            write_uint64(st.bio, rec.tell() + n_compressed)
+            st.bio.write(rec.getbuffer())
+            st.bio.write(records)
+    else:
+        compressed = st.compressor(chunk.bio.getvalue())
+        n_compressed = len(compressed)
+        write_string(rec, st.compression)
+        write_uint64(rec, n_compressed)
+        rec.write(compressed)
+        write_record(st.bio, 0x06, rec)
     chunk_end = st.bio.tell()
     offsets: list[tuple[int, int]] = []
     for cid, msgs in chunk.msgs.items():
@@ -395,7 +456,7 @@ def _close_chunk(st: Any) -> None:
         rec.write(struct.pack("<HQ", cid, offset))
     write_uint64(rec, st.bio.tell() - chunk_end)
     write_string(rec, st.compression)
-    write_uint64(rec, len(compressed))
+    write_uint64(rec, n_compressed)
     write_uint64(rec, chunk.bio.tell())
     st.chunks.append(rec)
     st.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))

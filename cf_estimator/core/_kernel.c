@@ -1016,6 +1016,169 @@ static PyObject *State_copy(StateObject *self, PyObject *Py_UNUSED(ignored))
     return (PyObject *)new;
 }
 
+/* ---- beside the step: the bulk replay's per-row loops (pipeline/bulk.py) ---------------- */
+
+/* core/covariance.py (test_twin_source checks the value) */
+#define CORRECTION_WINDOW_S 10.0
+
+/* A 1-D float64 buffer of `count` values with any stride (a column of a row-major array). */
+typedef struct {
+    Py_buffer b;
+    const char *p;
+    Py_ssize_t stride;
+} column;
+
+#define AT(c, i) (*(const double *)((c).p + (i) * (c).stride))
+#define WAT(c, i) (*(double *)((c).p + (i) * (c).stride))
+
+static int get_column(PyObject *o, column *c, Py_ssize_t count, int writable, const char *name)
+{
+    c->b.obj = NULL;
+    int flags = PyBUF_STRIDES | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    if (PyObject_GetBuffer(o, &c->b, flags) < 0) return 0;
+    if (c->b.ndim != 1 || c->b.itemsize != 8 || c->b.format == NULL ||
+        strcmp(c->b.format, "d") != 0 || c->b.shape[0] != count) {
+        PyErr_Format(PyExc_ValueError, "%s must be a 1-D float64 array of %zd values", name,
+                     count);
+        PyBuffer_Release(&c->b);
+        c->b.obj = NULL;
+        return 0;
+    }
+    c->p = c->b.buf;
+    c->stride = c->b.strides[0];
+    return 1;
+}
+
+/* OrientationCovariance.steps over rows, the same operations in the same order:
+ * covariance_rows(consts, state, heading_initialized, dt, clipped, bias_sigma, phase,
+ *                 error_norm, lx, ly, noise_a2, yaw_error, mag_used, mag_age|None, loop_k1,
+ *                 tilt_out, yaw_out) -> state
+ * consts = (k1, bias_prior, inv_6g2, tilt0, yaw0, yaw_unref, tilt_cap, yaw_cap),
+ * state = (clip_s, ms, yaw_err, cx, cy) before and after the rows; clipped and mag_used:
+ * non-zero = true; bias_sigma NaN: the prior; mag_age None: never (the Python's None). */
+static PyObject *covariance_rows(PyObject *Py_UNUSED(module), PyObject *args)
+{
+    double k1_cfg, prior, inv_6g2, tilt0, yaw0, yaw_unref, tilt_cap, yaw_cap;
+    double clip_s, ms, yaw_err, cx, cy;
+    int heading;
+    PyObject *o[14];
+    if (!PyArg_ParseTuple(args, "(dddddddd)(ddddd)pOOOOOOOOOOOOOO:covariance_rows", &k1_cfg,
+                          &prior, &inv_6g2, &tilt0, &yaw0, &yaw_unref, &tilt_cap, &yaw_cap,
+                          &clip_s, &ms, &yaw_err, &cx, &cy, &heading, &o[0], &o[1], &o[2],
+                          &o[3], &o[4], &o[5], &o[6], &o[7], &o[8], &o[9], &o[10], &o[11],
+                          &o[12], &o[13]))
+        return NULL;
+    static const char *names[14] = {"dt", "clipped", "bias_sigma", "phase", "error_norm", "lx",
+                                    "ly", "noise_a2", "yaw_error", "mag_used", "mag_age",
+                                    "loop_k1", "tilt_out", "yaw_out"};
+    column c[14];
+    for (int j = 0; j < 14; j++) c[j].b.obj = NULL;
+    PyObject *result = NULL;
+    Py_ssize_t n = PyObject_Length(o[0]);
+    if (n < 0) return NULL;
+    for (int j = 0; j < 14; j++) {
+        if (j == 10 && o[j] == Py_None) continue;
+        if (!get_column(o[j], &c[j], n, j >= 12, names[j])) goto done;
+    }
+    const int ages = c[10].b.obj != NULL;
+    volatile double pow_two = 2.0;
+    int overflow = 0;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        const double dt = AT(c[0], i);
+        clip_s = AT(c[1], i) != 0.0 ? clip_s + dt : 0.0;
+        const double sb = AT(c[2], i);
+        const double sigma_b = sb == sb ? sb : prior;
+        const double kr = AT(c[11], i);
+        const double k1 = kr > 0.0 ? kr : k1_cfg;
+        const double kdt = k1 * dt;
+        const double leak = dt / (CORRECTION_WINDOW_S + dt);
+        const double ncx = cx + kdt * AT(c[5], i) - leak * cx;
+        const double ncy = cy + kdt * AT(c[6], i) - leak * cy;
+        cx = ncx;
+        cy = ncy;
+        ms += kdt / (1.0 + kdt) * (cx * cx + cy * cy - ms);
+        const double ph = AT(c[3], i);
+        const double e_t = (ph == PHASE_STARTUP || ph == PHASE_RECOVERING) ? AT(c[4], i) : 0.0;
+        const double drift = sigma_b * clip_s;
+        const double noise = AT(c[7], i) * inv_6g2 * dt;
+        const double tilt = tilt0 + e_t * e_t + drift * drift + 0.5 * (ms + noise * k1);
+        WAT(c[12], i) = tilt_cap < tilt ? tilt_cap : tilt; /* Python's min(tilt, cap) */
+        if (heading) {
+            if (AT(c[9], i) != 0.0) yaw_err = fabs(AT(c[8], i));
+            const double age = ages ? AT(c[10], i) : 0.0;
+            const double yd = sigma_b * (age != 0.0 ? age : 0.0); /* age or 0.0 */
+            /* yaw_err ** 2 as Python's float power: NaN kept, overflow an error, else libm's
+             * pow itself (the exponent volatile: the compiler would make pow(x, 2.0) x * x,
+             * which differs from libm's pow in the last bit on some x) */
+            const double y2 = isnan(yaw_err) ? yaw_err : pow(yaw_err, pow_two);
+            if (isinf(y2) && isfinite(yaw_err)) {
+                overflow = 1;
+                break;
+            }
+            const double yaw = yaw0 + y2 + yd * yd;
+            WAT(c[13], i) = yaw_cap < yaw ? yaw_cap : yaw;
+        } else {
+            WAT(c[13], i) = yaw_unref;
+        }
+    }
+    if (overflow)
+        PyErr_SetString(PyExc_OverflowError, "(34, 'Numerical result out of range')");
+    else
+        result = Py_BuildValue("(ddddd)", clip_s, ms, yaw_err, cx, cy);
+done:
+    for (int j = 0; j < 14; j++)
+        if (c[j].b.obj) PyBuffer_Release(&c[j].b);
+    return result;
+}
+
+/* math.atan2 (CPython's m_atan2: its special values first, then libm's atan2). */
+static double py_atan2(double y, double x)
+{
+    if (isnan(x) || isnan(y)) return Py_NAN;
+    if (isinf(y)) {
+        if (isinf(x)) return copysign(copysign(1., x) == 1. ? 0.25 * Py_MATH_PI
+                                                             : 0.75 * Py_MATH_PI, y);
+        return copysign(0.5 * Py_MATH_PI, y);
+    }
+    if (isinf(x) || y == 0.) return copysign(copysign(1., x) == 1. ? 0. : Py_MATH_PI, y);
+    return atan2(y, x);
+}
+
+/* bulk._rpy's roll, pitch, yaw of each (w, x, y, z) row, without the unwrap:
+ * rpy_rows(q (n, 4), out (n, 3)), both C-contiguous float64. */
+static PyObject *rpy_rows(PyObject *Py_UNUSED(module), PyObject *args)
+{
+    PyObject *oq, *oo;
+    if (!PyArg_ParseTuple(args, "OO:rpy_rows", &oq, &oo)) return NULL;
+    Py_buffer bq, bo;
+    Py_ssize_t n = PyObject_Length(oq);
+    if (n < 0 || !get_array(oq, &bq, 4 * n, 0, 0, "q")) return NULL;
+    if (!get_array(oo, &bo, 3 * n, 1, 0, "out")) {
+        PyBuffer_Release(&bq);
+        return NULL;
+    }
+    const double *Q = bq.buf;
+    double *R = bo.buf;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        const double qw = Q[4 * i], qx = Q[4 * i + 1], qy = Q[4 * i + 2], qz = Q[4 * i + 3];
+        R[3 * i] = py_atan2(2.0 * (qw * qx + qy * qz), 1.0 - 2.0 * (qx * qx + qy * qy));
+        double sp = 2.0 * (qw * qy - qz * qx);
+        sp = sp > 1.0 ? 1.0 : (sp < -1.0 ? -1.0 : sp);
+        R[3 * i + 1] = asin(sp);
+        R[3 * i + 2] = py_atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz));
+    }
+    PyBuffer_Release(&bq);
+    PyBuffer_Release(&bo);
+    Py_RETURN_NONE;
+}
+
+static PyMethodDef module_methods[] = {
+    {"covariance_rows", covariance_rows, METH_VARARGS,
+     "OrientationCovariance.steps over float64 rows (core/covariance.py): -> the state after."},
+    {"rpy_rows", rpy_rows, METH_VARARGS,
+     "rpy_rows(q, out): roll, pitch, yaw of each (w, x, y, z) row as math.atan2/asin give."},
+    {NULL, NULL, 0, NULL}};
+
 static PyMethodDef State_methods[] = {
     {"update", (PyCFunction)(void (*)(void))State_update, METH_FASTCALL,
      "update(params, gyro, accel, dt, mag=None) -> q (w, x, y, z) in the output frame."},
@@ -1055,7 +1218,8 @@ static PyTypeObject StateType = {
 };
 
 static struct PyModuleDef kernel_module = {
-    PyModuleDef_HEAD_INIT, "_kernel", "Compiled twin of cf_estimator.core.step.", -1, NULL};
+    PyModuleDef_HEAD_INIT, "_kernel", "Compiled twin of cf_estimator.core.step.", -1,
+    module_methods};
 
 PyMODINIT_FUNC PyInit__kernel(void)
 {

@@ -53,7 +53,9 @@ model's Gaussian: tilt on the phantom4 vertical campaign, 6-D; yaw on BROAD's un
 9-D; BENCHMARKS.md "Covariance"); ``M``'s gain k1 (the loop's running gain), its window
 CORRECTION_WINDOW_S, its memory ``1/k1`` and ``V`` follow from the loop. Each variance is
 capped at π² (an angle error is at most π), or at its floor (yaw: also the unreferenced
-variance) if larger. Plain floats: it runs per message.
+variance) if larger. Plain floats: it runs per message; :meth:`OrientationCovariance.rows` runs
+it over arrays, in the compiled kernel when asked (``_kernel.c`` ``covariance_rows``: the same
+operations in the same order as :meth:`OrientationCovariance.steps`, the reference).
 """
 
 from __future__ import annotations
@@ -61,6 +63,9 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+import numpy as np
+
+from cf_estimator.core.kernel import compiled_kernel
 from cf_estimator.core.step import PHASE_RECOVERING, PHASE_STARTUP
 
 _PI2 = math.pi * math.pi
@@ -205,3 +210,33 @@ class OrientationCovariance:
                 yaws.append(yaw_unref)
         self._clip_s, self._ms, self._yaw_err, self._cx, self._cy = clip_s, ms, yaw_err, cx, cy
         return tilts, yaws
+
+    def rows(self, dt_s: np.ndarray, clipped: np.ndarray, bias_sigma_rad_s: np.ndarray,
+             phase: np.ndarray, error_norm_rad: np.ndarray, lx_rad: np.ndarray,
+             ly_rad: np.ndarray, noise_a2: np.ndarray, heading_initialized: bool,
+             yaw_error_rad: np.ndarray, mag_used: np.ndarray, mag_age_s: np.ndarray | None,
+             loop_k1: np.ndarray, backend: str = "python") -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`steps` over 1-D float64 arrays (columns of a row-major array will do):
+        ``clipped``, ``mag_used`` non-zero = true, ``mag_age_s`` None = never. ``backend``
+        'compiled': the C twin of :meth:`steps` (same bits; the bulk pipeline's path), else
+        :meth:`steps` itself. Returns the (tilt, yaw) variances per row [rad²]."""
+        n = int(dt_s.shape[0])
+        if backend == "compiled" and compiled_kernel is not None:
+            tilt, yaw = np.empty(n), np.empty(n)
+            consts = (self.k1, self.bias_prior, self._inv_6g2, self.tilt0, self.yaw0,
+                      self.yaw_unref, max(_PI2, self.tilt0),
+                      max(_PI2, self.yaw_unref, self.yaw0))
+            state = (self._clip_s, self._ms, self._yaw_err, self._cx, self._cy)
+            (self._clip_s, self._ms, self._yaw_err, self._cx,
+             self._cy) = compiled_kernel.covariance_rows(
+                consts, state, bool(heading_initialized), dt_s, clipped, bias_sigma_rad_s,
+                phase, error_norm_rad, lx_rad, ly_rad, noise_a2, yaw_error_rad, mag_used,
+                mag_age_s, loop_k1, tilt, yaw)
+            return tilt, yaw
+        tilts, yaws = self.steps(
+            dt_s.tolist(), (clipped != 0.0).tolist(), bias_sigma_rad_s.tolist(),
+            phase.tolist(), error_norm_rad.tolist(), lx_rad.tolist(), ly_rad.tolist(),
+            noise_a2.tolist(), heading_initialized, yaw_error_rad.tolist(),
+            (mag_used != 0).tolist(), [None] * n if mag_age_s is None else mag_age_s.tolist(),
+            loop_k1.tolist())
+        return np.asarray(tilts, dtype=np.float64), np.asarray(yaws, dtype=np.float64)

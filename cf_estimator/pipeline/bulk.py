@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from cf_estimator.core.filter import EXTRA_COLUMNS
+from cf_estimator.core.kernel import compiled_kernel
 from cf_estimator.core.step import MAG_DISABLED, MAG_REJECTED, MAG_USED
 from cf_estimator.pipeline import checks
 from cf_estimator.pipeline.pipeline import ACCEL_MAX2, GYRO_MAX2, TWO_PI, ImuPipeline
@@ -79,7 +80,9 @@ def _imu_ok(v: np.ndarray, sec: np.ndarray, nsec: np.ndarray) -> np.ndarray:
     """``on_imu``'s value checks, vectorized with its own arithmetic (same results)."""
     gx, gy, gz, ax, ay, az = (v[:, j] for j in (13, 14, 15, 25, 26, 27))
     with np.errstate(over="ignore", invalid="ignore"):
-        finite = np.all(np.isfinite(v[:, [13, 14, 15, 25, 26, 27]]), axis=1)
+        finite = np.isfinite(gx)  # all six finite (column by column: faster than axis=1)
+        for c in (gy, gz, ax, ay, az):
+            finite &= np.isfinite(c)
         a2 = ax * ax + ay * ay + az * az
         g2 = gx * gx + gy * gy + gz * gz
         return (finite & ~((sec == 0) & (nsec == 0)) & (a2 != 0.0) & (g2 <= GYRO_MAX2)
@@ -104,14 +107,19 @@ class Events:
     """
 
     def __init__(self, kind: Sequence[int], log_ns: Sequence[int], row: Sequence[int],
-                 imu: Any, mag: Any, message: Callable[[int], Any]) -> None:
+                 imu: Any, mag: Any, message: Callable[[int], Any],
+                 arrays: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> None:
         self.kind, self.log_ns, self.row = kind, log_ns, row
+        #: ``kind``, ``log_ns``, ``row`` as arrays when the reader has them (else made once)
+        self._arrays = arrays
         self.imu, self.mag, self.message = imu, mag, message
         self._cols: dict[str, list[float]] = {}
         self._cov: dict[tuple[int, bytes | None], np.ndarray] = {}
         self._static: dict[str, np.ndarray] | None = None
         self._frames: dict[tuple[int, str | None], np.ndarray] = {}
         self._stamps: tuple[np.ndarray, np.ndarray] | None = None
+        self._layout: dict[str, Any] | None = None
+        self._gates: dict[tuple[Any, ...], tuple[np.ndarray, np.ndarray]] = {}
 
     def column(self, name: str) -> list[float]:
         """``gx gy gz ax ay az`` (IMU) or ``mx my mz`` (magnetometer) as a list of floats;
@@ -136,8 +144,12 @@ class Events:
         if st is not None:
             return st
         n = len(self.kind)
-        kind = np.asarray(self.kind, dtype=np.int8)
-        row = np.asarray(self.row, dtype=np.intp)
+        if self._arrays is not None:
+            kind_a, log_a, row_a = self._arrays
+        else:
+            kind_a, log_a, row_a = self.kind, self.log_ns, self.row
+        kind = np.asarray(kind_a, dtype=np.int8)
+        row = np.asarray(row_a, dtype=np.intp)
         ok = np.zeros(n, dtype=bool)
         t_ns = np.zeros(n, dtype=np.int64)
         for blk, k, check in ((self.imu, IMU, _imu_ok), (self.mag, MAG, _mag_ok)):
@@ -145,21 +157,94 @@ class Events:
                 continue
             sel = np.flatnonzero(kind == k)
             r = row[sel]
-            sec = np.asarray(blk.sec, dtype=np.int64)[r]
-            nsec = np.asarray(blk.nsec, dtype=np.int64)[r]
-            t_ns[sel] = sec * 1_000_000_000 + nsec
-            plain = np.asarray(blk.plain, dtype=bool)[r]
-            ok[sel] = plain & check(blk.values[r], sec, nsec)
+            sec_all, nsec_all, plain_all = blk.arrays()
+            t_ns[sel] = sec_all[r] * 1_000_000_000 + nsec_all[r]
+            # the checks row by row over the block, then per event (no copy of its rows)
+            ok[sel] = (plain_all & check(blk.values, sec_all, nsec_all))[r]
         self._static = st = {"kind": kind, "ok": ok, "t_ns": t_ns, "row": row,
-                             "log_ns": np.asarray(self.log_ns, dtype=np.int64)}
+                             "log_ns": np.asarray(log_a, dtype=np.int64)}
         return st
+
+    def layout(self) -> dict[str, Any]:
+        """Where the IMU and magnetometer events are (computed once; no pipeline state):
+        ``imu_ev`` the IMU events' indices and, per IMU event, its ``imu_t`` (header stamp
+        [ns]), ``imu_row``, ``imu_log`` (log time), ``imu_sec``/``imu_nsec`` and
+        ``imu_prev_mag`` (the magnetometer event just before it among the IMU and
+        magnetometer events, else -1); ``nz`` the IMU and magnetometer events' indices,
+        ``nz_kind`` their kinds and ``mm_cum`` the running count of a magnetometer event
+        followed by another one among them."""
+        lay = self._layout
+        if lay is not None:
+            return lay
+        st = self.static()
+        kind = st["kind"]
+        nz = np.flatnonzero(kind != OTHER)
+        nz_kind = kind[nz]
+        is_imu_nz = nz_kind == IMU
+        imu_at = np.flatnonzero(is_imu_nz)  # in nz
+        imu_ev = nz[imu_at]
+        prev = np.where(imu_at > 0, nz[np.maximum(imu_at - 1, 0)], -1)
+        prev_mag = np.where((prev >= 0) & (kind[np.maximum(prev, 0)] == MAG), prev, -1)
+        mm = (nz_kind[:-1] == MAG) & (nz_kind[1:] == MAG)
+        imu_row = st["row"][imu_ev]
+        lay = {"imu_ev": imu_ev, "imu_t": st["t_ns"][imu_ev], "imu_row": imu_row,
+               "imu_log": st["log_ns"][imu_ev], "imu_prev_mag": prev_mag, "nz": nz,
+               "nz_kind": nz_kind,
+               "mm_cum": np.concatenate(([0], np.cumsum(mm, dtype=np.int64)))}
+        if self.imu is not None:
+            sec, nsec = self.imu_stamps()
+            lay["imu_sec"], lay["imu_nsec"] = sec[imu_row], nsec[imu_row]
+        self._layout = lay
+        return lay
+
+    def gate(self, imu_frame: str | None, av_raw: bytes | None, la_raw: bytes | None,
+             mag_frame: str | None, mag_allowed: bool, gap_ns: int | None
+             ) -> tuple[np.ndarray, np.ndarray]:
+        """Per event, what :func:`scan` asks of it but the first IMU message's interval (from
+        the pipeline's last stamp): ``good`` (IMU: valid, frame ``imu_frame``, covariances
+        ``av_raw``/``la_raw``; magnetometer: allowed, valid, frame ``mag_frame``; others:
+        true) and, with each IMU message's interval from the IMU event before it (positive,
+        at most ``gap_ns`` unless None), ``next_bad[i]``: the first index >= i failing them
+        (len(kind) if none; n + 1 values). Computed once per key."""
+        key = (imu_frame, av_raw, la_raw, mag_frame, mag_allowed, gap_ns)
+        got = self._gates.get(key)
+        if got is not None:
+            return got
+        st, lay = self.static(), self.layout()
+        kind, ok = st["kind"], st["ok"]
+        n = kind.shape[0]
+        good = np.ones(n, dtype=bool)
+        is_imu = kind == IMU
+        if self.imu is not None:
+            rows = st["row"]
+            cov_ok = (self.same_covariance(16, av_raw) & self.same_covariance(28, la_raw))
+            imu_good = ok & self.frame_is(IMU, imu_frame)
+            imu_good[is_imu] &= cov_ok[rows[is_imu]]
+            good[is_imu] = imu_good[is_imu]
+        is_mag = kind == MAG
+        if mag_allowed:
+            good[is_mag] = (ok & self.frame_is(MAG, mag_frame))[is_mag]
+        else:
+            good[is_mag] = False
+        # the interval from the IMU message before (the first one's is the caller's)
+        d = np.diff(lay["imu_t"])
+        chain = d > 0
+        if gap_ns is not None:
+            chain &= d <= gap_ns
+        seq = good.copy()
+        seq[lay["imu_ev"][1:]] &= chain
+        bad_at = np.where(seq, n, np.arange(n))
+        next_bad = np.empty(n + 1, dtype=np.int64)
+        next_bad[n] = n
+        next_bad[:n] = np.minimum.accumulate(bad_at[::-1])[::-1]
+        got = self._gates[key] = (good, next_bad)
+        return got
 
     def imu_stamps(self) -> tuple[np.ndarray, np.ndarray]:
         """The IMU block's header ``sec`` and ``nanosec`` per row (int64 arrays)."""
         if self._stamps is None:
-            blk = self.imu
-            self._stamps = (np.asarray(blk.sec, dtype=np.int64),
-                            np.asarray(blk.nsec, dtype=np.int64))
+            sec, nsec, _plain = self.imu.arrays()
+            self._stamps = (sec, nsec)
         return self._stamps
 
     def frame_is(self, kind: int, frame: str | None) -> np.ndarray:
@@ -188,9 +273,12 @@ class Events:
         if same is None:
             if raw is None or len(raw) != 72:
                 same = np.zeros(self.imu.n, dtype=bool)
-            else:
-                cov = np.ascontiguousarray(self.imu.values[:, start:start + 9]).view("<u8")
-                same = np.all(cov == np.frombuffer(raw, dtype="<u8"), axis=1)
+            else:  # the nine values' bits, column by column (a faster all(axis=1))
+                bits = np.ascontiguousarray(self.imu.values).view("<u8")
+                ref = np.frombuffer(raw, dtype="<u8").tolist()
+                same = bits[:, start] == ref[0]
+                for j in range(1, 9):
+                    same &= bits[:, start + j] == ref[j]
             self._cov[key] = same
         return same
 
@@ -211,7 +299,6 @@ def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = N
     pending = p.mag_input.pending
     if pending is not None and not heading:
         return out
-    st = ev.static()
     n_ev = len(ev.kind)
     stop = n_ev
     if limit_log_ns is not None:
@@ -219,82 +306,66 @@ def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = N
         stop = bisect.bisect_left(ev.log_ns, limit_log_ns, start, n_ev)
     if stop <= start:
         return out
-    kind = st["kind"][start:stop]
-    good = np.ones(stop - start, dtype=bool)
-    is_imu = kind == IMU
-    is_mag = kind == MAG
-    ok = st["ok"][start:stop]
-    if ev.imu is not None and is_imu.any():
-        good &= ~is_imu | (ok & ev.frame_is(IMU, p.imu_frame)[start:stop])
-        av = ev.same_covariance(16, p.angular_velocity_covariance.raw)
-        la = ev.same_covariance(28, p.linear_acceleration_covariance.raw)
-        rows = st["row"][start:stop]
-        imu_pos = np.flatnonzero(is_imu)
-        cov_ok = np.ones(stop - start, dtype=bool)
-        cov_ok[imu_pos] = av[rows[imu_pos]] & la[rows[imu_pos]]
-        good &= cov_ok
-        # stamps increase from message to message, without a gap that resets the filter
-        t = st["t_ns"][start:stop][imu_pos]
-        d = np.diff(t, prepend=np.int64(p.clock.last_ns))
-        t_ok = d > 0
-        if p.rules.reset_gap_on:
-            t_ok &= d <= p.rules.reset_gap_ns
-        seq_ok = np.ones(stop - start, dtype=bool)
-        seq_ok[imu_pos] = t_ok
-        good &= seq_ok
-    if is_mag.any():
-        if not (p.rules.use_mag and heading and p.mag_input.check_n >= checks.MAG_CHECK_SAMPLES):
-            good &= ~is_mag
+    lay = ev.layout()
+    rules = p.rules
+    mag_allowed = bool(rules.use_mag and heading
+                       and p.mag_input.check_n >= checks.MAG_CHECK_SAMPLES)
+    gap_ns = rules.reset_gap_ns if rules.reset_gap_on else None
+    good, next_bad = ev.gate(p.imu_frame, p.angular_velocity_covariance.raw,
+                             p.linear_acceleration_covariance.raw,
+                             p.mag_input.frame if mag_allowed else None, mag_allowed, gap_ns)
+    # the first event failing the checks: the static ones (events.gate) and, for the first
+    # IMU message, the interval from the pipeline's last stamp (positive, no gap that resets)
+    imu_ev, imu_t = lay["imu_ev"], lay["imu_t"]
+    a = int(np.searchsorted(imu_ev, start))
+    f = int(imu_ev[a]) if a < imu_ev.shape[0] else n_ev
+    first_bad = int(next_bad[start])
+    if f >= stop or first_bad < f:
+        end = min(first_bad, stop)
+    else:
+        d0 = int(imu_t[a]) - int(p.clock.last_ns)
+        if not (bool(good[f]) and d0 > 0 and (gap_ns is None or d0 <= gap_ns)):
+            end = f
         else:
-            good &= ~is_mag | (ok & ev.frame_is(MAG, p.mag_input.frame)[start:stop])
-    bad = np.flatnonzero(~good)
-    end = start + (int(bad[0]) if bad.size else stop - start)
+            end = min(int(next_bad[f + 1]), stop)
     if end <= start:
         return out
     # -- the bookkeeping over the run, in the pipeline's order ----------------------------------
-    max_dt_ns, timeout = p.rules.max_dt_ns, p.rules.mag_timeout_ns
+    max_dt_ns, timeout = rules.max_dt_ns, rules.mag_timeout_ns
     dt_mean, gaps = p.clock.dt_mean, p.tally.gaps
     stale = 0
     w = p.window
     dt_min, dt_max, dt_sum, n_dt = w.dt_min, w.dt_max, w.dt_sum, w.n_dt
     last = p.clock.last_ns
     mag_block = ev.mag
-    if mag_block is not None:
-        mxs, mys, mzs = ev.column("mx"), ev.column("my"), ev.column("mz")
-        if p.rules.flip:  # body_frame FLU <-> FRD, as on_mag turns the field
-            mys, mzs = ev.column("-my"), ev.column("-mz")
     max_dt_fallback = min(p.pipeline_params.max_dt_s, 0.01)
-    rel_kind = st["kind"][start:end]
-    nz = np.flatnonzero(rel_kind != OTHER)  # IMU and magnetometer events (run positions)
-    k_nz = rel_kind[nz]
-    t_run = st["t_ns"][start:end]
-    imu_at = np.flatnonzero(k_nz == IMU)  # in nz
-    imu_rel = nz[imu_at]
-    n_imu = int(imu_rel.shape[0])
-    rows = st["row"][start:end][imu_rel]
-    t_imu = t_run[imu_rel]
+    st = ev.static()
+    b = int(np.searchsorted(imu_ev, end))  # the run's IMU messages: a..b-1
+    n_imu = b - a
+    rows = lay["imu_row"][a:b]
+    t_imu = imu_t[a:b]
+    nz, nz_kind = lay["nz"], lay["nz_kind"]
+    ks, ke = (int(k) for k in np.searchsorted(nz, (start, end)))  # IMU and magnetometer
+    n_mag = ke - ks - n_imu
     # magnetometer samples: each IMU message takes the pending sample (the magnetometer event
     # just before it, or the one pending at the start); a sample followed by another one
     # before an IMU message is superseded (dropped)
-    is_mag_nz = k_nz == MAG
-    n_mag = int(np.count_nonzero(is_mag_nz))
-    dropped = int(np.count_nonzero(is_mag_nz[:-1] & is_mag_nz[1:]))
-    if n_mag and pending is not None and bool(is_mag_nz[0]):
+    mm_cum = lay["mm_cum"]
+    dropped = int(mm_cum[ke - 1] - mm_cum[ks]) if ke - 1 > ks else 0
+    if n_mag and pending is not None and int(nz_kind[ks]) == MAG:
         dropped += 1
-    prev_mag = np.zeros(n_imu, dtype=bool)
-    inner = imu_at > 0
-    prev_mag[inner] = is_mag_nz[imu_at[inner] - 1]
-    mag_ev = np.where(prev_mag, nz[np.maximum(imu_at - 1, 0)], -1)  # run position, or -1
-    first_takes_pending = n_imu > 0 and int(imu_at[0]) == 0 and pending is not None
+    prev_ev = lay["imu_prev_mag"][a:b]
+    prev_mag = prev_ev >= start  # the event before it in the run is a magnetometer sample
+    first_takes_pending = n_imu > 0 and int(nz_kind[ks]) == IMU and pending is not None
     has = prev_mag.copy()
-    mag_t = np.where(prev_mag, t_run[mag_ev], 0)
+    mag_t = np.where(prev_mag, st["t_ns"][np.maximum(prev_ev, 0)], 0)
     mag = None
     if n_mag or first_takes_pending:
         mag = np.full((n_imu, 3), np.nan)
         if mag_block is not None and prev_mag.any():
-            mrows = st["row"][start:end][mag_ev[prev_mag]]
+            mrows = st["row"][prev_ev[prev_mag]]
             vals = mag_block.values[mrows, 0:3]
-            if p.rules.flip:  # body_frame FLU <-> FRD, as on_mag turns the field
+            if rules.flip:  # body_frame FLU <-> FRD, as on_mag turns the field
                 vals = np.column_stack([vals[:, 0], -vals[:, 1], -vals[:, 2]])
             mag[prev_mag] = vals
         if first_takes_pending:
@@ -312,18 +383,24 @@ def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = N
             mag = None
     # the pending sample after the run: the last magnetometer event when no IMU message
     # followed it
-    if n_mag and bool(is_mag_nz[-1]):
-        r = int(st["row"][start + int(nz[-1])])
-        pending = (int(t_run[int(nz[-1])]), mxs[r], mys[r], mzs[r])
+    if n_mag and int(nz_kind[ke - 1]) == MAG:
+        last_ev = int(nz[ke - 1])
+        r = int(st["row"][last_ev])
+        mxs, mys, mzs = ev.column("mx"), ev.column("my"), ev.column("mz")
+        if rules.flip:  # body_frame FLU <-> FRD, as on_mag turns the field
+            mys, mzs = ev.column("-my"), ev.column("-mz")
+        pending = (int(st["t_ns"][last_ev]), mxs[r], mys[r], mzs[r])
     elif n_imu:
         pending = None
     # intervals: the window statistics see the raw interval, the filter the mean one across
     # a gap (pipeline.on_imu's order of operations, its float arithmetic)
-    d_ns = np.diff(t_imu, prepend=np.int64(last))
-    dt_arr = d_ns * 1e-9
-    dt_raw = dt_arr.tolist()
+    d_ns = np.empty(n_imu, dtype=np.int64)  # the stamp differences, the first from ``last``
     if n_imu:
-        lo, hi = min(dt_raw), max(dt_raw)
+        d_ns[0] = int(t_imu[0]) - last
+        np.subtract(t_imu[1:], t_imu[:-1], out=d_ns[1:])
+    dt_arr = d_ns * 1e-9
+    if n_imu:
+        lo, hi = float(dt_arr.min()), float(dt_arr.max())
         if n_dt == 0 or lo < dt_min:
             dt_min = lo
         if hi > dt_max:
@@ -334,7 +411,7 @@ def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = N
         dt_sum = float(np.add.accumulate(np.concatenate(([dt_sum], dt_arr)))[-1])
     if n_imu and int(d_ns.max()) > max_dt_ns:
         dts = []
-        for d, dt in zip(d_ns.tolist(), dt_raw, strict=True):
+        for d, dt in zip(d_ns.tolist(), dt_arr.tolist(), strict=True):
             if d > max_dt_ns:
                 gaps += 1
                 dt = dt_mean if dt_mean > 0.0 else max_dt_fallback
@@ -347,7 +424,7 @@ def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = N
     else:
         # the mean interval: unchanged by intervals equal to it (regular stamps), else in order
         if not (dt_mean > 0.0 and n_imu and bool(np.all(dt_arr == dt_mean))):
-            for dt in dt_raw:
+            for dt in dt_arr.tolist():
                 if dt_mean > 0.0:
                     dt_mean += 0.05 * (dt - dt_mean)
                 else:
@@ -356,9 +433,9 @@ def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = N
     out.rows = rows
     out.t_ns = t_imu
     if ev.imu is not None:
-        out.sec = ev.imu_stamps()[0][rows]
-        out.nsec = ev.imu_stamps()[1][rows]
-    out.log_ns = st["log_ns"][start:end][imu_rel]
+        out.sec = lay["imu_sec"][a:b]
+        out.nsec = lay["imu_nsec"][a:b]
+    out.log_ns = lay["imu_log"][a:b]
     out.mag = mag
     out.mag_t_ns = mag_t
     out.end = end
@@ -395,9 +472,8 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
     p = pipe
     n = run.n
     f = p.filter
-    sel = run.values[run.rows]
-    gyro = np.ascontiguousarray(sel[:, 13:16])
-    acc = np.ascontiguousarray(sel[:, 25:28])
+    gyro = run.values[run.rows, 13:16]  # new (n, 3) arrays
+    acc = run.values[run.rows, 25:28]
     if p.rules.flip:  # body_frame FLU <-> FRD, as on_imu turns the vectors
         gyro[:, 1:] = -gyro[:, 1:]
         acc[:, 1:] = -acc[:, 1:]
@@ -413,12 +489,10 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
     st = run.state
     ex, ey, ez = extra[:, 0], extra[:, 1], extra[:, 2]
     en_arr = np.sqrt(ex * ex + ey * ey + ez * ez)
-    en = en_arr.tolist()
-    clipped_col = extra[:, 6] != 0.0
+    clipped_col = extra[:, 6]
     heading = bool(state.heading_initialized)  # constant over the run
-    model = p.covariance_model
     last_mag = p.mag_input.last_used_ns
-    ages: Any
+    ages: np.ndarray | None
     if mag is not None:
         has = ~np.isnan(mag[:, 0])
         status = extra[:, 9]
@@ -426,10 +500,10 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
         p.tally.mag_used += int(np.count_nonzero(used_arr))
         p.tally.mag_rejected += int(np.count_nonzero(has & (status == MAG_REJECTED)))
         p.tally.mag_disabled += int(np.count_nonzero(has & (status == MAG_DISABLED)))
-        used = used_arr.tolist()
+        used = used_arr.astype(np.float64)
     else:
         used_arr = None
-        used = [False] * n
+        used = np.zeros(n)
     if used_arr is not None and used_arr.any():
         # the stamp of the last sample used up to each row (the one before the run: -1)
         last_at = np.maximum.accumulate(np.where(used_arr, np.arange(n), -1))
@@ -440,16 +514,15 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
             known[:] = True
         # (t - last) * 1e-9 as the per-message path computes it; unknown: 0.0, what the
         # model takes for "never" (age or 0.0)
-        ages = np.where(known, (run.t_ns - last_t) * 1e-9, 0.0).tolist()
+        ages = np.where(known, (run.t_ns - last_t) * 1e-9, 0.0)
         last_mag = int(run.mag_t_ns[int(last_at[-1])])
     elif last_mag is not None:
-        ages = ((run.t_ns - last_mag) * 1e-9).tolist()
+        ages = (run.t_ns - last_mag) * 1e-9
     else:
-        ages = [None] * n
-    tilts, yaws = model.steps(dt.tolist(), clipped_col.tolist(), extra[:, 10].tolist(),
-                              extra[:, 7].tolist(), en, extra[:, 11].tolist(),
-                              extra[:, 12].tolist(), extra[:, 14].tolist(), heading,
-                              extra[:, 13].tolist(), used, ages, extra[:, 18].tolist())
+        ages = None
+    tilts, yaws = p.covariance_model.rows(
+        dt, clipped_col, extra[:, 10], extra[:, 7], en_arr, extra[:, 11], extra[:, 12],
+        extra[:, 14], heading, extra[:, 13], used, ages, extra[:, 18], f.backend)
     cov = np.zeros((n, 9))
     cov[:, 0] = tilts
     cov[:, 4] = tilts
@@ -471,7 +544,7 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
         if finite.size and float(finite.max()) > w.err_max:
             w.err_max = float(finite.max())
     w.n_err += n
-    w.n_clipped += int(np.count_nonzero(clipped_col))
+    w.n_clipped += int(np.count_nonzero(clipped_col != 0.0))
     if w.n == 0:
         w.first_ns = int(run.t_ns[0])
     w.n += n
@@ -479,7 +552,7 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
     # -- outputs ------------------------------------------------------------------------------
     if not p.output_frame.identity:  # core world -> published (nwu, true north), as on_imu
         q = p.output_frame.apply_array(q)
-    rpy = _rpy(p, q)
+    rpy = _rpy(p, q, f.backend)
     p.last_rpy = tuple(rpy[-1].tolist())
     elapsed = perf_counter() - t0  # the run's processing time, shared by its messages
     w.proc_sum += elapsed
@@ -489,20 +562,24 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
                      p.linear_acceleration_covariance.value, gyro, acc)
 
 
-def _rpy(p: ImuPipeline, q: np.ndarray) -> np.ndarray:
+def _rpy(p: ImuPipeline, q: np.ndarray, backend: str = "python") -> np.ndarray:
     """(n, 3) roll, pitch, yaw of each row of ``q`` (w, x, y, z) as ``on_imu`` computes them:
     the arguments with NumPy (the same IEEE operations, in the same order), ``math.atan2`` and
-    ``math.asin`` per row (NumPy's own differ from them in the last bit on some rows), then
-    the unwrap, sequential by nature, when it is on."""
-    qw, qx, qy, qz = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    ``math.asin`` per row (NumPy's own differ from them in the last bit on some rows; backend
+    'compiled': ``_kernel.rpy_rows``, the same arithmetic and libm calls in C), then the
+    unwrap, sequential by nature, when it is on."""
     out = np.empty((q.shape[0], 3))
-    out[:, 0] = list(map(math.atan2, (2.0 * (qw * qx + qy * qz)).tolist(),
-                         (1.0 - 2.0 * (qx * qx + qy * qy)).tolist()))
-    sp = 2.0 * (qw * qy - qz * qx)
-    sp = np.where(sp > 1.0, 1.0, np.where(sp < -1.0, -1.0, sp))
-    out[:, 1] = list(map(math.asin, sp.tolist()))
-    out[:, 2] = list(map(math.atan2, (2.0 * (qw * qz + qx * qy)).tolist(),
-                         (1.0 - 2.0 * (qy * qy + qz * qz)).tolist()))
+    if backend == "compiled" and compiled_kernel is not None:
+        compiled_kernel.rpy_rows(np.ascontiguousarray(q), out)
+    else:
+        qw, qx, qy, qz = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+        out[:, 0] = list(map(math.atan2, (2.0 * (qw * qx + qy * qz)).tolist(),
+                             (1.0 - 2.0 * (qx * qx + qy * qy)).tolist()))
+        sp = 2.0 * (qw * qy - qz * qx)
+        sp = np.where(sp > 1.0, 1.0, np.where(sp < -1.0, -1.0, sp))
+        out[:, 1] = list(map(math.asin, sp.tolist()))
+        out[:, 2] = list(map(math.atan2, (2.0 * (qw * qz + qx * qy)).tolist(),
+                             (1.0 - 2.0 * (qy * qy + qz * qz)).tolist()))
     if p.pipeline_params.rpy_unwrap:
         prev = p.clock.unwrap_prev
         rows = out.tolist()
