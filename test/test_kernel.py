@@ -258,6 +258,26 @@ def test_states_agree_field_by_field_after_a_recording():
         assert ends["compiled"][k] == pytest.approx(v, abs=1e-12), k
 
 
+def test_squares_are_the_same_bits_where_libm_pow_is_not_correctly_rounded():
+    """The twins square by product (ops.sq, _kernel.c sq): Python's ``x ** 2`` calls libm's
+    pow, which for about one input in a thousand differs from x·x in the last bit (GCC makes
+    C's pow(x, 2.0) a product). A gyro step of such a size goes into the stillness block's
+    noise sum (blk_g2) and the per-sample rate: both twins hold the same bits."""
+    x = 0.037436064101607984  # x ** 2 != x * x with glibc 2.36's pow
+    assert ops.sq(x) == x * x
+    ends = {}
+    for backend in ("python", "compiled"):
+        f = ComplementaryFilter(PARAM_SETS["full_mag"], backend=backend,
+                                initial_orientation=(1.0, 0.0, 0.0, 0.0))
+        for k in range(7):
+            f.update((x * (k % 2), 0.0, x * ((k + 1) % 2)), (0.0, x, G), 0.01)
+        s = f.state_snapshot()
+        ends[backend] = {k: getattr(s, k) for k in step.StepState.FIELDS}
+    for k, v in ends["python"].items():
+        c = ends["compiled"][k]
+        assert c == v or (math.isnan(v) and math.isnan(c)), k
+
+
 def test_update_accepts_the_same_inputs_and_refuses_the_same_ones():
     fs = {b: ComplementaryFilter(backend=b, initial_orientation=(1, 0, 0, 0))
           for b in ("python", "compiled")}

@@ -4,7 +4,8 @@
  * step.py is the reference (read it for the equations and their meaning); this file repeats its
  * arithmetic in the same order, so both give the same bits on the same libm (tested to 1e-12 in
  * test/test_kernel.py). Built with -ffp-contract=off: no fused multiply-adds, as in Python.
- * Python's `x ** 2` is written pow(x, 2.0) here for the same reason.
+ * Squares are products, sq(x) = x * x, as in the Python (ops.sq: Python's `x ** 2` calls libm's
+ * pow, which is not correctly rounded).
  *
  * Module cf_estimator.core._kernel:
  *   Params(view)  the parameter view of step_params() (FilterParams fields + mag_full), frozen;
@@ -116,6 +117,7 @@ static void state_init(cf_state *s)
 
 /* ---- the step (mirrors step.py) ----------------------------------------------------------- */
 static inline double maxd(double a, double b) { return a >= b ? a : b; }
+static inline double sq(double x) { return x * x; } /* ops.sq */
 static inline double mind(double a, double b) { return a <= b ? a : b; }
 
 static void mul(double aw, double ax, double ay, double az, double bw, double bx, double by,
@@ -238,14 +240,14 @@ static void heading(cf_state *s, const cf_params *p, const double *mag, int fast
                  MAG_TURN_FRACTION * MAG_TURN_TIME_CONSTANT_S * s->rate_lp;
     double drift = MAG_DRIFT_SIGMAS * sqrt(maxd(s->bias_var, 0.0)) * age;
     int turned =
-        sqrt(pow(mmx - s->mvx, 2.0) + pow(mmy - s->mvy, 2.0) + pow(mmz - s->mvz, 2.0)) > tol + drift;
+        sqrt(sq(mmx - s->mvx) + sq(mmy - s->mvy) + sq(mmz - s->mvz)) > tol + drift;
     int off = (off_norm > p->mag_norm_tolerance) || (off_dip > p->mag_dip_tolerance_rad) || turned;
     s->mag_ok_timer_s = learning ? MAG_SETTLE_S : (turned ? 0.0 : s->mag_ok_timer_s + dt_s);
     int disturbed = p->mag_rejection && !learning && (off || (s->mag_ok_timer_s < MAG_SETTLE_S));
     s->mag_disturbed = (char)disturbed;
     double drift_c = MAG_DRIFT_SIGMAS * sqrt(maxd(s->bias_var, 0.0)) * s->mag_cand_timer_s;
     int cand_moved =
-        (sqrt(pow(mmx - s->mcx, 2.0) + pow(mmy - s->mcy, 2.0) + pow(mmz - s->mcz, 2.0)) >
+        (sqrt(sq(mmx - s->mcx) + sq(mmy - s->mcy) + sq(mmz - s->mcz)) >
          2.0 * MAG_TURN_TOLERANCE_RAD + drift_c) ||
         (maxd(mn - s->mag_cand_norm, s->mag_cand_norm - mn) >
          MAG_CANDIDATE_NORM_TOLERANCE * s->mag_cand_norm);
@@ -322,10 +324,10 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
     s->blk_ay = s->blk_ay + ay;
     s->blk_az = s->blk_az + az;
     double seen = s->last_n > 0.0 ? 1.0 : 0.0;
-    s->blk_g2 = s->blk_g2 + seen * (pow(gx - s->lgx, 2.0) + pow(gy - s->lgy, 2.0) +
-                                    pow(gz - s->lgz, 2.0));
-    s->blk_a2 = s->blk_a2 + seen * (pow(ax - s->lax, 2.0) + pow(ay - s->lay, 2.0) +
-                                    pow(az - s->laz, 2.0));
+    s->blk_g2 = s->blk_g2 + seen * (sq(gx - s->lgx) + sq(gy - s->lgy) +
+                                    sq(gz - s->lgz));
+    s->blk_a2 = s->blk_a2 + seen * (sq(ax - s->lax) + sq(ay - s->lay) +
+                                    sq(az - s->laz));
     s->blk_d = s->blk_d + seen;
     s->lgx = gx;
     s->lgy = gy;
@@ -344,9 +346,9 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
         s->blk_mn = s->blk_mn + use;
     }
     int has_prev = s->prev_n > 0.0;
-    int jump_g = sqrt(pow(gx - s->pgx, 2.0) + pow(gy - s->pgy, 2.0) + pow(gz - s->pgz, 2.0)) >
+    int jump_g = sqrt(sq(gx - s->pgx) + sq(gy - s->pgy) + sq(gz - s->pgz)) >
                  (p->rest_gyro_threshold_rad_s + REST_SAMPLE_SIGMAS * sqrt(s->noise_g2));
-    int jump_a = sqrt(pow(ax - s->pax, 2.0) + pow(ay - s->pay, 2.0) + pow(az - s->paz, 2.0)) >
+    int jump_a = sqrt(sq(ax - s->pax) + sq(ay - s->pay) + sq(az - s->paz)) >
                  (p->rest_accel_threshold_m_s2 + REST_SAMPLE_SIGMAS * sqrt(s->noise_a2));
     if (has_prev && (jump_g || jump_a)) s->rest_timer_s = 0.0;
 
@@ -360,8 +362,8 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
     double nd = 2.0 * maxd(s->blk_d, 1.0);
     double noise_g2 = s->blk_g2 / nd, noise_a2 = s->blk_a2 / nd;
     double spread = 1.0 / n + 1.0 / maxd(s->prev_n, 1.0);
-    double dg = sqrt(pow(mgx - s->pgx, 2.0) + pow(mgy - s->pgy, 2.0) + pow(mgz - s->pgz, 2.0));
-    double da = sqrt(pow(max_ - s->pax, 2.0) + pow(may - s->pay, 2.0) + pow(maz - s->paz, 2.0));
+    double dg = sqrt(sq(mgx - s->pgx) + sq(mgy - s->pgy) + sq(mgz - s->pgz));
+    double da = sqrt(sq(max_ - s->pax) + sq(may - s->pay) + sq(maz - s->paz));
     double tol_g = p->rest_gyro_threshold_rad_s +
                    REST_NOISE_SIGMAS * mind(sqrt(noise_g2 * spread),
                                             REST_NOISE_CAP * p->rest_gyro_threshold_rad_s);
@@ -372,7 +374,7 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
     double bm = maxd(sqrt(s->blk_mx * s->blk_mx + s->blk_my * s->blk_my + s->blk_mz * s->blk_mz),
                      TINY);
     double umx = s->blk_mx / bm, umy = s->blk_my / bm, umz = s->blk_mz / bm;
-    double dm = sqrt(pow(umx - s->pmx, 2.0) + pow(umy - s->pmy, 2.0) + pow(umz - s->pmz, 2.0));
+    double dm = sqrt(sq(umx - s->pmx) + sq(umy - s->pmy) + sq(umz - s->pmz));
     int turned = mag_seen &&
                  (dm > REST_MAG_TOLERANCE_RAD + p->rest_gyro_threshold_rad_s * s->blk_t);
     int steady = has_prev && (dg < tol_g) && (da < tol_a) && !turned &&
@@ -461,7 +463,7 @@ static int classify_motion(cf_state *s, const cf_params *p, const double *g, con
     int quick = fast || (s->at_rest &&
                          (maxd(steady_g - s->g_ref, s->g_ref - steady_g) <
                           p->acceleration_threshold_m_s2) &&
-                         (s->noise_a2 < pow(p->acceleration_threshold_m_s2, 2.0)));
+                         (s->noise_a2 < sq(p->acceleration_threshold_m_s2)));
     double aw = s->last_n <= 1.0 ? 1.0 : dt / (ACCEL_LOWPASS_TIME_CONSTANT_S + dt);
     double acx = s->acx + aw * (ax - s->acx), acy = s->acy + aw * (ay - s->acy),
            acz = s->acz + aw * (az - s->acz);
@@ -475,7 +477,7 @@ static int classify_motion(cf_state *s, const cf_params *p, const double *g, con
     double lp_sigma = sqrt(s->noise_a2 / 3.0 * dt / (2.0 * ACCEL_LOWPASS_TIME_CONSTANT_S + dt));
     *accelerating =
         s->accel_hold > p->acceleration_threshold_m_s2 + ACCEL_DETECT_SIGMAS * lp_sigma;
-    double rate = sqrt(pow(gx - s->bx, 2.0) + pow(gy - s->by, 2.0) + pow(gz - s->bz, 2.0));
+    double rate = sqrt(sq(gx - s->bx) + sq(gy - s->by) + sq(gz - s->bz));
     double lw = dt / (RATE_LOWPASS_TIME_CONSTANT_S + dt);
     s->rate_lp = s->rate_lp + lw * (rate - s->rate_lp);
     double v[3];
@@ -522,7 +524,7 @@ static double saturate(const cf_state *s, const cf_params *p, double en, int qui
 /* bias.turn_share of bias.py: the share of the learning raise left while the vehicle turns */
 static double turn_share(const cf_state *s, const cf_params *p)
 {
-    double k1_2 = pow(maxd(p->k1, BIAS_LEARNING_MIN_K1), 2.0);
+    double k1_2 = sq(maxd(p->k1, BIAS_LEARNING_MIN_K1));
     double w = s->turn_rate_lp;
     double share = k1_2 / (k1_2 + w * w);
     return share * share;
@@ -542,7 +544,7 @@ static void learning_gains(const cf_state *s, const cf_params *p, double *k1, do
 {
     double sigma_b = sqrt(maxd(s->bias_var, 0.0));
     double sigma_v = maxd(sqrt(s->pv_var), TINY);
-    double share = mind(s->bias_var / pow(p->bias_prior_sigma_rad_s, 2.0), 1.0);
+    double share = mind(s->bias_var / sq(p->bias_prior_sigma_rad_s), 1.0);
     *k2 = maxd(p->k2, mind(p->bias_learning_k2 * share, sigma_b / sigma_v) * turn_share(s, p));
     *k1 = maxd(loop_gain(s, p), 2.0 * sqrt(*k2));
 }
@@ -629,8 +631,8 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
                     const double *mag, double dt)
 {
     s->time_s = s->time_s + dt;
-    s->bias_var = (s->bias_var < 0.0 ? pow(p->bias_prior_sigma_rad_s, 2.0) : s->bias_var) +
-                  pow(BIAS_RANDOM_WALK_RAD_S_SQRT_S, 2.0) * dt;
+    s->bias_var = (s->bias_var < 0.0 ? sq(p->bias_prior_sigma_rad_s) : s->bias_var) +
+                  sq(BIAS_RANDOM_WALK_RAD_S_SQRT_S) * dt;
     int startup = s->time_s <= p->startup_duration_s;
     int fast = startup || s->recovering || (s->time_s <= s->quick_until_s);
     int learn = !fast;
@@ -1108,7 +1110,7 @@ static PyObject *covariance_rows(PyObject *Py_UNUSED(module), PyObject *args)
             const double age = ages ? AT(c[10], i) : 0.0;
             const double yd = sigma_b * (age != 0.0 ? age : 0.0); /* age or 0.0 */
             /* yaw_err ** 2 as Python's float power: NaN kept, overflow an error, else libm's
-             * pow itself (the exponent volatile: the compiler would make pow(x, 2.0) x * x,
+             * pow itself (the exponent volatile: the compiler would make sq(x) x * x,
              * which differs from libm's pow in the last bit on some x) */
             const double y2 = isnan(yaw_err) ? yaw_err : pow(yaw_err, pow_two);
             if (isinf(y2) && isfinite(yaw_err)) {

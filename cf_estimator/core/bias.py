@@ -27,7 +27,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from cf_estimator.core.ops import TINY
+from cf_estimator.core.ops import TINY, sq
 from cf_estimator.core.state import StepState
 from cf_estimator.core.stillness import RestMeasurement
 
@@ -61,8 +61,8 @@ GYRO_SCALE_UNCERTAINTY = 0.01
 
 def add_process_noise(s: StepState, p: Any, dt: Any, o: Any) -> None:
     """The prior (``bias_prior_sigma_rad_s``²) at the first step, then + random walk × dt."""
-    s.bias_var = o.where(s.bias_var < 0.0, p.bias_prior_sigma_rad_s ** 2, s.bias_var) + (
-        BIAS_RANDOM_WALK_RAD_S_SQRT_S ** 2 * dt)
+    s.bias_var = o.where(s.bias_var < 0.0, sq(p.bias_prior_sigma_rad_s), s.bias_var) + (
+        sq(BIAS_RANDOM_WALK_RAD_S_SQRT_S) * dt)
 
 
 def fuse_rest(s: StepState, m: RestMeasurement, o: Any) -> None:
@@ -111,7 +111,7 @@ def turn_share(s: StepState, p: Any, o: Any) -> Any:
     de-biased gyro for bias. ω is low-passed over TURN_LOWPASS_TIME_CONSTANT_S (step.py): a
     turn long enough to pass for a bias; a gyro bias about the vertical as large as the prior
     (0.1 rad/s) counts as a turn too, and takes 15 % of the raise."""
-    k1_2 = o.maximum(p.k1, BIAS_LEARNING_MIN_K1) ** 2
+    k1_2 = sq(o.maximum(p.k1, BIAS_LEARNING_MIN_K1))
     w = s.turn_rate_lp
     share = k1_2 / (k1_2 + w * w)
     return share * share
@@ -126,7 +126,7 @@ def learning_gains(s: StepState, p: Any, o: Any) -> tuple[Any, Any]:
     at least 2√k2 (the PI loop critically damped)."""
     sigma_b = o.sqrt(o.maximum(s.bias_var, 0.0))
     sigma_v = o.maximum(o.sqrt(s.pv_var), TINY)
-    share = o.minimum(s.bias_var / (p.bias_prior_sigma_rad_s ** 2), 1.0)
+    share = o.minimum(s.bias_var / sq(p.bias_prior_sigma_rad_s), 1.0)
     k2 = o.maximum(p.k2, o.minimum(p.bias_learning_k2 * share, sigma_b / sigma_v)
                    * turn_share(s, p, o))
     k1 = o.maximum(loop_gain(s, p, o), 2.0 * o.sqrt(k2))

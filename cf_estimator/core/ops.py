@@ -16,6 +16,13 @@ SMALL_ANGLE_RAD = 1e-6
 TINY = 1e-300
 
 
+def sq(x: Any) -> Any:
+    """x·x: the square as a product, in both back-ends and in ``_kernel.c`` (``sq``). Python's
+    ``x ** 2`` calls libm's ``pow``, which is not correctly rounded: about one input in a
+    thousand differs from x·x in the last bit (GCC turns C's ``pow(x, 2.0)`` into x·x)."""
+    return x * x
+
+
 class FloatOps:
     """Scalar back-end: Python floats and bools (fast for one 3-vector at a time)."""
 

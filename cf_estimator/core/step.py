@@ -71,7 +71,7 @@ from cf_estimator.core.bias import (  # noqa: F401 - the constants of the whole 
     SWING_TIME_CONSTANT_S,
     SWING_VAR_TIME_CONSTANT_S,
 )
-from cf_estimator.core.ops import TINY
+from cf_estimator.core.ops import TINY, sq
 from cf_estimator.core.state import StepState
 from cf_estimator.core.stillness import (  # noqa: F401
     GRAVITY_TIME_CONSTANT_S,
@@ -308,7 +308,7 @@ def classify_motion(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple 
     # ... and only without strong vibration: at startup_k1 it would pass into the attitude
     quick = fast | (s.at_rest & (o.maximum(steady_g - s.g_ref, s.g_ref - steady_g)
                                  < p.acceleration_threshold_m_s2)
-                    & (s.noise_a2 < p.acceleration_threshold_m_s2 ** 2))
+                    & (s.noise_a2 < sq(p.acceleration_threshold_m_s2)))
     # linear-acceleration detector, blind to vibration: | |a| - ‖g‖ | of the accelerometer
     # low-passed over ACCEL_LOWPASS_TIME_CONSTANT_S, or of this very sample when it is a
     # spike far above the noise measured by the stillness blocks (an impact)
@@ -323,7 +323,7 @@ def classify_motion(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple 
     # per axis, from the stillness blocks' noise): not a manoeuvre
     lp_sigma = o.sqrt(s.noise_a2 / 3.0 * dt / (2.0 * ACCEL_LOWPASS_TIME_CONSTANT_S + dt))
     accelerating = s.accel_hold > p.acceleration_threshold_m_s2 + ACCEL_DETECT_SIGMAS * lp_sigma
-    rate = o.sqrt((gx - s.bx) ** 2 + (gy - s.by) ** 2 + (gz - s.bz) ** 2)
+    rate = o.sqrt(sq(gx - s.bx) + sq(gy - s.by) + sq(gz - s.bz))
     lw = dt / (RATE_LOWPASS_TIME_CONSTANT_S + dt)
     s.rate_lp = s.rate_lp + lw * (rate - s.rate_lp)
     vx, vy, vz = up_direction(s)  # the turn: the rate about the vertical (bias.turn_share)
@@ -495,7 +495,7 @@ def heading(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: Any) -> 
     # gyro predicts (tolerance: noise, a calibration's leftover times the angle turned, drift)
     tol = MAG_TURN_TOLERANCE_RAD + MAG_TURN_FRACTION * MAG_TURN_TIME_CONSTANT_S * s.rate_lp
     drift = MAG_DRIFT_SIGMAS * o.sqrt(o.maximum(s.bias_var, 0.0)) * age
-    turned = o.sqrt((mmx - s.mvx) ** 2 + (mmy - s.mvy) ** 2 + (mmz - s.mvz) ** 2) > tol + drift
+    turned = o.sqrt(sq(mmx - s.mvx) + sq(mmy - s.mvy) + sq(mmz - s.mvz)) > tol + drift
     off = (off_norm > p.mag_norm_tolerance) | (off_dip > p.mag_dip_tolerance_rad) | turned
     # latched: after the field turned, used again only once it agrees for MAG_SETTLE_S
     # unbroken (a single sample off in norm or dip is noise: rejected alone)
@@ -510,7 +510,7 @@ def heading(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: Any) -> 
     # both, a world-fixed field does not
     drift_c = MAG_DRIFT_SIGMAS * o.sqrt(o.maximum(s.bias_var, 0.0)) * s.mag_cand_timer_s
     cand_moved = (
-        (o.sqrt((mmx - s.mcx) ** 2 + (mmy - s.mcy) ** 2 + (mmz - s.mcz) ** 2)
+        (o.sqrt(sq(mmx - s.mcx) + sq(mmy - s.mcy) + sq(mmz - s.mcz))
          > 2.0 * MAG_TURN_TOLERANCE_RAD + drift_c)
         | (o.maximum(mn - s.mag_cand_norm, s.mag_cand_norm - mn)
            > MAG_CANDIDATE_NORM_TOLERANCE * s.mag_cand_norm)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from typing import Any, NamedTuple
 
-from cf_estimator.core.ops import TINY
+from cf_estimator.core.ops import TINY, sq
 from cf_estimator.core.state import StepState
 
 #: Stillness: a change of the block means within this many standard deviations of the observed
@@ -82,8 +82,8 @@ def classify(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple | None,
     s.blk_ax, s.blk_ay, s.blk_az = s.blk_ax + ax, s.blk_ay + ay, s.blk_az + az
     # squared sample-to-sample differences (noise); the first sample has none
     seen = o.where(s.last_n > 0.0, 1.0, 0.0)
-    s.blk_g2 = s.blk_g2 + seen * ((gx - s.lgx) ** 2 + (gy - s.lgy) ** 2 + (gz - s.lgz) ** 2)
-    s.blk_a2 = s.blk_a2 + seen * ((ax - s.lax) ** 2 + (ay - s.lay) ** 2 + (az - s.laz) ** 2)
+    s.blk_g2 = s.blk_g2 + seen * (sq(gx - s.lgx) + sq(gy - s.lgy) + sq(gz - s.lgz))
+    s.blk_a2 = s.blk_a2 + seen * (sq(ax - s.lax) + sq(ay - s.lay) + sq(az - s.laz))
     s.blk_d = s.blk_d + seen
     s.lgx, s.lgy, s.lgz, s.lax, s.lay, s.laz = gx, gy, gz, ax, ay, az
     s.last_n = s.last_n + 1.0
@@ -97,9 +97,9 @@ def classify(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple | None,
         s.blk_mn = s.blk_mn + use
     has_prev = s.prev_n > 0.0
     # a sample far outside the noise around the last block's mean ends rest at once
-    jump_g = o.sqrt((gx - s.pgx) ** 2 + (gy - s.pgy) ** 2 + (gz - s.pgz) ** 2) > (
+    jump_g = o.sqrt(sq(gx - s.pgx) + sq(gy - s.pgy) + sq(gz - s.pgz)) > (
         p.rest_gyro_threshold_rad_s + REST_SAMPLE_SIGMAS * o.sqrt(s.noise_g2))
-    jump_a = o.sqrt((ax - s.pax) ** 2 + (ay - s.pay) ** 2 + (az - s.paz) ** 2) > (
+    jump_a = o.sqrt(sq(ax - s.pax) + sq(ay - s.pay) + sq(az - s.paz)) > (
         p.rest_accel_threshold_m_s2 + REST_SAMPLE_SIGMAS * o.sqrt(s.noise_a2))
     s.rest_timer_s = o.where(has_prev & (jump_g | jump_a), 0.0, s.rest_timer_s)
 
@@ -111,8 +111,8 @@ def classify(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple | None,
     nd = 2.0 * o.maximum(s.blk_d, 1.0)
     noise_g2, noise_a2 = s.blk_g2 / nd, s.blk_a2 / nd
     spread = 1.0 / n + 1.0 / o.maximum(s.prev_n, 1.0)
-    dg = o.sqrt((mgx - s.pgx) ** 2 + (mgy - s.pgy) ** 2 + (mgz - s.pgz) ** 2)
-    da = o.sqrt((max_ - s.pax) ** 2 + (may - s.pay) ** 2 + (maz - s.paz) ** 2)
+    dg = o.sqrt(sq(mgx - s.pgx) + sq(mgy - s.pgy) + sq(mgz - s.pgz))
+    da = o.sqrt(sq(max_ - s.pax) + sq(may - s.pay) + sq(maz - s.paz))
     tol_g = p.rest_gyro_threshold_rad_s + REST_NOISE_SIGMAS * o.minimum(
         o.sqrt(noise_g2 * spread), REST_NOISE_CAP * p.rest_gyro_threshold_rad_s)
     tol_a = p.rest_accel_threshold_m_s2 + REST_NOISE_SIGMAS * o.minimum(
@@ -122,7 +122,7 @@ def classify(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple | None,
     bm = o.maximum(o.sqrt(s.blk_mx * s.blk_mx + s.blk_my * s.blk_my + s.blk_mz * s.blk_mz),
                    TINY)
     umx, umy, umz = s.blk_mx / bm, s.blk_my / bm, s.blk_mz / bm
-    dm = o.sqrt((umx - s.pmx) ** 2 + (umy - s.pmy) ** 2 + (umz - s.pmz) ** 2)
+    dm = o.sqrt(sq(umx - s.pmx) + sq(umy - s.pmy) + sq(umz - s.pmz))
     turned = mag_seen & (dm > REST_MAG_TOLERANCE_RAD + p.rest_gyro_threshold_rad_s * s.blk_t)
     steady = (
         has_prev
