@@ -15,21 +15,15 @@ test_kernel.py), which turns the skip into a failure.
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
 import pytest
+from kernel_guard import require_kernel
 
-from cf_estimator.core import kernel
 from cf_estimator.core.covariance import OrientationCovariance
 from cf_estimator.pipeline import ImuPipeline, bulk
 
-if not kernel.compiled_available():
-    if os.environ.get("CF_ESTIMATOR_REQUIRE_KERNEL") == "1":
-        pytest.fail("the compiled kernel did not build (CF_ESTIMATOR_REQUIRE_KERNEL=1)",
-                    pytrace=False)
-    pytest.skip("compiled kernel not built (no C compiler at install time)",
-                allow_module_level=True)
+require_kernel()
 
 
 def _bits(a: np.ndarray) -> np.ndarray:

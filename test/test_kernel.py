@@ -11,12 +11,12 @@ scripts/test.sh, where a C compiler is present), which turns the skip into a fai
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from kernel_guard import require_kernel
 
 from cf_estimator.core import kernel, ops, step
 from cf_estimator.core.batch import estimate, estimate_many
@@ -24,12 +24,7 @@ from cf_estimator.core.filter import EXTRA_COLUMNS, ComplementaryFilter
 from cf_estimator.core.params import FilterParams
 from cf_estimator.schema import ParameterError, specs_of
 
-if not kernel.compiled_available():
-    if os.environ.get("CF_ESTIMATOR_REQUIRE_KERNEL") == "1":
-        pytest.fail("the compiled kernel did not build (CF_ESTIMATOR_REQUIRE_KERNEL=1)",
-                    pytrace=False)
-    pytest.skip("compiled kernel not built (no C compiler at install time)",
-                allow_module_level=True)
+require_kernel()
 
 G = 9.80665
 FIELD = np.array([0.0, 20.0, -40.0])  # µT, ENU-ish, any unit works
