@@ -516,13 +516,15 @@ def test_time_to_hold_counts_from_the_first_velocity_sample_until_it_stays_below
     assert time_to_hold_s(SimpleNamespace(**{**vars(flight), "velocity_t_s": None}), est) != 0.0
 
 
+@pytest.mark.parametrize("offline", [False, True], ids=["online", "offline"])
 @pytest.mark.parametrize("backend", ["python", "compiled"])
-def test_a_vehicle_the_velocity_says_moves_is_never_at_rest(backend):
+def test_a_vehicle_the_velocity_says_moves_is_never_at_rest(backend, offline):
     """A slow steady turn (0.3 deg/s, within the stillness blocks' tolerance: a multirotor
     slowing down in the air passes them) is taken for rest, and its rate for gyro bias, when
     nothing says otherwise; while the velocity says the vehicle moves (2 m/s, beyond
     MOVING_SPEED_SIGMAS) it is never at rest and the bias stays unlearned from it. Once the
-    velocity falls to zero, rest comes back after rest_time_s of still blocks."""
+    velocity falls to zero, rest comes back after rest_time_s of still blocks. The offline
+    estimate's passes run the causal pass's moving rows alike (offline.ROW_MOVING)."""
     from cf_estimator.core.kernel import compiled_available
 
     if backend == "compiled" and not compiled_available():
@@ -530,6 +532,7 @@ def test_a_vehicle_the_velocity_says_moves_is_never_at_rest(backend):
     rate = math.radians(0.3)
     t = np.arange(0.0, 12.0, 0.01)
     gyro = np.tile([0.0, 0.0, rate], (t.size, 1))
+    gyro[t >= 8.0] = 0.0  # it stops turning when it stops (the true bias is 0 throughout)
     acc = np.tile([0.0, 0.0, P6.gravity_m_s2], (t.size, 1))
     t_v = np.arange(0.0, 12.0, 0.1)
     first_rest = {}
@@ -537,7 +540,7 @@ def test_a_vehicle_the_velocity_says_moves_is_never_at_rest(backend):
         v = np.zeros((t_v.size, 3))
         v[:, 0] = np.where(t_v < 8.0, speed, 0.0)  # stops at 8 s
         r = estimate(gyro, acc, None, timestamps_s=t, params=P6, velocity=(t_v, v),
-                     backend=backend)
+                     backend=backend, offline=offline)
         before = t < 8.0
         first_rest[speed] = float(t[np.argmax(r.at_rest)]) if r.at_rest.any() else math.inf
         bias_z = r.gyro_bias_rad_s[before][-1, 2]

@@ -250,11 +250,13 @@ def velocity_arrays(velocity: tuple[ArrayLike, ArrayLike]) -> tuple[np.ndarray, 
 def run_aided(f: ComplementaryFilter, aiding: VelocityAiding, gyro: np.ndarray, acc: np.ndarray,
               mg: np.ndarray | None, t: np.ndarray, t_v: np.ndarray, v: np.ndarray,
               latency_s: float, q_out: np.ndarray, extra_out: np.ndarray | None,
-              aided_out: np.ndarray, accel_out: np.ndarray | None = None) -> None:
+              aided_out: np.ndarray, accel_out: np.ndarray | None = None,
+              moving_out: np.ndarray | None = None) -> None:
     """:func:`_run_filter` with velocity aiding, one sample at a time: velocity sample j is
     offered once the IMU stamp reaches t_v[j] + latency_s (its arrival); each IMU sample's
     accelerometer goes through :meth:`VelocityAiding.aided_accel` (writes aided_out (N,) bool
-    and, if given, accel_out (N, 3): the accelerometer rows the filter was given)."""
+    and, if given, accel_out (N, 3): the accelerometer rows the filter was given, and
+    moving_out (N,) bool: the rows the velocity said the vehicle moves, not at rest)."""
     order = np.argsort(t_v + latency_s, kind="stable")
     arrival = (t_v + latency_s)[order].tolist()
     tv_rows, v_rows = t_v[order].tolist(), v[order].tolist()
@@ -285,6 +287,8 @@ def run_aided(f: ComplementaryFilter, aiding: VelocityAiding, gyro: np.ndarray, 
             f.update(g_rows[i], a_in, dts[i], m)
         q_out[i] = f.orientation_tuple()
         aided_out[i] = aiding.active
+        if moving_out is not None:
+            moving_out[i] = i != init_row and aiding.moving_now
         if accel_out is not None:
             accel_out[i] = a_in
         if extra_out is not None:
@@ -327,7 +331,7 @@ def estimate(
     t = sample_times(n, rate_hz, timestamps_s)
     f = ComplementaryFilter(params, initial_orientation=initial_orientation, backend=backend)
     warn_units(gyro, acc, f.params.gravity_m_s2)  # deg/s or g: warned once per call site
-    aided = status = None
+    aided = moving = status = None
     if velocity is not None:
         t_v, v = velocity_arrays(velocity)
         if not (np.isfinite(velocity_latency_s) and velocity_latency_s >= 0.0):
@@ -336,16 +340,19 @@ def estimate(
         out_q = np.full((n, 4), np.nan)
         extra = np.zeros((n, EXTRA_COLUMNS))
         aided = np.zeros(n, dtype=bool)
+        moving = np.zeros(n, dtype=bool)
         acc_used = acc.copy()
         run_aided(f, aiding, gyro, acc, mg, t, t_v, v, velocity_latency_s, out_q, extra, aided,
-                  acc_used)
+                  acc_used, moving)
         status = aiding.status()
         acc = acc_used
     if offline:
-        from cf_estimator.core.offline import estimate_offline
+        from cf_estimator.core.offline import ROW_AIDED, ROW_MOVING, estimate_offline
 
+        flags = None if aided is None or moving is None else (
+            aided * ROW_AIDED + moving * ROW_MOVING).astype(np.int8)
         out_q, extra = estimate_offline(gyro, acc, mg, t, f.params, initial_orientation, backend,
-                                        aided=aided)
+                                        flags=flags)
     elif velocity is None:
         out_q = np.full((n, 4), np.nan)
         extra = np.zeros((n, EXTRA_COLUMNS))

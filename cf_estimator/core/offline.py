@@ -44,6 +44,11 @@ from cf_estimator.core.params import FilterParams
 OFFLINE_MAX_GAP_S = 0.5
 #: Pass 1 runs on block means down to about this rate [Hz] (it only delivers its end state).
 PASS1_RATE_HZ = 100.0
+#: Row flags of a causal pass with velocity aiding (``flags`` of :func:`smooth_segment`): the
+#: accelerometer row was velocity-aided ...
+ROW_AIDED = 1
+#: ... the velocity said the vehicle moves (not at rest: VelocityAiding.moving_now).
+ROW_MOVING = 2
 #: Fewer valid samples than this: pass 1 is not decimated.
 _MIN_DECIMATED_ROWS = 200
 
@@ -90,20 +95,26 @@ def reverse_rows(gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None, dt
 
 def _run_rows(f: ComplementaryFilter, gyro: np.ndarray, accel: np.ndarray,
               mag: np.ndarray | None, dt: np.ndarray, start: int, q_out: np.ndarray,
-              extra_out: np.ndarray | None, aided: np.ndarray | None) -> None:
-    """``f.run_rows`` over rows start..N−1, the state's aided flag set for each run of rows
-    whose ``aided`` (N,) bool is alike (velocity-aided accelerometer rows, as the causal pass
-    flagged them); None: the flag as it is."""
-    if aided is None:
+              extra_out: np.ndarray | None, flags: np.ndarray | None) -> None:
+    """``f.run_rows`` over rows start..N−1 as the causal pass's ``flags`` (N,) say (None: the
+    state as it is): the state's aided flag set for each run of rows with :data:`ROW_AIDED`
+    alike, and rest interrupted before every row with :data:`ROW_MOVING` (one row at a time
+    there, :meth:`~cf_estimator.core.filter.ComplementaryFilter.interrupt_rest`). A bool array
+    is :data:`ROW_AIDED` alone."""
+    if flags is None:
         f.run_rows(gyro, accel, mag, dt, start, q_out, extra_out)
         return
     n = len(dt)
-    edges = (np.flatnonzero(np.diff(aided[start:].astype(np.int8))) + start + 1).tolist() + [n]
+    edges = (np.flatnonzero(np.diff(flags[start:].astype(np.int8))) + start + 1).tolist() + [n]
     k = start
     for stop in edges:
-        f.set_aided(bool(aided[k]))
-        f.run_rows(gyro[:stop], accel[:stop], None if mag is None else mag[:stop], dt[:stop], k,
-                   q_out[:stop], None if extra_out is None else extra_out[:stop])
+        f.set_aided(bool(flags[k] & ROW_AIDED))
+        moving = bool(flags[k] & ROW_MOVING)
+        for a, b in [(i, i + 1) for i in range(k, stop)] if moving else [(k, stop)]:
+            if moving:
+                f.interrupt_rest()
+            f.run_rows(gyro[:b], accel[:b], None if mag is None else mag[:b], dt[:b], a,
+                       q_out[:b], None if extra_out is None else extra_out[:b])
         k = stop
 
 
@@ -111,10 +122,10 @@ def _pass(params: FilterParams, gyro: np.ndarray, accel: np.ndarray, mag: np.nda
           dt: np.ndarray, q_out: np.ndarray, extra_out: np.ndarray | None,
           q0: Sequence[float] | None = None, bias: Sequence[float] | None = None,
           bias_var: float | None = None, backend: str | None = None,
-          aided: np.ndarray | None = None) -> ComplementaryFilter | None:
+          flags: np.ndarray | None = None) -> ComplementaryFilter | None:
     """One filter pass over rows 0..N−1 (dt[0] unused). Starts from ``q0`` (world frame) with
     ``bias`` [rad/s] and its variance, or else initialises at the first valid accelerometer
-    row (rows before stay NaN). None if it never initialises. ``aided``: see
+    row (rows before stay NaN). None if it never initialises. ``flags``: see
     :func:`_run_rows`."""
     f = ComplementaryFilter(params, backend=backend)
     start = 0
@@ -136,7 +147,7 @@ def _pass(params: FilterParams, gyro: np.ndarray, accel: np.ndarray, mag: np.nda
     if extra_out is not None:
         extra_out[start - 1] = state_extras(s)
     if start < len(dt):
-        _run_rows(f, gyro, accel, mag, dt, start, q_out, extra_out, aided)
+        _run_rows(f, gyro, accel, mag, dt, start, q_out, extra_out, flags)
     return f
 
 
@@ -185,7 +196,7 @@ CHUNK_ROWS = 1 << 16
 def _backward_pass(params: FilterParams, gyro: np.ndarray, accel: np.ndarray,
                    mag: np.ndarray | None, dt: np.ndarray, q_out: np.ndarray,
                    q0: Sequence[float], bias: Sequence[float], bias_var: float,
-                   backend: str | None = None, aided: np.ndarray | None = None
+                   backend: str | None = None, flags: np.ndarray | None = None
                    ) -> ComplementaryFilter:
     """The filter over the time-reversed rows (:func:`reverse_rows`), started at the last
     row from ``q0`` with ``bias`` (already negated) and its variance; writes ``q_out`` in the
@@ -206,7 +217,7 @@ def _backward_pass(params: FilterParams, gyro: np.ndarray, accel: np.ndarray,
                                        dt[n - j1:n - j0 + 1])
         # the chunk's row 0 is the state already reached: run its rows 1..
         _run_rows(f, gr, ar, mr, dtr, 1, buf[:j1 - j0 + 1], None,
-                  None if aided is None else aided[n - j1:n - j0 + 1][::-1])
+                  None if flags is None else flags[n - j1:n - j0 + 1][::-1])
         q_out[n - j1:n - j0] = buf[1:j1 - j0 + 1][::-1]
     return f
 
@@ -235,12 +246,13 @@ def _fuse(qf: np.ndarray, qb: np.ndarray, heading_from_forward: bool) -> None:
 def smooth_segment(gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None,
                    t_s: np.ndarray, params: FilterParams, q: np.ndarray, extra: np.ndarray,
                    initial_orientation: Sequence[float] | None = None,
-                   backend: str | None = None, aided: np.ndarray | None = None) -> None:
+                   backend: str | None = None, flags: np.ndarray | None = None) -> None:
     """Offline estimate of one segment (C-contiguous (N, 3) rows, strictly increasing t_s)
     into ``q`` ((N, 4) q_world_from_sensor, NaN-filled: stays NaN when no accelerometer row
     is valid) and ``extra`` ((N, EXTRA_COLUMNS) forward-pass signals), both C-contiguous.
-    ``aided`` (N,) bool: the accelerometer rows a causal pass velocity-aided (the vehicle's
-    acceleration taken out); every pass runs them as aided, as the causal pass did."""
+    ``flags`` (N,): what a causal pass with velocity aiding did per row (:data:`ROW_AIDED`:
+    the vehicle's acceleration taken out of the accelerometer row; :data:`ROW_MOVING`: the
+    velocity said the vehicle moves, so it was not at rest); every pass runs the rows so."""
     n = len(t_s)
     dt = np.diff(t_s, prepend=t_s[0])
     # pass 1: online, forward, decimated; only its final state is used
@@ -250,9 +262,9 @@ def smooth_segment(gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None,
         factor = 1
     g1, a1, m1, d1 = _block_means(gyro, accel, mag, dt, factor) if factor > 1 else (
         gyro, accel, mag, dt)
-    aided1 = _block_last(aided, factor) if aided is not None and factor > 1 else aided
+    flags1 = _block_last(flags, factor) if flags is not None and factor > 1 else flags
     f1 = _pass(params, g1, a1, m1, d1, np.empty((len(d1), 4)), None, initial_orientation,
-               backend=backend, aided=aided1)
+               backend=backend, flags=flags1)
     if f1 is None:
         return
     s1 = f1._state  # noqa: SLF001
@@ -260,11 +272,11 @@ def smooth_segment(gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None,
     # pass 2: backward from pass 1's end
     qb = np.empty((n, 4))
     fb = _backward_pass(refined, gyro, accel, mag, dt, qb, f1.orientation_tuple(),
-                        (-s1.bx, -s1.by, -s1.bz), s1.bias_var, backend, aided)
+                        (-s1.bx, -s1.by, -s1.bz), s1.bias_var, backend, flags)
     sb = fb._state  # noqa: SLF001
     # pass 3: forward from the backward pass's start
     _pass(refined, gyro, accel, mag, dt, q, extra, qb[0], (-sb.bx, -sb.by, -sb.bz),
-          sb.bias_var, backend, aided)
+          sb.bias_var, backend, flags)
     _fuse(q, qb, params.use_mag and mag is not None)
 
 
@@ -272,10 +284,10 @@ def estimate_offline(gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None
                      t_s: np.ndarray, params: FilterParams | None = None,
                      initial_orientation: Sequence[float] | None = None,
                      backend: str | None = None, max_gap_s: float = OFFLINE_MAX_GAP_S,
-                     aided: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                     flags: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """((N, 4) q, (N, EXTRA_COLUMNS) signals) over every segment of a recording (see
     :func:`segments`; rows outside segments: NaN q, zero signals). ``initial_orientation``
-    starts the first segment's first pass; ``aided``: see :func:`smooth_segment`."""
+    starts the first segment's first pass; ``flags``: see :func:`smooth_segment`."""
     p = params if params is not None else FilterParams()
     n = len(t_s)
     q = np.full((n, 4), np.nan)
@@ -283,5 +295,5 @@ def estimate_offline(gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None
     for k, (a, b) in enumerate(segments(t_s, gyro, max_gap_s)):
         smooth_segment(gyro[a:b], accel[a:b], None if mag is None else mag[a:b], t_s[a:b], p,
                        q[a:b], extra[a:b], initial_orientation if k == 0 and a == 0 else None,
-                       backend, None if aided is None else aided[a:b])
+                       backend, None if flags is None else flags[a:b])
     return q, extra
