@@ -91,6 +91,39 @@ def test_offline_replay_uses_the_aided_specific_force(faulty_bag):
             < 0.7 * r0.summary["reference"]["rmse_deg"]["inclination"])
 
 
+def test_offline_replay_runs_each_row_as_the_aiding_ran_it():
+    """The offline replay's recorder notes per row whether the velocity aiding had the row
+    aided (set_aided) and said the vehicle moves (interrupt_rest); the offline passes get those
+    flags (offline.ROW_AIDED / ROW_MOVING), as estimate(offline=True) gives them: a slow steady
+    turn in motion is not learned as bias offline either."""
+    from cf_estimator.bag.replay import _offline_orientations, _RecordingFilter
+    from cf_estimator.core.filter import EXTRA_COLUMNS
+    from cf_estimator.core.offline import ROW_AIDED, ROW_MOVING, smooth_segment
+
+    rec = _RecordingFilter(P6)
+    rec.initialize((1.0, 0.0, 0.0, 0.0))
+    t = np.arange(0.0, 8.0, 0.01)
+    g = (0.0, 0.0, math.radians(0.3))
+    for k in range(t.size):
+        rec.set_aided(k % 400 >= 200)
+        rec.interrupt_rest()
+        rec.update(g, (0.0, 0.0, P6.gravity_m_s2), 0.01)
+    flags = np.asarray(rec.flags)
+    aided = np.arange(t.size) % 400 >= 200
+    assert (flags == np.where(aided, ROW_AIDED, 0) | ROW_MOVING).all()
+    q, segments = _offline_orientations(t, rec, P6, 0.5)
+    assert segments == 1
+    rows = np.asarray(rec.rows)
+    q_plain = np.full((t.size, 4), np.nan)
+    smooth_segment(np.ascontiguousarray(rows[:, :3]), np.ascontiguousarray(rows[:, 3:6]), None,
+                   t, P6, q_plain, np.zeros((t.size, EXTRA_COLUMNS)))
+    # unflagged, the passes take the turn for bias at rest and hold the heading still; flagged,
+    # the heading turns with the gyro (0.3 deg/s over the 7 s from 1 s on)
+    yaw = np.degrees(2.0 * np.arctan2(q[:, 3], q[:, 0]))
+    yaw_plain = np.degrees(2.0 * np.arctan2(q_plain[:, 3], q_plain[:, 0]))
+    assert abs(yaw[-1] - yaw[100]) > 1.8 > 1.0 > abs(yaw_plain[-1] - yaw_plain[100])
+
+
 # -- messages --------------------------------------------------------------------------------
 def test_twist_and_odometry_messages_give_the_same_world_velocity():
     q = quat.from_euler(0.1, -0.2, 1.0)

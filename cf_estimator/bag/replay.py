@@ -42,6 +42,7 @@ from cf_estimator.bag.metrics import (
 from cf_estimator.core import quaternion as quat
 from cf_estimator.core.filter import ComplementaryFilter, bias_sigma
 from cf_estimator.core.kernel import resolve_backend
+from cf_estimator.core.offline import ROW_AIDED, ROW_MOVING
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import BIAS_CONVERGED_SIGMA_RAD_S
 from cf_estimator.pipeline import ImuPipeline, PipelineParams, bulk, checks, frames, px4
@@ -258,14 +259,18 @@ class _Col:
 
 
 class _RecordingFilter(ComplementaryFilter):
-    """The pipeline's filter, recording what the pipeline passes it (accepted samples only) and
-    where it resets: the offline replay runs :mod:`cf_estimator.core.offline` on them."""
+    """The pipeline's filter, recording what the pipeline passes it (accepted samples only),
+    how the velocity aiding ran each row and where it resets: the offline replay runs
+    :mod:`cf_estimator.core.offline` on them."""
 
     def __init__(self, params: FilterParams) -> None:
         super().__init__(params)
         self.rows: list[tuple[float, ...]] = []  #: gyro (3), accel (3), mag (3, NaN = none)
+        #: per row, offline.ROW_AIDED / ROW_MOVING as the velocity aiding ran it (0: unaided)
+        self.flags: list[int] = []
         self.starts: list[int] = [0]  #: row index of each reset
         self._in_update = False
+        self._moving = False  # interrupt_rest was called before the next update
 
     def reset(self) -> None:
         super().reset()
@@ -274,9 +279,16 @@ class _RecordingFilter(ComplementaryFilter):
                 self.starts[-1] != len(self.rows):
             self.starts.append(len(self.rows))
 
+    def interrupt_rest(self) -> None:
+        super().interrupt_rest()
+        self._moving = True
+
     def update(self, gyro_rad_s: Any, accel_m_s2: Any, dt_s: float, mag: Any = None) -> Any:
         m = tuple(mag) if mag is not None else (math.nan, math.nan, math.nan)
         self.rows.append((*gyro_rad_s, *accel_m_s2, *m))
+        self.flags.append((ROW_AIDED if self.step_state.aided else 0)
+                          | (ROW_MOVING if self._moving else 0))
+        self._moving = False
         self._in_update = True
         try:
             return super().update(gyro_rad_s, accel_m_s2, dt_s, mag)
@@ -288,7 +300,8 @@ def _offline_orientations(t_s: np.ndarray, rec: _RecordingFilter, params: Filter
                           max_dt_s: float) -> tuple[np.ndarray, int]:
     """((N, 4) offline q_world_from_sensor per processed message, number of segments): the
     pipeline's accepted samples, split at its resets and at gaps over ``max_dt_s`` (where it
-    did not integrate), each segment through :func:`cf_estimator.core.offline.smooth_segment`."""
+    did not integrate), each segment through :func:`cf_estimator.core.offline.smooth_segment`,
+    its rows run as the velocity aiding ran them (aided, not at rest)."""
     from cf_estimator.core.filter import EXTRA_COLUMNS
     from cf_estimator.core.offline import smooth_segment
 
@@ -300,6 +313,7 @@ def _offline_orientations(t_s: np.ndarray, rec: _RecordingFilter, params: Filter
         bounds |= set((np.flatnonzero(np.diff(t_s) > max_dt_s) + 1).tolist())
     edges = sorted(bounds)
     use_mag = params.use_mag and bool(np.any(np.isfinite(rows[:, 6])))
+    flags = np.asarray(rec.flags, dtype=np.int8) if any(rec.flags) else None
     count = 0
     for a, b in zip(edges[:-1], edges[1:], strict=True):
         if b <= a:
@@ -307,7 +321,8 @@ def _offline_orientations(t_s: np.ndarray, rec: _RecordingFilter, params: Filter
         count += 1
         g, acc = np.ascontiguousarray(rows[a:b, 0:3]), np.ascontiguousarray(rows[a:b, 3:6])
         mg = np.ascontiguousarray(rows[a:b, 6:9]) if use_mag else None
-        smooth_segment(g, acc, mg, t_s[a:b], params, q[a:b], np.zeros((b - a, EXTRA_COLUMNS)))
+        smooth_segment(g, acc, mg, t_s[a:b], params, q[a:b], np.zeros((b - a, EXTRA_COLUMNS)),
+                       flags=flags[a:b] if flags is not None else None)
     return q, count
 
 
