@@ -158,6 +158,7 @@ def test_pipeline_counts_velocity_and_reports_it_in_diagnostics(uav):
     pipe = ImuPipeline(P6, PipelineParams(velocity_frame_id="map"))
     imu = uav.imu
     jv = 0
+    moving_seen: list[bool] = []
     for k in range(imu.n_samples):
         t = float(imu.t_s[k])
         while jv < len(vd.t_s) and vd.arrival_s[jv] <= t:
@@ -168,6 +169,8 @@ def test_pipeline_counts_velocity_and_reports_it_in_diagnostics(uav):
         st = divmod(T0_NS + round(t * 1e9), 10**9)
         pipe.on_imu(io.imu_message(*st, "imu", (0, 0, 0, 1), None, imu.gyro_rad_s[k], None,
                                    imu.accel_m_s2[k], None))
+        if k % 200 == 0:
+            moving_seen.append(pipe.velocity_aiding is not None and pipe.velocity_aiding.moving_now)
     values = dict(pipe.diagnostics().values)
     assert values["velocity_rejected.frame"] == "1"
     assert values["velocity_aiding"] == "aided"
@@ -186,6 +189,11 @@ def test_pipeline_counts_velocity_and_reports_it_in_diagnostics(uav):
     # one aided stretch since it began (no dropout in this stream): it lasted to the end
     assert float(values["velocity_aided_for_s"]) == pytest.approx(
         float(imu.t_s[-1]) + T0_NS * 1e-9 - st.first_aided_t_s, abs=1e-3)
+    # moving (not at rest, whatever the stillness blocks say) while the flight is under way;
+    # at the end the vehicle hovers below 5 sigma of the velocity noise
+    assert sum(moving_seen) > 0.5 * len(moving_seen)
+    slow = np.linalg.norm(vd.v_world_m_s[-5:], axis=1).max() < 5.0 * P6.velocity_noise_m_s
+    assert values["velocity_moving"] == str(not slow).lower()
     # a reset (time jump back) resets the aiding as well
     pipe.on_imu(io.imu_message(1, 0, "imu", (0, 0, 0, 1), None, (0, 0, 0), None, (0, 0, 9.8),
                                None))

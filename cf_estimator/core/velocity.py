@@ -139,6 +139,8 @@ class VelocityStatus:
     first_aided_t_s: float  #: IMU stamp of the first aided sample (nan: not aided yet)
     aligned_t_s: float  #: IMU stamp at which the in-motion alignment became known and the
     #: filter took its tilt and gyro bias (nan: not yet)
+    moving_now: bool = False  #: the velocity says the vehicle moves: the filter is not at rest
+    #: (VelocityAiding.moving_now)
 
 
 def _rot(qw: float, qx: float, qy: float, qz: float, x: float, y: float, z: float
@@ -611,7 +613,7 @@ class VelocityAiding:
             age_s=now - self._m_t if self._m is not None else math.inf,
             axes=self.axes, aided_for_s=now - self._since if self._active else 0.0,
             first_velocity_t_s=self._first_v_t, first_aided_t_s=self._first_aided_t,
-            aligned_t_s=self._realigned_t)
+            aligned_t_s=self._realigned_t, moving_now=self.moving_now)
 
 
 def apply_aiding(f: Any, aiding: VelocityAiding) -> None:

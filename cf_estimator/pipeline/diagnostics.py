@@ -277,6 +277,7 @@ def velocity_values(status: Any) -> list[tuple[str, str]]:
         ("velocity_time_to_aid_s", _f(_time_to_aid(status))),
         ("velocity_aligned", str(math.isfinite(status.aligned_t_s)).lower()),
         ("velocity_time_to_align_s", _f(_time_to_align(status))),
+        ("velocity_moving", str(bool(status.moving_now)).lower()),
     ]
     return values
 
