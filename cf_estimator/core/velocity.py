@@ -188,6 +188,9 @@ class VelocityAiding:
         # steer a filter without its own heading reference onto the velocity's frame
         self._steer = self._auto and not params.use_mag
         self._span = params.velocity_timeout_s + params.velocity_window_s + BUFFER_MARGIN_S
+        # a speed² [m²/s²] beyond which a velocity sample says the vehicle moves
+        limit = MOVING_SPEED_SIGMAS * params.velocity_noise_m_s
+        self._moving_speed2 = limit * limit
         # differentiation noise of the velocity over one window, both horizontal axes [m²/s⁴]
         noise2 = 4.0 * (params.velocity_noise_m_s / params.velocity_window_s) ** 2
         if hasattr(self, "_heading"):
@@ -273,8 +276,7 @@ class VelocityAiding:
             reason = "too_old"
         else:
             self._last_stamp = t
-            limit = MOVING_SPEED_SIGMAS * self._params.velocity_noise_m_s
-            self._moving = self._moving or vx * vx + vy * vy + vz * vz > limit * limit
+            self._moving = self._moving or vx * vx + vy * vy + vz * vz > self._moving_speed2
             self._pending.append((t, (vx, vy, vz)))
             if len(self._pending) > MAX_PENDING:
                 self._pending.pop(0)
@@ -459,8 +461,7 @@ class VelocityAiding:
             if self._used == 1:
                 self._first_v_t = t
             hist.append((t, v, s))
-            limit = MOVING_SPEED_SIGMAS * self._params.velocity_noise_m_s
-            if v[0] * v[0] + v[1] * v[1] + v[2] * v[2] > limit * limit:
+            if v[0] * v[0] + v[1] * v[1] + v[2] * v[2] > self._moving_speed2:
                 self._fast_t = t
             self._observe_swing(t, v)
             # the window: the latest earlier sample at least velocity_window_s before t
