@@ -204,7 +204,7 @@ def test_the_turn_rate_is_the_rotation_about_the_estimated_vertical():
     """step.classify_motion low-passes the bias-corrected rate projected on the estimated up:
     a yaw on a level body counts fully, a roll not at all, a yaw on a body rolled 90° not at
     all (it is then a rotation about a horizontal axis)."""
-    from cf_estimator.core.step import TURN_LOWPASS_TIME_CONSTANT_S, classify_motion
+    from cf_estimator.core.step import TURN_LOWPASS_TIME_CONSTANT_S, classify_motion, up_direction
 
     p = step_params(FilterParams())
     cases = (((0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), 0.5),
@@ -216,7 +216,7 @@ def test_the_turn_rate_is_the_rotation_about_the_estimated_vertical():
         accel = (0.0, 0.0, G)
         dt = 0.01
         for _ in range(int(10 * TURN_LOWPASS_TIME_CONSTANT_S / dt)):
-            classify_motion(s, p, gyro, accel, None, False, dt, FloatOps)
+            classify_motion(s, p, gyro, accel, None, up_direction(s), False, dt, FloatOps)
         assert s.turn_rate_lp == pytest.approx(turn, abs=1e-3), (gyro, q)
 
 

@@ -450,7 +450,8 @@ static void predict(cf_state *s, const double *g, double dt)
 /* classify_motion() of step.py: stillness blocks, quick, the linear-acceleration detector,
    the rotation-rate low-pass; returns quick, *accelerating */
 static int classify_motion(cf_state *s, const cf_params *p, const double *g, const double *acc,
-                           const double *mag, int fast, double dt, int *accelerating)
+                           const double *mag, const double *v, int fast, double dt,
+                           int *accelerating)
 {
     double gx = g[0], gy = g[1], gz = g[2];
     double ax = acc[0], ay = acc[1], az = acc[2];
@@ -480,8 +481,7 @@ static int classify_motion(cf_state *s, const cf_params *p, const double *g, con
     double rate = sqrt(sq(gx - s->bx) + sq(gy - s->by) + sq(gz - s->bz));
     double lw = dt / (RATE_LOWPASS_TIME_CONSTANT_S + dt);
     s->rate_lp = s->rate_lp + lw * (rate - s->rate_lp);
-    double v[3];
-    up(s, v); /* the turn: the rate about the estimated vertical (turn_share) */
+    /* the turn: the rate about the estimated vertical v (turn_share) */
     double turn = (gx - s->bx) * v[0] + (gy - s->by) * v[1] + (gz - s->bz) * v[2];
     double tw = dt / (TURN_LOWPASS_TIME_CONSTANT_S + dt);
     s->turn_rate_lp = s->turn_rate_lp + tw * (turn - s->turn_rate_lp);
@@ -489,13 +489,11 @@ static int classify_motion(cf_state *s, const cf_params *p, const double *g, con
 }
 
 /* tilt_error() of step.py: e = (a/|g|) x g_hat into s->ex.., s->error_norm; u = a/|g|,
-   v = g_hat (third row of R); returns |e| */
-static double tilt_error(cf_state *s, const double *acc, double *u, double *v)
+   v = g_hat (the up direction of the predicted q, third row of R); returns |e| */
+static double tilt_error(cf_state *s, const double *acc, const double *v, double *u)
 {
     double ux = acc[0] / s->g_ref, uy = acc[1] / s->g_ref, uz = acc[2] / s->g_ref;
-    double up_[3];
-    up(s, up_);
-    double vx = up_[0], vy = up_[1], vz = up_[2];
+    double vx = v[0], vy = v[1], vz = v[2];
     double ex = uy * vz - uz * vy, ey = uz * vx - ux * vz, ez = ux * vy - uy * vx;
     double en = sqrt(ex * ex + ey * ey + ez * ez);
     s->ex = ex;
@@ -505,9 +503,6 @@ static double tilt_error(cf_state *s, const double *acc, double *u, double *v)
     u[0] = ux;
     u[1] = uy;
     u[2] = uz;
-    v[0] = vx;
-    v[1] = vy;
-    v[2] = vz;
     return en;
 }
 
@@ -540,13 +535,14 @@ static double loop_gain(const cf_state *s, const cf_params *p)
 
 /* bias.learning_gains of bias.py: k2 raised while the bias is uncertain, capped by the
  * velocity swing and withheld in a turn; k1 as the disturbance allows, critically damped */
-static void learning_gains(const cf_state *s, const cf_params *p, double *k1, double *k2)
+static void learning_gains(const cf_state *s, const cf_params *p, double loop, double *k1,
+                           double *k2)
 {
     double sigma_b = sqrt(maxd(s->bias_var, 0.0));
     double sigma_v = maxd(sqrt(s->pv_var), TINY);
     double share = mind(s->bias_var / sq(p->bias_prior_sigma_rad_s), 1.0);
     *k2 = maxd(p->k2, mind(p->bias_learning_k2 * share, sigma_b / sigma_v) * turn_share(s, p));
-    *k1 = maxd(loop_gain(s, p), 2.0 * sqrt(*k2));
+    *k1 = maxd(loop, 2.0 * sqrt(*k2));
 }
 
 /* aperiodic() of step.py: the unit in the world frame on the saturated error; f into s->fx.. */
@@ -556,7 +552,7 @@ static void aperiodic(cf_state *s, const cf_params *p, double scale, int quick, 
     double w[3], k1, k2;
     rotate(s->qw, s->qx, s->qy, s->qz, s->ex * scale, s->ey * scale, s->ez * scale, w);
     double lag = s->aided ? AIDED_LAG_TIME_CONSTANT_S : p->aperiodic_time_constant_s;
-    learning_gains(s, p, &k1, &k2);
+    learning_gains(s, p, loop_gain(s, p), &k1, &k2);
     lag = tight ? lag : mind(lag, LOOP_LAG_FRACTION / maxd(k1, TINY));
     double weight = dt / ((quick ? QUICK_LAG_TIME_CONSTANT_S : lag) + dt);
     s->lx = s->lx + weight * (w[0] - s->lx);
@@ -584,9 +580,9 @@ static void regulate(cf_state *s, const cf_params *p, const double *f, double en
     s->pvy = s->pvy + w[1] * dt - leak * s->pvy;
     double sw = dt / (mind(SWING_VAR_TIME_CONSTANT_S, maxd(s->time_s, dt)) + dt);
     s->pv_var = s->pv_var + sw * (s->pvx * s->pvx + s->pvy * s->pvy - s->pv_var);
-    double k1, k2;
-    learning_gains(s, p, &k1, &k2);
-    s->loop_k1 = maxd(loop_gain(s, p), 2.0 * sqrt(p->k2));
+    double k1, k2, loop = loop_gain(s, p);
+    learning_gains(s, p, loop, &k1, &k2);
+    s->loop_k1 = maxd(loop, 2.0 * sqrt(p->k2));
     double k3dt = learn ? p->k3 * dt : 0.0;
     s->cx = s->cx + k3dt * f[0];
     s->cy = s->cy + k3dt * f[1];
@@ -643,8 +639,9 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
     if (acc != NULL) {
         int accelerating, tight, clipped;
         double u[3], v[3], f[3], limit;
-        int quick = classify_motion(s, p, g, acc, mag, fast, dt, &accelerating);
-        double en = tilt_error(s, acc, u, v);
+        up(s, v); /* q is the predicted one until regulate() corrects it */
+        int quick = classify_motion(s, p, g, acc, mag, v, fast, dt, &accelerating);
+        double en = tilt_error(s, acc, v, u);
         double scale = saturate(s, p, en, quick, accelerating, &limit, &tight, &clipped);
         aperiodic(s, p, scale, quick, tight, dt, f);
         regulate(s, p, f, en, u, v, quick, tight, learn, dt);

@@ -117,8 +117,9 @@ def turn_share(s: StepState, p: Any, o: Any) -> Any:
     return share * share
 
 
-def learning_gains(s: StepState, p: Any, o: Any) -> tuple[Any, Any]:
-    """(k1 [1/s], k2 [1/s²]) of the regulator at this step.
+def learning_gains(s: StepState, p: Any, o: Any, loop: Any = None) -> tuple[Any, Any]:
+    """(k1 [1/s], k2 [1/s²]) of the regulator at this step (``loop``: :func:`loop_gain` of
+    this state, when the caller has it already).
 
     k2: raised while b is uncertain, the raise at most σ_b/σ_V [rad/s over rad·s] (the velocity
     swing moves the estimate by no more than its uncertainty σ_b = √bias_var; σ_V = √pv_var)
@@ -129,7 +130,7 @@ def learning_gains(s: StepState, p: Any, o: Any) -> tuple[Any, Any]:
     share = o.minimum(s.bias_var / sq(p.bias_prior_sigma_rad_s), 1.0)
     k2 = o.maximum(p.k2, o.minimum(p.bias_learning_k2 * share, sigma_b / sigma_v)
                    * turn_share(s, p, o))
-    k1 = o.maximum(loop_gain(s, p, o), 2.0 * o.sqrt(k2))
+    k1 = o.maximum(loop_gain(s, p, o) if loop is None else loop, 2.0 * o.sqrt(k2))
     return k1, k2
 
 

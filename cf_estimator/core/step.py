@@ -254,8 +254,9 @@ def step(
     s.clipped = s.clipped & False
     s.accel_used = accel is not None
     if accel is not None:
-        quick, accelerating = classify_motion(s, p, gyro, accel, mag, fast, dt, o)
-        u, v, en = tilt_error(s, accel, o)
+        up = up_direction(s)  # q is the predicted one until regulate() corrects it
+        quick, accelerating = classify_motion(s, p, gyro, accel, mag, up, fast, dt, o)
+        u, v, en = tilt_error(s, accel, up, o)
         scale, limit, tight, clipped = saturate(s, p, en, quick, accelerating, o)
         f = aperiodic(s, p, scale, quick, tight, dt, o)
         regulate(s, p, f, en, u, v, quick, tight, learn, dt, o)
@@ -285,13 +286,14 @@ def predict(s: StepState, gyro: tuple, dt: Any, o: Any) -> None:
 
 
 def classify_motion(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple | None,
-                    fast: Any, dt: Any, o: Any) -> tuple[Any, Any]:
+                    up: tuple, fast: Any, dt: Any, o: Any) -> tuple[Any, Any]:
     """Before the error: rest or motion, and is there a linear acceleration → (quick, accelerating).
 
     The stillness blocks (``stillness.classify``) and their bias measurement at rest; quick: the
     error bypasses the clip and the unit (``fast``, or at rest with |a| = ‖g‖ and no strong
     vibration); the linear-acceleration detector (peak hold of the 50 ms low-passed
-    | |a| − ‖g‖ | [m/s²], or of a spike: an impact); the rotation-rate low-pass [rad/s].
+    | |a| − ‖g‖ | [m/s²], or of a spike: an impact); the rotation-rate low-pass [rad/s] and
+    the turn's, about ``up`` (:func:`up_direction` of the predicted q).
     """
     gx, gy, gz = gyro
     ax, ay, az = accel
@@ -326,23 +328,23 @@ def classify_motion(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple 
     rate = o.sqrt(sq(gx - s.bx) + sq(gy - s.by) + sq(gz - s.bz))
     lw = dt / (RATE_LOWPASS_TIME_CONSTANT_S + dt)
     s.rate_lp = s.rate_lp + lw * (rate - s.rate_lp)
-    vx, vy, vz = up_direction(s)  # the turn: the rate about the vertical (bias.turn_share)
+    vx, vy, vz = up  # the turn: the rate about the vertical (bias.turn_share)
     turn = (gx - s.bx) * vx + (gy - s.by) * vy + (gz - s.bz) * vz
     tw = dt / (TURN_LOWPASS_TIME_CONSTANT_S + dt)
     s.turn_rate_lp = s.turn_rate_lp + tw * (turn - s.turn_rate_lp)
     return quick, accelerating
 
 
-def tilt_error(s: StepState, accel: tuple, o: Any) -> tuple[tuple, tuple, Any]:
+def tilt_error(s: StepState, accel: tuple, up: tuple, o: Any) -> tuple[tuple, tuple, Any]:
     """Stage 2: e = (a/‖g‖) × ĝ (into s.ex, s.ey, s.ez, s.error_norm) → (a/‖g‖, ĝ, |e|).
 
     Ryzhkov & Karpenko: scaled by gravity, not by |a|, so the error stays linear in the linear
-    acceleration and the aperiodic unit averages zero-mean accelerations out. ĝ: the predicted
-    gravity (up) direction in the sensor frame, the third row of R.
+    acceleration and the aperiodic unit averages zero-mean accelerations out. ĝ = ``up``: the
+    predicted gravity (up) direction in the sensor frame, the third row of R.
     """
     ax, ay, az = accel
     ux, uy, uz = ax / s.g_ref, ay / s.g_ref, az / s.g_ref
-    vx, vy, vz = up_direction(s)
+    vx, vy, vz = up
     ex, ey, ez = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
     en = o.sqrt(ex * ex + ey * ey + ez * ez)
     s.ex, s.ey, s.ez, s.error_norm = ex, ey, ez, en
@@ -407,8 +409,9 @@ def regulate(s: StepState, p: Any, f: tuple, en: Any, u: tuple, v: tuple, quick:
     vx, vy, vz = v
     wx, wy, _ = _rotate(s.qw, s.qx, s.qy, s.qz, s.ex, s.ey, s.ez)
     bias.observe_velocity_swing(s, wx, wy, dt, o)
-    k1, k2 = bias.learning_gains(s, p, o)
-    s.loop_k1 = o.maximum(bias.loop_gain(s, p, o), 2.0 * o.sqrt(p.k2))  # without the raise
+    loop = bias.loop_gain(s, p, o)
+    k1, k2 = bias.learning_gains(s, p, o, loop)
+    s.loop_k1 = o.maximum(loop, 2.0 * o.sqrt(p.k2))  # without the raise
     # an error beyond the learning limit (BIAS_LEARNING_MAX_ERROR_RAD, widened by the samples'
     # scatter) is an attitude error (a gyro over range, a glitch), not a bias: the integral
     # does not learn from it (anti-windup; beyond 90° the cross product shrinks again, hence
