@@ -357,6 +357,47 @@ def test_cli_bench_euroc_peers_and_explicit_groundtruth(euroc_dir, tmp_path, cap
     capsys.readouterr()
 
 
+def test_gyro_fault_is_added_to_the_x_axis_in_its_window_only():
+    """euroc_eval.with_gyro_fault: GYRO_FAULT_RATE_RAD_S on x over [at, at + duration), nothing
+    else changed; a flight that ends before the fault is over is refused."""
+    stamps, w, acc, q = _flight_truth(duration_s=5.0)
+    t = (stamps - stamps[0]) * 1e-9
+    f = euroc.Flight("x", t, w, acc, q, 0, Path("."))
+    g = ev.with_gyro_fault(f, 2.0)
+    d = g.gyro_rad_s - f.gyro_rad_s
+    window = (t >= 2.0) & (t < 2.0 + ev.GYRO_FAULT_DURATION_S)
+    assert window.sum() == round(ev.GYRO_FAULT_DURATION_S * 200.0)
+    assert np.all(d[window, 0] == pytest.approx(ev.GYRO_FAULT_RATE_RAD_S))
+    assert not d[~window].any() and not d[:, 1:].any()
+    assert g.accel_m_s2 is f.accel_m_s2 and g.q_ref is f.q_ref and g.name == "x"
+    with pytest.raises(ValueError, match="before a gyro fault at 4.9 s is over"):
+        ev.with_gyro_fault(f, 4.9)
+
+
+def test_cli_bench_euroc_gyro_fault_moves_the_scores_of_every_algorithm(euroc_dir, tmp_path,
+                                                                         capsys):
+    """--gyro-fault reaches the algorithms: after a 34 deg step at 5 s the score from 5 s on
+    is worse than without it (perfect sensors otherwise), for ours online and offline."""
+    scores = {}
+    for fault in ([], ["--gyro-fault", "5"]):
+        js = tmp_path / f"f{len(fault)}.json"
+        assert main(["bench", "euroc", "--data", str(euroc_dir), "--peers", "none", "--settle",
+                     "5", "--json", str(js), *fault]) == 0
+        doc = json.loads(js.read_text())
+        scores[bool(fault)] = {a: s["inclination_rms_deg"] for a, s in doc["mean"].items()}
+        assert doc["meta"]["gyro_fault_at_s"] == (5.0 if fault else None)
+    out = capsys.readouterr().out
+    assert "gyro fault: 3 rad/s added to the sensor x axis for 0.2 s at 5 s" in out
+    for algo in ("cf_estimator", "cf_estimator_offline"):
+        assert scores[True][algo] > scores[False][algo] + 1.0, algo
+    assert main(["bench", "euroc", "--data", str(euroc_dir), "--peers", "none",
+                 "--gyro-fault", "100"]) == 2
+    assert "every flight ends before the fault is over" in capsys.readouterr().err
+    assert main(["bench", "euroc", "--data", str(euroc_dir), "--peers", "none",
+                 "--gyro-fault", "-1"]) == 2
+    assert "--gyro-fault must be >= 0 s" in capsys.readouterr().err
+
+
 def test_cli_bench_euroc_errors(euroc_dir, tmp_path, capsys):
     assert main(["bench", "euroc", "--data", str(tmp_path / "none"), "--peers", "none"]) == 2
     err = capsys.readouterr().err

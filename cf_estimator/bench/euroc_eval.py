@@ -273,6 +273,28 @@ def _algorithms(peers: Sequence[str], velocity: VelocityInput | None) -> list[Al
     return algos + [ALGORITHMS[n] for n in peers]
 
 
+#: The gyro fault of ``bench euroc --gyro-fault``: this rate [rad/s] added to the sensor x axis
+#: ...
+GYRO_FAULT_RATE_RAD_S = 3.0
+#: ... for this long [s]: a 0.6 rad (34°) attitude error in one step, as a gyro over-range or a
+#: glitch leaves it; every sample after it is true again.
+GYRO_FAULT_DURATION_S = 0.2
+
+
+def with_gyro_fault(flight: Flight, at_s: float) -> Flight:
+    """The flight with GYRO_FAULT_RATE_RAD_S added to its gyro's x axis [rad/s, sensor frame]
+    on the samples in [at_s, at_s + GYRO_FAULT_DURATION_S) [s since its first sample];
+    everything else, the ground truth included, unchanged. ValueError if the flight ends
+    before the fault does."""
+    end = at_s + GYRO_FAULT_DURATION_S
+    if not float(flight.t_s[-1]) > end:
+        raise ValueError(f"{flight.name}: ends at {float(flight.t_s[-1]):.1f} s, before a gyro "
+                         f"fault at {at_s:g} s is over")
+    gyro = flight.gyro_rad_s.copy()
+    gyro[(flight.t_s >= at_s) & (flight.t_s < end), 0] += GYRO_FAULT_RATE_RAD_S
+    return dataclasses.replace(flight, gyro_rad_s=gyro)
+
+
 #: Inclination error [deg] below which a velocity-aided estimate counts as having taken hold.
 HOLD_THRESHOLD_DEG = 2.0
 

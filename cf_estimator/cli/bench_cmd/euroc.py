@@ -50,6 +50,11 @@ def add_parser(sub: Any) -> None:
                    help="comma-separated seconds, e.g. 20,40,60: also crop every flight to start "
                    "there (a mid-air start: node restarted in flight) and score 2-12 s and "
                    "12 s-end after that start, beside the full (ground) start")
+    e.add_argument("--gyro-fault", type=finite_float, metavar="AT_S",
+                   help="a gyro fault AT_S seconds into every flight: 3 rad/s added to the "
+                   "sensor x axis for 0.2 s, a 34 deg attitude error in one step (a gyro "
+                   "over-range, a glitch), for every algorithm alike; flights that end before "
+                   "it is over are left out. Score after it with --settle")
     e.add_argument("--json", metavar="OUT", help="write per-flight scores and means as JSON")
     e.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
                    help="worker processes, one flight each (default %(default)s)")
@@ -110,6 +115,9 @@ def run(args: Any) -> int:
             flights = euroc.load_flights(args.data)
     except euroc.EurocDataError as exc:
         raise CliError(str(exc), 2) from None
+    fault_note = None
+    if args.gyro_fault is not None:
+        flights, fault_note = _with_gyro_fault(flights, args.gyro_fault)
     if velocity is not None:
         missing = [f.name for f in flights if f.velocity_t_s is None]
         if missing:
@@ -125,6 +133,8 @@ def run(args: Any) -> int:
     print(f"EuRoC: {len(result.flights)} flight(s) from {args.data}; 6-D inclination error "
           f"[deg] vs ground truth after the first {args.settle:g} s: RMS / max")
     print(f"cf_estimator parameters: {args.params or 'shipped defaults'}")
+    if fault_note is not None:
+        print(fault_note)
     if velocity is not None:
         rate = f"{velocity.rate_hz:g} Hz" if velocity.rate_hz else "rate as given"
         print(f"velocity aiding: ground-truth velocity, {rate}, noise {velocity.noise_m_s:g} "
@@ -159,11 +169,29 @@ def run(args: Any) -> int:
             "data": str(args.data), "peers": peers, "peers_skipped": skipped,
             "params_file": args.params, "cf_estimator_params": as_dict(params),
             "velocity": None if velocity is None else dataclasses.asdict(velocity),
+            "gyro_fault_at_s": args.gyro_fault,
             "metrics": "inclination error: angle between estimated and true up in the sensor "
                        "frame [deg]; RMS and max over samples with ground truth, t >= settle_s",
         }
         write_json(args.json, doc)
     return 0
+
+
+def _with_gyro_fault(flights: list, at_s: float) -> tuple[list, str]:
+    """``--gyro-fault``: the flights long enough, each with the fault
+    (:func:`cf_estimator.bench.euroc_eval.with_gyro_fault`), and the line that says so."""
+    from cf_estimator.bench import euroc_eval as ev
+
+    if not at_s >= 0.0:
+        raise CliError(f"--gyro-fault must be >= 0 s (got {at_s:g})", 2)
+    long_enough = [f for f in flights if float(f.t_s[-1]) > at_s + ev.GYRO_FAULT_DURATION_S]
+    if not long_enough:
+        raise CliError(f"--gyro-fault {at_s:g}: every flight ends before the fault is over", 2)
+    note = (f"gyro fault: {ev.GYRO_FAULT_RATE_RAD_S:g} rad/s added to the sensor x axis for "
+            f"{ev.GYRO_FAULT_DURATION_S:g} s at {at_s:g} s (every algorithm)")
+    if len(long_enough) < len(flights):
+        note += f"; {len(flights) - len(long_enough)} shorter flight(s) left out"
+    return [ev.with_gyro_fault(f, at_s) for f in long_enough], note
 
 
 def _velocity_input(args: Any) -> Any:
