@@ -55,6 +55,14 @@ module builds that aided specific force for the unchanged filter step, outside i
   σ 0.2 °/s and the aided tilt error grew to 2.7°; with the velocity's word, ``bench cross``'s
   aided EuRoC mid-air rows (12 s–end, starts 20 / 40 / 60 s) went 1.13 / 1.27 / 0.86° →
   0.89 / 0.87 / 0.86°.
+- **An attitude error revealed while aided is taken hold of.** Aided horizontally, the
+  accelerometer's disagreement is what the aiding leaves (the velocity's noise and latency:
+  hundredths of a radian); one beyond ``BIAS_LEARNING_MAX_ERROR_RAD`` (0.35 rad, the error
+  no bias explains) in the aperiodic unit's state — a gyro fault, an over-range — is an
+  attitude error: the filter takes hold again, as when aiding began, instead of learning
+  part of it as gyro bias. A 34° step (``bench euroc --velocity --gyro-fault 15 --settle
+  20``), aided: phantom4 3.56° → 1.64°; horizontal zig-zags (``--gyro-fault 10 --settle 15``)
+  4.00° → 1.99°. Without the fault nothing changes (``bench cross``: the same JSON).
 - **Fallback.** Without a fresh window (no velocity, a stamp older than ``velocity_timeout_s``,
   a dropout) the raw accelerometer sample is returned untouched: the filter's
   outputs are then bit-identical to the unaided filter's.
@@ -76,7 +84,11 @@ from dataclasses import dataclass
 from typing import Any
 
 from cf_estimator.core.alignment import HeadingOffset, InMotionAlignment
-from cf_estimator.core.bias import SWING_TIME_CONSTANT_S, SWING_VAR_TIME_CONSTANT_S
+from cf_estimator.core.bias import (
+    BIAS_LEARNING_MAX_ERROR_RAD,
+    SWING_TIME_CONSTANT_S,
+    SWING_VAR_TIME_CONSTANT_S,
+)
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.quaternion import to_matrix
 
@@ -637,6 +649,13 @@ def apply_aiding(f: Any, aiding: VelocityAiding) -> None:
         # the aiding left; the unaided loop takes the vehicle's swing from the velocity
         f.seed_swing(aiding.swing_var)
     f.set_aided(aiding.active)
+    s = f.step_state
+    if (aiding.active and aiding.axes == "xy" and s.time_s > s.quick_until_s
+            and math.hypot(s.lx, s.ly) > BIAS_LEARNING_MAX_ERROR_RAD):
+        # aided, the unit's horizontal state [rad, world] is the tilt error itself (what the
+        # aiding leaves is hundredths of a rad): one beyond what a bias explains is an
+        # attitude error (a gyro fault): take hold, learning nothing from it
+        f.take_hold(AIDING_TAKE_HOLD_S)
     f.correct_heading(aiding.take_heading_correction())
 
 
