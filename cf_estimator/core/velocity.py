@@ -632,8 +632,9 @@ class VelocityAiding:
 def apply_aiding(f: Any, aiding: VelocityAiding) -> None:
     """What the aiding tells the filter before its update (after
     :meth:`VelocityAiding.aided_accel`): the vehicle moves (the start-up averages), take hold
-    when aiding began, the alignment's tilt and bias once it is known, whether the sample is
-    aided, the heading correction due. One place for the per-message pipeline and
+    when aiding began (and again when, aided, the disagreement is an attitude error), the
+    alignment's tilt and bias once it is known, whether the sample is aided, the heading
+    correction due. One place for the per-message pipeline and
     :func:`~cf_estimator.core.batch.estimate`."""
     if aiding.moving:
         f.mark_moving()
