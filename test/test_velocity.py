@@ -215,6 +215,7 @@ def test_aiding_removes_most_of_the_manoeuvre_error_in_a_multirotor_flight(uav, 
     assert r.velocity_status.heading_known
     assert r.velocity_aided.mean() > 0.7
     assert _rms(e1) < 0.5 * _rms(e0)
+    assert r.velocity_status.attitude_errors == 0  # no fault: never taken for one
     # the heading offset found is the filter's real heading error against ENU
     yaw_err = _yaw_offset(r.quaternion[-1], uav.truth.q_world_from_body[-1])
     d = math.remainder(r.velocity_status.heading_offset_rad - yaw_err, 2 * math.pi)
@@ -509,14 +510,17 @@ def test_an_attitude_error_revealed_while_aided_is_taken_hold_of(uav, monkeypatc
                      velocity=(vd.t_s, vd.v_world_m_s),
                      velocity_latency_s=vd.arrival_s[0] - vd.t_s[0], **kw)
         assert r.velocity_status.heading_known and r.velocity_aided[t >= 40.0].all()
+        counted.append(r.velocity_status.attitude_errors)
         e = _tilt_arcmin(uav, r, t_from=0.0) / 60.0
         return e[(t >= 42.0) & (t < 43.5)], e[t >= 43.5]
 
+    counted: list[int] = []
     held, held_rest = after_fault()
     monkeypatch.setattr(velocity_module, "BIAS_LEARNING_MAX_ERROR_RAD", math.inf)
     learned, learned_rest = after_fault()
     assert held.max() < 1.0 < 10.0 < learned.min()
     assert _rms(held_rest) < 0.7 * _rms(learned_rest)
+    assert counted[0] >= 1 and counted[1] == 0  # VelocityStatus.attitude_errors
 
 
 def test_an_aided_accelerometer_is_followed_without_the_slow_lag():

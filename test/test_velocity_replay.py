@@ -194,6 +194,8 @@ def test_pipeline_counts_velocity_and_reports_it_in_diagnostics(uav):
     assert sum(moving_seen) > 0.5 * len(moving_seen)
     slow = np.linalg.norm(vd.v_world_m_s[-5:], axis=1).max() < 5.0 * P6.velocity_noise_m_s
     assert values["velocity_moving"] == str(not slow).lower()
+    # no gyro fault in this flight: never taken for an attitude error (the key is there)
+    assert values["velocity_attitude_errors"] == "0"
     # a reset (time jump back) resets the aiding as well
     pipe.on_imu(io.imu_message(1, 0, "imu", (0, 0, 0, 1), None, (0, 0, 0), None, (0, 0, 9.8),
                                None))

@@ -153,6 +153,8 @@ class VelocityStatus:
     #: filter took its tilt and gyro bias (nan: not yet)
     moving_now: bool = False  #: the velocity says the vehicle moves: the filter is not at rest
     #: (VelocityAiding.moving_now)
+    attitude_errors: int = 0  #: times an attitude error revealed while aided horizontally (a
+    #: gyro fault) made the filter take hold again (apply_aiding)
 
 
 def _rot(qw: float, qx: float, qy: float, qz: float, x: float, y: float, z: float
@@ -262,6 +264,7 @@ class VelocityAiding:
         self._aided = 0
         self._aided_xy = 0
         self._reanchors = 0
+        self._attitude_errors = 0
         self.rejected = dict.fromkeys(REJECT_REASONS, 0)
 
     # -- velocity input ------------------------------------------------------------------------
@@ -626,7 +629,12 @@ class VelocityAiding:
             age_s=now - self._m_t if self._m is not None else math.inf,
             axes=self.axes, aided_for_s=now - self._since if self._active else 0.0,
             first_velocity_t_s=self._first_v_t, first_aided_t_s=self._first_aided_t,
-            aligned_t_s=self._realigned_t, moving_now=self.moving_now)
+            aligned_t_s=self._realigned_t, moving_now=self.moving_now,
+            attitude_errors=self._attitude_errors)
+
+    def note_attitude_error(self) -> None:
+        """Count one take-hold on an attitude error revealed while aided (apply_aiding)."""
+        self._attitude_errors += 1
 
 
 def apply_aiding(f: Any, aiding: VelocityAiding) -> None:
@@ -657,6 +665,7 @@ def apply_aiding(f: Any, aiding: VelocityAiding) -> None:
         # aiding leaves is hundredths of a rad): one beyond what a bias explains is an
         # attitude error (a gyro fault): take hold, learning nothing from it
         f.take_hold(AIDING_TAKE_HOLD_S)
+        aiding.note_attitude_error()
     f.correct_heading(aiding.take_heading_correction())
 
 

@@ -251,7 +251,8 @@ def velocity_values(status: Any) -> list[tuple[str, str]]:
     rejected by reason, IMU samples aided and left unaided by a stale velocity, the heading
     offset between the filter's world frame and the velocity's and its standard deviation, the
     world axes aided now (``xy`` or ``none``), how long the current aided stretch has lasted
-    and how long aiding took to begin after the first velocity sample [s]."""
+    and how long aiding took to begin after the first velocity sample [s], and how often an
+    attitude error revealed while aided made the filter take hold again."""
     rejected = dict(status.rejected)
     stale = rejected.pop("too_old", 0)
     values = [
@@ -278,6 +279,7 @@ def velocity_values(status: Any) -> list[tuple[str, str]]:
         ("velocity_aligned", str(math.isfinite(status.aligned_t_s)).lower()),
         ("velocity_time_to_align_s", _f(_time_to_align(status))),
         ("velocity_moving", str(bool(status.moving_now)).lower()),
+        ("velocity_attitude_errors", str(status.attitude_errors)),
     ]
     return values
 
