@@ -199,6 +199,12 @@ def test_rate_limited_warnings_one_line_per_reset_and_per_new_rejection_kind():
     late = w.flush(7.5)  # ... and said once due, with what was held back
     assert any("8 more (9 so far)" in t for t in late)
     assert any("2 reset(s) time_jump_back so far" in t for t in late)
+    # an event (an attitude error revealed while aided): one line, rate-limited alike
+    ev = w.update({}, {}, 10.0, {"attitude_error": 1})
+    assert len(ev) == 1 and ev[0].startswith("attitude_error: velocity-aided")
+    assert "1 so far, counted in /diagnostics" in ev[0]
+    assert w.update({}, {}, 11.0, {"attitude_error": 3}) == []
+    assert any("(2 since the last report); 3 so far" in t for t in w.flush(15.5))
 
 
 # -- items 3 and 5: frames that say what they are; nwu, true north --------------------------

@@ -202,6 +202,41 @@ def test_pipeline_counts_velocity_and_reports_it_in_diagnostics(uav):
     assert pipe.velocity_aiding.status().age_s == math.inf
 
 
+def test_pipeline_counts_an_attitude_error_revealed_while_aided_and_says_it(uav):
+    """A gyro fault (3 rad/s on x for 0.2 s at 40 s) in an aided flight through the pipeline:
+    counted as an event (event_counts, event_total), in the diagnostics
+    (velocity_attitude_errors) and in the node's log line (RateLimitedWarnings)."""
+    from cf_estimator.pipeline.log_events import RateLimitedWarnings
+
+    vd = measure_velocity(uav.truth, VelocityModel(10.0, 0.1, 0.1), np.random.default_rng(0))
+    pipe = ImuPipeline(P6, PipelineParams())
+    imu = uav.imu
+    gyro = imu.gyro_rad_s.copy()
+    gyro[(imu.t_s >= 40.0) & (imu.t_s < 40.2), 0] += 3.0
+    jv = 0
+    totals = []
+    for k in range(imu.n_samples):
+        t = float(imu.t_s[k])
+        while jv < len(vd.t_s) and vd.arrival_s[jv] <= t:
+            st = divmod(T0_NS + round(float(vd.t_s[jv]) * 1e9), 10**9)
+            pipe.on_velocity(io.twist_stamped_message(*st, "map", vd.v_world_m_s[jv]))
+            jv += 1
+        st = divmod(T0_NS + round(t * 1e9), 10**9)
+        pipe.on_imu(io.imu_message(*st, "imu", (0, 0, 0, 1), None, gyro[k], None,
+                                   imu.accel_m_s2[k], None))
+        totals.append(pipe.event_total)
+    n = pipe.event_counts.get("attitude_error", 0)
+    assert n >= 1 and pipe.event_total == n
+    first = int(np.argmax(np.array(totals) > 0))
+    assert 40.0 <= imu.t_s[first] < 42.0  # taken hold of within 2 s of the fault, not before
+    values = dict(pipe.diagnostics().values)
+    assert values["velocity_attitude_errors"] == str(n)
+    lines = RateLimitedWarnings().update(pipe.reset_counts, pipe.rejected_counts, 0.0,
+                                         pipe.event_counts)
+    assert len(lines) == 1 and lines[0].startswith("attitude_error: velocity-aided")
+    assert f"{n} so far" in lines[0]
+
+
 def test_pipeline_without_velocity_messages_matches_the_filter_bit_for_bit(uav):
     """No velocity topic: the pipeline never creates the aiding (bit-equal by construction)."""
     pipe = ImuPipeline(P6)

@@ -636,6 +636,11 @@ class VelocityAiding:
         """Count one take-hold on an attitude error revealed while aided (apply_aiding)."""
         self._attitude_errors += 1
 
+    @property
+    def attitude_errors(self) -> int:
+        """Take-holds on an attitude error revealed while aided so far (cumulative)."""
+        return self._attitude_errors
+
 
 def apply_aiding(f: Any, aiding: VelocityAiding) -> None:
     """What the aiding tells the filter before its update (after

@@ -161,6 +161,7 @@ class CfEstimatorNode(Node):
         self._velocity_count = 0
         self._events = RateLimitedWarnings(LOG_THROTTLE_S)
         self._resets_logged = 0
+        self._events_logged = 0
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._converts_axes = self._pipe.converts_axes
 
@@ -290,20 +291,23 @@ class CfEstimatorNode(Node):
 
     # -- messages ---------------------------------------------------------------------------
     def _log_events(self, flush: bool = False) -> None:
-        """One WARN per reset and per new kind of rejection, rate-limited per reason
+        """One WARN per reset, per event and per new kind of rejection, rate-limited per reason
         (:class:`cf_estimator.pipeline.log_events.RateLimitedWarnings`, steady clock)."""
         now_s = self._steady.now().nanoseconds * 1e-9
         pipe = self._pipe
         lines = (self._events.flush(now_s) if flush else
-                 self._events.update(pipe.reset_counts, pipe.rejected_counts, now_s))
+                 self._events.update(pipe.reset_counts, pipe.rejected_counts, now_s,
+                                     pipe.event_counts))
         self._resets_logged = pipe.reset_total
+        self._events_logged = pipe.event_total
         for text in lines:
             self.get_logger().warning(text)
 
     def _on_imu(self, msg: Imu) -> None:
         out = self._pipe.on_imu(msg)
         log = self.get_logger()
-        if out is None or self._pipe.reset_total != self._resets_logged:
+        if (out is None or self._pipe.reset_total != self._resets_logged
+                or self._pipe.event_total != self._events_logged):
             self._log_events()
         if out is None:
             return

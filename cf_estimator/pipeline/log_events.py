@@ -1,10 +1,11 @@
-"""What the node's log says about resets and rejections: one WARN each, rate-limited.
+"""What the node's log says about resets, rejections and events: one WARN each, rate-limited.
 
-/diagnostics counts every reset and rejection, but a launch screen only shows the log. The node
-feeds the pipeline's cumulative counters to :class:`RateLimitedWarnings` after a rejected
-message or a reset; it returns the lines to log: one per reset (``filter reset
-(time_jump_back): ...``) and one for the first rejection of each kind, then at most one per
-:attr:`period_s` for each key, summing up what happened in between. No ROS, no clock of its
+/diagnostics counts every reset, rejection and event (an attitude error revealed while aided),
+but a launch screen only shows the log. The node feeds the pipeline's cumulative counters to
+:class:`RateLimitedWarnings` after a rejected message, a reset or an event; it returns the
+lines to log: one per reset (``filter reset (time_jump_back): ...``) or event, and one for the
+first rejection of each kind, then at most one per :attr:`period_s` for each key, summing up
+what happened in between. No ROS, no clock of its
 own: the caller passes the time (the node: the steady clock), so the tests need no sleeps.
 """
 
@@ -17,6 +18,12 @@ RESET_TEXT = {
     "time_jump_back": "the IMU stamps went back by more than time_jump_back_threshold_s",
     "long_gap": "an IMU stamp gap longer than reset_after_gap_s",
     "clock_jump_back": "the node clock jumped back (use_sim_time rewind)",
+}
+#: What each event means, for the log line.
+EVENT_TEXT = {
+    "attitude_error": "velocity-aided, the tilt was off the accelerometer by more than an "
+                      "attitude error's worth (a gyro fault or over-range): the filter took "
+                      "hold again, learning no gyro bias from it",
 }
 
 
@@ -38,10 +45,11 @@ class RateLimitedWarnings:
         return last is None or now_s - last >= self.period_s
 
     def update(self, resets: Mapping[str, int], rejected: Mapping[str, int],
-               now_s: float) -> list[str]:
+               now_s: float, events: Mapping[str, int] | None = None) -> list[str]:
         """The lines to log now for these cumulative counters (``reason → count``)."""
         out: list[str] = []
-        for kind, counts in (("reset", resets), ("rejected", rejected)):
+        for kind, counts in (("reset", resets), ("rejected", rejected),
+                             ("event", events or {})):
             for reason, n in counts.items():
                 key = f"{kind}.{reason}"
                 if n <= self._seen.get(key, 0):
@@ -68,6 +76,10 @@ class RateLimitedWarnings:
 
     @staticmethod
     def _text(kind: str, reason: str, total: int, new: int) -> str:
+        if kind == "event":
+            more = f" ({new} since the last report)" if new > 1 else ""
+            return (f"{reason}: {EVENT_TEXT.get(reason, reason)}{more}; {total} so far, "
+                    "counted in /diagnostics")
         if kind == "reset":
             why = RESET_TEXT.get(reason, reason)
             more = f" ({new} since the last report)" if new > 1 else ""
