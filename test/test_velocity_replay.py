@@ -153,22 +153,35 @@ def test_bad_velocity_messages_are_reasons_not_exceptions():
     assert velocity_from_message(object(), "enu", "enu") == "malformed"
 
 
+def _aided_stream(imu, vd, gyro=None, frame=lambda j: "map"):
+    """(k, IMU message k) of ``imu`` in time order (``gyro`` in place of its own when given),
+    each after the (None, velocity message) of ``vd`` that arrived by then (TwistStamped,
+    frame id ``frame(j)`` for the j-th)."""
+    jv = 0
+    for k in range(imu.n_samples):
+        t = float(imu.t_s[k])
+        while jv < len(vd.t_s) and vd.arrival_s[jv] <= t:
+            st = divmod(T0_NS + round(float(vd.t_s[jv]) * 1e9), 10**9)
+            yield None, io.twist_stamped_message(*st, frame(jv), vd.v_world_m_s[jv])
+            jv += 1
+        st = divmod(T0_NS + round(t * 1e9), 10**9)
+        g = imu.gyro_rad_s[k] if gyro is None else gyro[k]
+        yield k, io.imu_message(*st, "imu", (0, 0, 0, 1), None, g, None, imu.accel_m_s2[k],
+                                None)
+
+
 def test_pipeline_counts_velocity_and_reports_it_in_diagnostics(uav):
     vd = measure_velocity(uav.truth, VelocityModel(10.0, 0.1, 0.1), np.random.default_rng(0))
     pipe = ImuPipeline(P6, PipelineParams(velocity_frame_id="map"))
     imu = uav.imu
     jv = 0
     moving_seen: list[bool] = []
-    for k in range(imu.n_samples):
-        t = float(imu.t_s[k])
-        while jv < len(vd.t_s) and vd.arrival_s[jv] <= t:
-            st = divmod(T0_NS + round(float(vd.t_s[jv]) * 1e9), 10**9)
-            frame = "gps" if jv == 7 else "map"
-            pipe.on_velocity(io.twist_stamped_message(*st, frame, vd.v_world_m_s[jv]))
+    for k, msg in _aided_stream(imu, vd, frame=lambda j: "gps" if j == 7 else "map"):
+        if k is None:
+            pipe.on_velocity(msg)
             jv += 1
-        st = divmod(T0_NS + round(t * 1e9), 10**9)
-        pipe.on_imu(io.imu_message(*st, "imu", (0, 0, 0, 1), None, imu.gyro_rad_s[k], None,
-                                   imu.accel_m_s2[k], None))
+            continue
+        pipe.on_imu(msg)
         if k % 200 == 0:
             moving_seen.append(pipe.velocity_aiding is not None and pipe.velocity_aiding.moving_now)
     values = dict(pipe.diagnostics().values)
@@ -213,18 +226,13 @@ def test_pipeline_counts_an_attitude_error_revealed_while_aided_and_says_it(uav)
     imu = uav.imu
     gyro = imu.gyro_rad_s.copy()
     gyro[(imu.t_s >= 40.0) & (imu.t_s < 40.2), 0] += 3.0
-    jv = 0
     totals = []
-    for k in range(imu.n_samples):
-        t = float(imu.t_s[k])
-        while jv < len(vd.t_s) and vd.arrival_s[jv] <= t:
-            st = divmod(T0_NS + round(float(vd.t_s[jv]) * 1e9), 10**9)
-            pipe.on_velocity(io.twist_stamped_message(*st, "map", vd.v_world_m_s[jv]))
-            jv += 1
-        st = divmod(T0_NS + round(t * 1e9), 10**9)
-        pipe.on_imu(io.imu_message(*st, "imu", (0, 0, 0, 1), None, gyro[k], None,
-                                   imu.accel_m_s2[k], None))
-        totals.append(pipe.event_total)
+    for k, msg in _aided_stream(imu, vd, gyro):
+        if k is None:
+            pipe.on_velocity(msg)
+        else:
+            pipe.on_imu(msg)
+            totals.append(pipe.event_total)
     n = pipe.event_counts.get("attitude_error", 0)
     assert n >= 1 and pipe.event_total == n
     first = int(np.argmax(np.array(totals) > 0))
@@ -254,17 +262,12 @@ def test_pipeline_with_stale_velocity_messages_is_bit_equal_to_no_velocity(uav):
     counted stale and the outputs are those of a pipeline that never saw a velocity."""
     vd = measure_velocity(uav.truth, VelocityModel(10.0, 0.1, 5.0), np.random.default_rng(0))
     aided, plain = ImuPipeline(P6), ImuPipeline(P6)
-    imu = uav.imu
     jv = 0
-    for k in range(imu.n_samples):
-        t = float(imu.t_s[k])
-        while jv < len(vd.t_s) and vd.arrival_s[jv] <= t:
-            st = divmod(T0_NS + round(float(vd.t_s[jv]) * 1e9), 10**9)
-            aided.on_velocity(io.twist_stamped_message(*st, "map", vd.v_world_m_s[jv]))
+    for k, msg in _aided_stream(uav.imu, vd):
+        if k is None:
+            aided.on_velocity(msg)
             jv += 1
-        st = divmod(T0_NS + round(t * 1e9), 10**9)
-        msg = io.imu_message(*st, "imu", (0, 0, 0, 1), None, imu.gyro_rad_s[k], None,
-                             imu.accel_m_s2[k], None)
+            continue
         a, b = aided.on_imu(msg), plain.on_imu(msg)
         assert a.orientation_xyzw == b.orientation_xyzw
         assert a.orientation_covariance == b.orientation_covariance
