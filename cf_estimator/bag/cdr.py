@@ -370,12 +370,11 @@ def _header_rows(sec: np.ndarray, nsec: np.ndarray, frame: bytes, n_doubles: int
         out = np.empty((n, size + 8 * n_doubles), dtype=np.uint8)
     elif out.shape != (n, size + 8 * n_doubles) or out.dtype != np.uint8:
         raise ValueError(f"out must be uint8 of shape {(n, size + 8 * n_doubles)}")
-    rows = out
-    head = rows[:, :size]
+    head = out[:, :size]
     head[:] = _header_template(frame)  # all but the stamp, then the stamp
     head[:, 4:8] = sec.astype("<i4").view(np.uint8).reshape(n, 4)
     head[:, 8:12] = nsec.astype("<u4").view(np.uint8).reshape(n, 4)
-    return rows, size
+    return out, size
 
 
 @functools.lru_cache(maxsize=64)

@@ -420,13 +420,8 @@ class FastChunk:
         types = [c.msgtype for c in self._conns]
         return [types[k] for k in self._batch.conn.tolist()]
 
-    def kinds(self, table: dict[str, int], default: int) -> list[int]:
-        """Per message: ``table[topic]`` (``default`` for a topic not in it)."""
-        lut = np.asarray([table.get(c.topic, default) for c in self._conns], dtype=np.int64)
-        return lut[self._batch.conn].tolist()
-
     def kind_array(self, table: dict[str, int], default: int) -> np.ndarray:
-        """:meth:`kinds` as an int8 array."""
+        """Per message: ``table[topic]`` (``default`` for a topic not in it), an int8 array."""
         lut = np.asarray([table.get(c.topic, default) for c in self._conns], dtype=np.int8)
         return lut[self._batch.conn]
 

@@ -649,8 +649,6 @@ def _read_in_bulk(bag: Any, topics: _Topics, run: _Run, reading: _Reading,
             kind_arr = chunk.kind_array(table, bulk.OTHER)
             kinds = kind_arr.tolist()
             arrays = (kind_arr, chunk.log_ns_array, chunk.row_array)
-        elif hasattr(chunk, "kinds"):  # from arrays, without a topic list
-            kinds = chunk.kinds(table, bulk.OTHER)
         else:
             kinds = [bulk.IMU if t == topics.imu else bulk.MAG if t == topics.mag
                      else bulk.OTHER for t in chunk.topic]
