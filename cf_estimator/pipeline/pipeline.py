@@ -115,10 +115,6 @@ class ImuPipeline:
         self._rejected: dict[str, int] = {}
         self._resets: dict[str, int] = {}
         self.reset_total = 0  #: resets of every reason (a cheap "did it reset?" for the node)
-        #: events by kind (cumulative): 'attitude_error', a take-hold on an attitude error
-        #: revealed while aided (core/velocity.py apply_aiding)
-        self._events: dict[str, int] = {}
-        self.event_total = 0  #: events of every kind (a cheap "did one happen?" for the node)
         #: the IMU time base (cleared by every reset), the magnetometer input, the rules
         self.clock = ImuTime()
         self.mag_input = MagInput()
@@ -334,8 +330,15 @@ class ImuPipeline:
 
     @property
     def event_counts(self) -> Mapping[str, int]:
-        """Events by kind (the live dict: read, do not modify)."""
-        return self._events
+        """Events by kind, cumulative: 'attitude_error', a take-hold on an attitude error
+        revealed while aided (core/velocity.py apply_aiding; counted by the aiding, which
+        keeps its counters across resets)."""
+        return {"attitude_error": self.event_total} if self._aiding is not None else {}
+
+    @property
+    def event_total(self) -> int:
+        """Events of every kind so far (a cheap "did one happen?" for the node)."""
+        return self._aiding.attitude_errors if self._aiding is not None else 0
 
     @property
     def input_warnings(self) -> dict[str, str]:
@@ -543,10 +546,6 @@ class ImuPipeline:
                 acc = self._aiding.aided_accel(t_ns * 1e-9, (gx, gy, gz), acc, dt,
                                                f.orientation_tuple(), filter_bias(f))
                 apply_aiding(f, self._aiding)
-                n = self._aiding.attitude_errors
-                if n != self._events.get("attitude_error", 0):
-                    self._events["attitude_error"] = n
-                    self.event_total += 1
             q = f.update((gx, gy, gz), acc, dt, mag)
             s = f._state  # noqa: SLF001 - per-sample flags without building FilterStatus (20 us)
             if mag is not None:
