@@ -215,6 +215,69 @@ def test_a_known_attitude_reads_back(tmp_path):
     assert np.allclose(rpy[:, 1], 0.0, atol=0.3)
 
 
+MAG_OFFSET_GA = (0.0, 0.06, 0.0)  # a hard-iron offset across a 0.2 G horizontal field: 16.7 deg
+
+
+def _saved_bias(device_id: int) -> dict[str, float | int]:
+    return {"EKF2_MAGBIAS_X": MAG_OFFSET_GA[0], "EKF2_MAGBIAS_Y": MAG_OFFSET_GA[1],
+            "EKF2_MAGBIAS_Z": MAG_OFFSET_GA[2], "EKF2_MAGBIAS_ID": device_id}
+
+
+@pytest.mark.parametrize(("saved_for", "subtracted"), [(1000, True), (1001, False)])
+def test_ekf2s_saved_magnetometer_bias_is_subtracted_where_ekf2_subtracted_it(
+        tmp_path, saved_for, subtracted):
+    """PX4 <= 1.11 subtracts EKF2_MAGBIAS_X/Y/Z from the magnetometer whose device id is
+    EKF2_MAGBIAS_ID: the replay does the same, so a log whose magnetometer carries that offset
+    gives the true heading (the synthetic vehicle faces north), and a bias saved for another
+    device is left alone (the heading then shows the offset's 16.7 deg)."""
+    log = ulogwrite.static_tilt_log(tmp_path / "bias.ulg", 20.0, mag_offset_ga=MAG_OFFSET_GA,
+                                    parameters=_saved_bias(saved_for))
+    result = replay_bag(log, None, options=OPTS)
+    yaw = np.degrees(result.series.rpy_rad[-100:, 2])
+    px4_summary = result.summary["px4"]
+    applied = [c for c in px4_summary["conventions_applied"] if "EKF2_MAGBIAS" in c]
+    assert "device 1000" in px4_summary["magnetometer_bias"] or not subtracted
+    if subtracted:
+        assert np.allclose(yaw, 0.0, atol=1.0)
+        assert applied and "subtracted" in applied[0]
+    else:
+        assert np.all(np.abs(yaw) > 10.0)
+        assert not applied
+        assert "not subtracted: the magnetometer is device 1000" in px4_summary[
+            "magnetometer_bias"]
+
+
+@pytest.mark.parametrize(("params", "ids", "expect"), [
+    (_saved_bias(7), {7}, "subtracted"),
+    (_saved_bias(7), set(), "does not say which magnetometer"),
+    (_saved_bias(7), {7, 8}, "device 7, 8"),
+    ({**_saved_bias(7), "EKF2_MAGBIAS_Y": 0.0}, {7}, ""),  # all zero: nothing saved
+    ({**_saved_bias(7), "EKF2_MAGBIAS_Y": float("nan")}, {7}, ""),
+    ({**_saved_bias(7), "EKF2_MAGBIAS_Y": 3.0}, {7}, ""),  # 3 G is not a bias
+    ({"EKF2_MAGBIAS_Y": 0.06}, {7}, ""),  # no device id saved
+])
+def test_saved_magnetometer_bias_only_when_it_is_one_and_ekf2_used_it(params, ids, expect):
+    bias, text = px4.saved_mag_bias(params, ids)
+    assert (bias is not None) == (expect == "subtracted")
+    if bias is not None:
+        assert np.allclose(bias, MAG_OFFSET_GA)
+    assert (expect in text) if expect else text == ""
+
+
+def test_real_log_with_a_saved_magnetometer_bias_reads_as_ekf2s(monkeypatch):
+    """sample_log_small.ulg (PX4 1.10) saved a bias for the magnetometer EKF2 used: subtracted,
+    the heading moves 4 deg towards the autopilot's (13.9 -> 9.8 deg RMS; what is left is the
+    autopilot's own heading, which does not follow its magnetometer in this excerpt)."""
+    params = pyulog.ULog(str(_require(SHORT_IMU)), parse_header_only=True).initial_parameters
+    assert np.allclose(ulog.open_ulog(SHORT_IMU).mag_bias_ga,
+                       [params[k] for k in px4.PX4_MAG_BIAS_PARAMS])
+    with_bias = replay_bag(SHORT_IMU, None, options=OPTS).summary["reference"]["rpy_rmse_deg"]
+    monkeypatch.setattr(px4, "saved_mag_bias", lambda _params, _ids: (None, ""))
+    without = replay_bag(SHORT_IMU, None, options=OPTS).summary["reference"]["rpy_rmse_deg"]
+    assert with_bias["yaw"] < without["yaw"] - 3.0
+    assert with_bias["roll"] == pytest.approx(without["roll"], abs=0.05)
+
+
 # -- bad input -----------------------------------------------------------------------------------
 def test_truncated_log_replays_what_is_readable_and_says_how_much(tmp_path):
     data = _require(SITL).read_bytes()

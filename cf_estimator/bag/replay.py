@@ -914,7 +914,10 @@ class _Px4Input:
 
     def summary(self, r: _Run) -> dict[str, Any]:
         lo, hi, dur = self.span
-        return {"conventions_applied": self.changed, "instances": dict(self.bag.instances),
+        applied = [self.bag.mag_bias_text] if self.bag.mag_bias_ga is not None else []
+        return {"conventions_applied": self.changed + applied,
+                "magnetometer_bias": self.bag.mag_bias_text or None,
+                "instances": dict(self.bag.instances),
                 "truncated": bool(self.bag.truncated), "imu_first_s": lo, "imu_last_s": hi,
                 "log_duration_s": dur,
                 "output_frames": f"{px4.output_body(r.pparams.body_frame, r.fparams.world_frame)}"

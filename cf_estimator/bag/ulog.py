@@ -15,7 +15,8 @@ path), in log-time order. Topics (named as in the log):
   FRD, stamped ``timestamp_sample`` (``timestamp`` in logs without it). Older logs have no such
   topic: ``sensor_combined.magnetometer_ga`` (stamp ``timestamp +
   magnetometer_timestamp_relative``, a new sample only where the relative stamp is valid and
-  changes).
+  changes). Either less EKF2's saved bias where EKF2 subtracted it (PX4 ≤ v1.11,
+  :func:`cf_estimator.pipeline.px4.saved_mag_bias`; :attr:`UlogBag.mag_bias_text` says so).
 * ``vehicle_local_position`` → ``geometry_msgs/msg/TwistStamped``: (vx, vy, vz) [m/s] NED, only
   rows with ``v_xy_valid`` and ``v_z_valid``; replayed only when asked for (velocity aiding).
 * ``vehicle_attitude`` → ``geometry_msgs/msg/QuaternionStamped``: PX4's own estimate, q FRD →
@@ -178,6 +179,20 @@ class _Stream:
     values: np.ndarray
 
 
+def _mag_device_ids(chosen: dict[str, Any]) -> set[int]:
+    """The device ids (non-zero) the log gives for the magnetometer read: vehicle_magnetometer's
+    own ``device_id``, else the ``mag_device_id`` of sensor_selection (the magnetometer PX4
+    selected) or of estimator_sensor_bias (the one EKF2 used); empty when none says."""
+    for topic, name in ((MAG_TOPIC, "device_id"), ("sensor_selection", "mag_device_id"),
+                        ("estimator_sensor_bias", "mag_device_id")):
+        d = chosen[topic].data if topic in chosen else {}
+        if name in d:
+            ids = {int(i) for i in np.unique(np.asarray(d[name])).tolist() if int(i) != 0}
+            if ids:
+                return ids
+    return set()
+
+
 def _field(data: dict[str, np.ndarray], name: str, n: int) -> np.ndarray:
     """(len, n) array of ``name[0]..name[n-1]``."""
     return np.stack([np.asarray(data[f"{name}[{i}]"], dtype=float) for i in range(n)], axis=1)
@@ -246,6 +261,15 @@ class UlogBag(io.InputBag):
                               "instances in this log (each has one)")
         self.streams: dict[str, _Stream] = {}
         self._imu(chosen[IMU_TOPIC].data)
+        #: EKF2's saved magnetometer bias [Gauss] when EKF2 subtracted it (px4.saved_mag_bias)
+        self.mag_bias_ga: np.ndarray | None = None
+        #: what was done about it (empty: no bias saved in the log)
+        self.mag_bias_text = ""
+        if MAG_TOPIC in chosen or "magnetometer_ga[0]" in chosen[IMU_TOPIC].data:
+            ids = _mag_device_ids(chosen)
+            self.mag_bias_ga, self.mag_bias_text = px4.saved_mag_bias(self.parameters, ids)
+            if self.mag_bias_text and not ids:  # a bias saved, for a magnetometer not named
+                self.notes.append(self.mag_bias_text)
         if MAG_TOPIC in chosen:
             self._mag(chosen[MAG_TOPIC].data)
         elif "magnetometer_ga[0]" in chosen[IMU_TOPIC].data:
@@ -301,7 +325,8 @@ class UlogBag(io.InputBag):
     def _mag_stream(self, topic: str, t_us: np.ndarray, ga: np.ndarray) -> None:
         ok = np.all(np.isfinite(ga), axis=1)
         values = np.zeros((int(ok.sum()), cdr.MAG_DOUBLES))
-        values[:, 0:3] = ga[ok] * px4.GAUSS_TO_TESLA
+        ga = ga[ok] if self.mag_bias_ga is None else ga[ok] - self.mag_bias_ga
+        values[:, 0:3] = ga * px4.GAUSS_TO_TESLA
         self.streams[topic] = _Stream(topic, io.MAG_TYPE, t_us[ok] * 1000, values)
 
     def _mag(self, d: dict[str, np.ndarray]) -> None:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 import os
 import struct
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -55,8 +55,19 @@ def _message(kind: bytes, payload: bytes) -> bytes:
     return struct.pack("<HB", len(payload), kind[0]) + payload
 
 
-def write_ulog(path: str | os.PathLike[str], topics: Sequence[Topic], start_us: int = 0) -> Path:
-    """Write ``topics`` into a ulog at ``path`` (data interleaved by timestamp)."""
+def _parameter(name: str, value: float | int) -> bytes:
+    """A "P" message: the parameter's value at the log's start (PX4's float or int32_t)."""
+    if isinstance(value, int):
+        key, raw = f"int32_t {name}".encode(), struct.pack("<i", value)
+    else:
+        key, raw = f"float {name}".encode(), struct.pack("<f", value)
+    return _message(b"P", bytes([len(key)]) + key + raw)
+
+
+def write_ulog(path: str | os.PathLike[str], topics: Sequence[Topic], start_us: int = 0,
+               parameters: Mapping[str, float | int] | None = None) -> Path:
+    """Write ``topics`` into a ulog at ``path`` (data interleaved by timestamp), with the
+    autopilot's ``parameters`` (name -> value; int → int32_t, float → float) at its start."""
     out = Path(path)
     chunks = [_MAGIC + b"\x01" + struct.pack("<Q", start_us),
               _message(b"B", bytes(16) + bytes(24))]
@@ -67,6 +78,7 @@ def write_ulog(path: str | os.PathLike[str], topics: Sequence[Topic], start_us: 
         chunks.append(_message(b"F", text.encode()))
     key = b"char[4] ver_sw"
     chunks.append(_message(b"I", bytes([len(key)]) + key + b"synt"))
+    chunks += [_parameter(k, v) for k, v in (parameters or {}).items()]
     rows, stamps, ids = [], [], []
     for i, t in enumerate(topics):
         t.msg_id = i
@@ -111,11 +123,14 @@ def static_tilt_log(path: str | os.PathLike[str], duration_s: float = 60.0,
                     rate_hz: float = 250.0, roll_deg: float = 10.0, *, mag_hz: float = 50.0,
                     with_imu: bool = True, mag_instances: int = 1, imu_from_s: float = 0.0,
                     imu_until_s: float | None = None, seed: int = 0,
-                    boot_us: int = 5_000_000) -> Path:
+                    boot_us: int = 5_000_000, mag_offset_ga: Sequence[float] = (0.0, 0.0, 0.0),
+                    parameters: Mapping[str, float | int] | None = None) -> Path:
     """A vehicle at rest rolled by ``roll_deg`` (FRD, NED): sensor_combined at ``rate_hz``
     (from ``imu_from_s`` to ``imu_until_s`` only, the rest of the log without IMU),
-    vehicle_magnetometer (``mag_instances`` instances, the second reading a little off),
-    vehicle_attitude at 50 Hz (the truth) over the whole ``duration_s``."""
+    vehicle_magnetometer (``mag_instances`` instances, device ids 1000, 1001, …, the second
+    reading a little off; each reads ``mag_offset_ga`` [Gauss, FRD] on top of the field: a
+    hard-iron bias), vehicle_attitude at 50 Hz (the truth) over the whole ``duration_s``;
+    ``parameters`` as the autopilot's (:func:`write_ulog`)."""
     rng = np.random.default_rng(seed)
     r = math.radians(roll_deg)
     g = 9.80665
@@ -142,10 +157,11 @@ def static_tilt_log(path: str | os.PathLike[str], duration_s: float = 60.0,
         m = tm.shape[0]
         topics.append(Topic("vehicle_magnetometer", MAG_FIELDS, {
             "timestamp": tm + 100, "timestamp_sample": tm, "device_id": np.full(m, 1000 + k),
-            "magnetometer_ga": f_body * (1.0 + 0.05 * k) + rng.normal(0.0, 0.002, (m, 3)),
+            "magnetometer_ga": f_body * (1.0 + 0.05 * k) + np.asarray(mag_offset_ga)
+            + rng.normal(0.0, 0.002, (m, 3)),
         }, multi_id=k))
     ta = boot_us + np.arange(0, int(duration_s * 1e6), 20_000, dtype=np.int64)
     q = np.array([math.cos(r / 2), math.sin(r / 2), 0.0, 0.0])
     topics.append(Topic("vehicle_attitude", ATTITUDE_FIELDS, {
         "timestamp": ta, "timestamp_sample": ta, "q": np.tile(q, (ta.shape[0], 1))}))
-    return write_ulog(path, topics, start_us=boot_us)
+    return write_ulog(path, topics, start_us=boot_us, parameters=parameters)

@@ -13,6 +13,13 @@ looks up, or by ``EKF2_MAG_DECL``): a ulog's replay takes ``magnetic_declination
 log's ``EKF2_MAG_DECL`` [deg] (:func:`log_defaults`; the value the autopilot saved, from the
 World Magnetic Model at its last GNSS position) unless the user set it.
 
+PX4 up to v1.11 learned a magnetometer bias in flight (EKF2's body-field states), saved it on
+disarm as ``EKF2_MAGBIAS_X/Y/Z`` [Gauss] with the magnetometer's device id
+(``EKF2_MAGBIAS_ID``), and at the next boot subtracted it from ``vehicle_magnetometer`` before
+fusing, for that device only; later versions fold it into the ``CAL_MAGn_*`` calibration that
+``vehicle_magnetometer`` already carries. :func:`saved_mag_bias` says whether a log's
+magnetometer needs it subtracted to read as EKF2's did.
+
 Stamps stay the log's time since boot (``timestamp`` µs → header stamp ns), so the output lines
 up with every other topic of the log.
 """
@@ -58,6 +65,41 @@ def log_defaults(log_parameters: Mapping[str, Any]) -> dict[str, Any]:
     if not (math.isfinite(decl) and abs(decl) <= 180.0):
         return {}
     return {"magnetic_declination_rad": math.radians(decl)}
+
+
+#: PX4 parameters of EKF2's saved magnetometer bias [Gauss, FRD body axes] (PX4 ≤ v1.11) ...
+PX4_MAG_BIAS_PARAMS = ("EKF2_MAGBIAS_X", "EKF2_MAGBIAS_Y", "EKF2_MAGBIAS_Z")
+#: ... and of the device id of the magnetometer it belongs to.
+PX4_MAG_BIAS_ID_PARAM = "EKF2_MAGBIAS_ID"
+#: A saved bias beyond this [Gauss] is not a bias (the Earth's field is at most 0.65 G).
+PX4_MAG_BIAS_MAX_GA = 1.0
+
+
+def saved_mag_bias(log_parameters: Mapping[str, Any], device_ids: Collection[int]
+                   ) -> tuple[np.ndarray | None, str]:
+    """``(bias, text)``: EKF2's saved magnetometer bias [Gauss, FRD] (:data:`PX4_MAG_BIAS_PARAMS`)
+    when EKF2 subtracted it from this log's magnetometer, i.e. the log's ``device_ids`` (the
+    magnetometer read; from the log's topics) are all :data:`PX4_MAG_BIAS_ID_PARAM`; else
+    ``None``. ``text`` says what was done: empty when no bias is saved (the parameters absent,
+    all zero, not finite or beyond :data:`PX4_MAG_BIAS_MAX_GA`: nothing to subtract), else one
+    line for the replay's summary."""
+    try:
+        bias = np.array([float(log_parameters[k]) for k in PX4_MAG_BIAS_PARAMS])
+        saved_id = int(log_parameters[PX4_MAG_BIAS_ID_PARAM])
+    except (KeyError, TypeError, ValueError, OverflowError):
+        return None, ""
+    if not (np.all(np.isfinite(bias)) and 0.0 < np.linalg.norm(bias) <= PX4_MAG_BIAS_MAX_GA):
+        return None, ""
+    saved = (f"EKF2_MAGBIAS_X/Y/Z ({bias[0]:+.4f}, {bias[1]:+.4f}, {bias[2]:+.4f}) G of "
+             f"device {saved_id}")
+    ids = sorted(set(device_ids))
+    if ids == [saved_id]:
+        return bias, f"{saved} subtracted from the magnetometer (as EKF2 did)"
+    if not ids:
+        return None, (f"{saved} not subtracted: the log does not say which magnetometer it "
+                      "read (no device id), so whether EKF2 subtracted it is unknown")
+    return None, (f"{saved} not subtracted: the magnetometer is device "
+                  f"{', '.join(map(str, ids))} (neither did EKF2)")
 
 
 def _defaults(cls: type) -> dict[str, Any]:
