@@ -112,9 +112,12 @@ def test_classifier_returns_the_block_mean_as_the_measurement():
 
 
 # -- bias estimator ---------------------------------------------------------------------------
-def _bias_state(var: float) -> state.StepState:
+def _bias_state(var: float, err_var: float | None = None) -> state.StepState:
+    """A state whose bias variance is ``var`` and its error's ``err_var`` (default the same: as
+    right after a still-block measurement)."""
     s = state.StepState(0.0, False)
     s.bias_var = var
+    s.bias_err_var = var if err_var is None else err_var
     return s
 
 
@@ -129,9 +132,38 @@ def test_fuse_rest_is_the_scalar_kalman_update():
     s.moved = True
     bias.fuse_rest(s, m, FloatOps)
     assert not s.bias_unverified
-    before = (s.bx, s.bias_var)
+    before = (s.bx, s.bias_var, s.bias_err_var)
     bias.fuse_rest(s, m._replace(measure=False), FloatOps)
-    assert (s.bx, s.bias_var) == before
+    assert (s.bx, s.bias_var, s.bias_err_var) == before
+
+
+def test_the_bias_error_variance_takes_every_measurement_and_shrinks_twice_as_fast():
+    """bias_err_var (bias.error_sigma): the same prior and random walk as bias_var; a still
+    block's update with the gain bias_var chose leaves (1 - k)^2 err + k^2 r (the Kalman
+    posterior when both agree); while the integral learns it falls at twice the schedule's
+    rate (the error decays with the loop's slow mode k2/k1, its variance twice as fast)."""
+    s = state.StepState(0.0, False)
+    p = step_params(FilterParams(bias_prior_sigma_rad_s=0.1))
+    bias.add_process_noise(s, p, 0.01, FloatOps)  # the first step: the prior, both
+    walk = bias.BIAS_RANDOM_WALK_RAD_S_SQRT_S ** 2 * 0.01
+    assert s.bias_var == s.bias_err_var == pytest.approx(0.01 + walk, rel=1e-12)
+    m = stillness.RestMeasurement(True, 0.05, -0.02, 0.0, 0.0001, False)
+    bias.fuse_rest(s, m, FloatOps)
+    assert s.bias_err_var == pytest.approx(s.bias_var, rel=1e-9)  # both the Kalman posterior
+    s = _bias_state(0.01, 0.0004)  # learned: the error already below the schedule
+    bias.fuse_rest(s, m, FloatOps)
+    k = 0.01 / (0.01 + 0.0001)
+    assert s.bias_err_var == pytest.approx((1 - k) ** 2 * 0.0004 + k * k * 0.0001, rel=1e-12)
+    s = _bias_state(0.01, 0.01)
+    f = (0.01, 0.0, 0.0)
+    bias.integrate(s, p, f, 0.35, 0.05, True, True, 0.01, FloatOps)
+    x = 0.01 * 0.05 / 0.35
+    assert s.bias_var == pytest.approx(0.01 / (1 + x), rel=1e-12)
+    assert s.bias_err_var == pytest.approx(0.01 / (1 + 2 * x), rel=1e-12)
+    assert bias.error_sigma(s, FloatOps) == pytest.approx(math.sqrt(0.01 / (1 + 2 * x)))
+    before = (s.bias_var, s.bias_err_var)
+    bias.integrate(s, p, f, 0.35, 0.05, True, False, 0.01, FloatOps)  # too large to learn from
+    assert (s.bias_var, s.bias_err_var) == before
 
 
 def test_learning_gains_follow_the_bias_uncertainty():
@@ -158,9 +190,10 @@ def test_a_velocity_swing_caps_the_raised_learning_at_sigma_b_over_sigma_v():
 
 
 def test_the_loop_gain_falls_with_the_velocity_swing_and_rises_with_the_gyro_drift():
-    """bias.loop_gain: k1 = sqrt(d / sigma_V), d = sigma_b + GYRO_SCALE_UNCERTAINTY * |w|, at most
-    the configured k1: a hover keeps the thesis's loop, legs of metres per second lower it, a
-    fast rotation (the gyro's scale error) raises it again."""
+    """bias.loop_gain: k1 = sqrt(d / sigma_V), d = sigma_e + GYRO_SCALE_UNCERTAINTY * |w| with
+    sigma_e the bias estimate's error (bias.error_sigma, not the schedule's sigma_b), at most the
+    configured k1: a hover keeps the thesis's loop, legs of metres per second lower it, a fast
+    rotation (the gyro's scale error) raises it again."""
     p = step_params(FilterParams())
     s = _bias_state(1e-6)  # sigma_b = 1e-3 rad/s: a learned bias
     s.pv_var = 2.5e-5  # sigma_V = 0.005 rad s: a hover
@@ -177,6 +210,10 @@ def test_the_loop_gain_falls_with_the_velocity_swing_and_rises_with_the_gyro_dri
     assert fast == pytest.approx(min(p.k1, math.sqrt((1e-3 + bias.GYRO_SCALE_UNCERTAINTY * 3.0)
                                                      / 0.02)))
     assert fast > slow
+    # the schedule still says 0.01 rad/s, the error is 1e-3 rad/s: the drift is the error's
+    s = _bias_state(1e-4, 1e-6)
+    s.pv_var = 4e-4
+    assert bias.loop_gain(s, p, FloatOps) == pytest.approx(slow)
 
 
 def test_a_turn_about_the_vertical_withholds_the_learning_raise():

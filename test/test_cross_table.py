@@ -31,8 +31,10 @@ looser bound would pretend); they stay open in BENCHMARKS.md:
   above 6°: asserted);
 - issue 22: the simulated multirotor cases (rows "simulated ..."): learned-bias error < 0.05 °/s
   on each — zig-zags 0.58 °/s (the vertical component a level 6-D flight cannot observe),
-  figure-8s 0.26 °/s (1 kHz and 100 Hz); their inclination RMS at most VQF online's is met
+  figure-8s 0.49 °/s (1 kHz and 100 Hz); their inclination RMS at most VQF online's is met
   (asserted);
+- issue 27: the simulated compass cases' heading mean(e²/σ²) in [0.5, 2] — 0.09-0.10 while the
+  magnet is on (conservative: a perfect simulated sensor against floors fitted on real ones);
 - issue 23: median time to < 2° after the first velocity ≤ 5 s — met on EuRoC (0 s), missed on
   phantom4 (9.3 s) and phantom4 horizontal (17.5 s; the offline pass 17.5 s, and the DOT's own
   filter, measured the same way against the same reference, 21 s and 31 s: the reference's own
@@ -76,48 +78,49 @@ HOLD_MARGIN_FLOOR_S = 0.1
 SIMULATED_MARGIN = 0.05
 #: Our (online, offline) value of each row when the guards were last set (issue 26, on the
 #: tree with issues 22-25 merged; re-set with issue 22's loop lag and gate, then with the
-#: running mean in start-up and the turn share, and with a velocity that says moving;
+#: running mean in start-up and the turn share, with a velocity that says moving, and
+#: with the loop's drift from the bias estimate's error, bias.error_sigma;
 #: `cf-estimator bench cross --json`, 4 decimals).
 BASELINE: dict[str, tuple[float, float | None]] = {
-    "EuRoC MH, ground start, after 10 s: mean": (1.2642, 0.8586),
-    "EuRoC MH, mid-air start 20 s: 2-12 s": (2.7842, 0.7775),
-    "EuRoC MH, mid-air start 20 s: 12 s-end": (1.5873, 0.8954),
-    "EuRoC MH, mid-air start 40 s: 2-12 s": (4.7064, 1.3706),
-    "EuRoC MH, mid-air start 40 s: 12 s-end": (2.0048, 0.8631),
-    "EuRoC MH, mid-air start 60 s: 2-12 s": (3.8393, 0.6371),
-    "EuRoC MH, mid-air start 60 s: 12 s-end": (1.8329, 0.9550),
-    "phantom4, after 10 s: mean": (1.6234, 1.3243),
-    "phantom4, after 10 s: worst recording": (2.1459, 3.1312),
-    "phantom4 horizontal, after 10 s: mean": (3.1106, 1.7087),
-    "phantom4 horizontal, after 10 s: worst recording": (5.2265, 4.1233),
+    "EuRoC MH, ground start, after 10 s: mean": (1.2613, 0.8580),
+    "EuRoC MH, mid-air start 20 s: 2-12 s": (2.7842, 0.7431),
+    "EuRoC MH, mid-air start 20 s: 12 s-end": (1.5016, 0.8785),
+    "EuRoC MH, mid-air start 40 s: 2-12 s": (4.7064, 1.3609),
+    "EuRoC MH, mid-air start 40 s: 12 s-end": (1.9367, 0.8235),
+    "EuRoC MH, mid-air start 60 s: 2-12 s": (3.8398, 0.5845),
+    "EuRoC MH, mid-air start 60 s: 12 s-end": (1.7662, 0.9416),
+    "phantom4, after 10 s: mean": (1.6211, 1.3110),
+    "phantom4, after 10 s: worst recording": (2.1511, 3.3481),
+    "phantom4 horizontal, after 10 s: mean": (3.1052, 1.5030),
+    "phantom4 horizontal, after 10 s: worst recording": (5.2265, 3.7195),
     "BROAD all (18): 6-D inclination": (0.6874, 0.5406),
     "BROAD undisturbed (11): 6-D inclination": (0.6489, 0.5152),
     "BROAD disturbed (7): 6-D inclination": (0.7479, 0.5806),
     "BROAD rotation (5): 6-D inclination": (0.6193, 0.5759),
     "BROAD translation (5): 6-D inclination": (0.4318, 0.3607),
     "BROAD combined (1): 6-D inclination": (1.8830, 0.9838),
-    "BROAD slow (6): 6-D inclination": (0.3809, 0.3097),
+    "BROAD slow (6): 6-D inclination": (0.3808, 0.3097),
     "BROAD fast (5): 6-D inclination": (0.9706, 0.7618),
     "BROAD no_breaks (7): 6-D inclination": (0.7010, 0.5236),
     "BROAD with_breaks (4): 6-D inclination": (0.5578, 0.5004),
     "BROAD tapping (1): 6-D inclination": (0.6206, 0.5568),
-    "BROAD vibration (1): 6-D inclination": (0.3566, 0.3237),
+    "BROAD vibration (1): 6-D inclination": (0.3561, 0.3237),
     "BROAD stationary_magnet (2): 6-D inclination": (1.1375, 0.8580),
     "BROAD attached_magnet (3): 6-D inclination": (0.6612, 0.4892),
-    "BROAD all (18): 9-D total": (1.9981, 1.8949),
-    "BROAD undisturbed (11): 9-D total": (1.5307, 1.4527),
-    "BROAD disturbed (7): 9-D total": (2.7325, 2.5898),
-    "BROAD rotation (5): 9-D total": (1.3790, 1.3611),
-    "BROAD translation (5): 9-D total": (1.3024, 1.2312),
+    "BROAD all (18): 9-D total": (1.9982, 1.8949),
+    "BROAD undisturbed (11): 9-D total": (1.5309, 1.4527),
+    "BROAD disturbed (7): 9-D total": (2.7325, 2.5899),
+    "BROAD rotation (5): 9-D total": (1.3791, 1.3611),
+    "BROAD translation (5): 9-D total": (1.3027, 1.2312),
     "BROAD combined (1): 9-D total": (3.4306, 3.0181),
-    "BROAD slow (6): 9-D total": (1.2777, 1.2144),
+    "BROAD slow (6): 9-D total": (1.2780, 1.2144),
     "BROAD fast (5): 9-D total": (1.8343, 1.7387),
-    "BROAD no_breaks (7): 9-D total": (1.8941, 1.7845),
-    "BROAD with_breaks (4): 9-D total": (0.8948, 0.8719),
+    "BROAD no_breaks (7): 9-D total": (1.8943, 1.7846),
+    "BROAD with_breaks (4): 9-D total": (0.8949, 0.8720),
     "BROAD tapping (1): 9-D total": (1.3783, 1.3469),
-    "BROAD vibration (1): 9-D total": (6.8394, 6.6982),
+    "BROAD vibration (1): 9-D total": (6.8393, 6.6983),
     "BROAD stationary_magnet (2): 9-D total": (1.7931, 1.6393),
-    "BROAD attached_magnet (3): 9-D total": (2.4412, 2.2684),
+    "BROAD attached_magnet (3): 9-D total": (2.4413, 2.2684),
     "thesis impacts: peak (limit 90')": (20.4135, None),
     "thesis vibration: peak (limit 90')": (15.8747, None),
     "thesis acceleration: peak (limit 90')": (55.2873, None),
@@ -127,23 +130,23 @@ BASELINE: dict[str, tuple[float, float | None]] = {
     "magnet 0.5x on a turning sensor: heading RMS": (0.6843, 0.6266),
     "magnet 1x on a turning sensor: heading peak": (1.4733, 1.3765),
     "magnet 1x on a turning sensor: heading RMS": (0.6824, 0.6221),
-    "simulated zig-zags 4 m/s², 120 Hz: inclination RMS after 10 s": (3.9607, 1.6835),
-    "simulated zig-zags 4 m/s², 120 Hz: inclination peak after 10 s": (12.3590, 3.9393),
+    "simulated zig-zags 4 m/s², 120 Hz: inclination RMS after 10 s": (3.9609, 1.4115),
+    "simulated zig-zags 4 m/s², 120 Hz: inclination peak after 10 s": (12.3596, 3.2939),
     "simulated zig-zags 4 m/s², 120 Hz: learned-bias error at the end": (0.5846, None),
-    "simulated figure-8s 1.8 m/s², 1 kHz: inclination RMS after 10 s": (4.0476, 1.7558),
-    "simulated figure-8s 1.8 m/s², 1 kHz: inclination peak after 10 s": (6.1349, 3.6594),
-    "simulated figure-8s 1.8 m/s², 1 kHz: learned-bias error at the end": (0.2556, None),
-    "simulated figure-8s 1.8 m/s², 100 Hz: inclination RMS after 10 s": (4.0401, 1.7511),
-    "simulated figure-8s 1.8 m/s², 100 Hz: inclination peak after 10 s": (6.1736, 3.6675),
-    "simulated figure-8s 1.8 m/s², 100 Hz: learned-bias error at the end": (0.2584, None),
-    "phantom4 horizontal, aided, after 10 s: mean": (0.8396, 0.7217),
+    "simulated figure-8s 1.8 m/s², 1 kHz: inclination RMS after 10 s": (3.2817, 1.8084),
+    "simulated figure-8s 1.8 m/s², 1 kHz: inclination peak after 10 s": (5.9290, 2.9745),
+    "simulated figure-8s 1.8 m/s², 1 kHz: learned-bias error at the end": (0.4858, None),
+    "simulated figure-8s 1.8 m/s², 100 Hz: inclination RMS after 10 s": (3.2777, 1.8144),
+    "simulated figure-8s 1.8 m/s², 100 Hz: inclination peak after 10 s": (5.8945, 2.9771),
+    "simulated figure-8s 1.8 m/s², 100 Hz: learned-bias error at the end": (0.4865, None),
+    "phantom4 horizontal, aided, after 10 s: mean": (0.8413, 0.7228),
     "phantom4 horizontal, aided: median time to < 2 deg": (17.4851, 17.4883),
     "phantom4, aided, after 10 s: mean": (0.6962, 0.6402),
     "phantom4, aided: median time to < 2 deg": (9.3353, 6.9181),
     "EuRoC MH, ground start, aided, after 10 s: mean": (0.9469, 0.7948),
     "EuRoC MH, ground start, aided: median time to < 2 deg": (0.0000, 0.0000),
     "EuRoC MH, aided, mid-air start 20 s: 12 s-end": (0.8912, 0.7260),
-    "EuRoC MH, aided, mid-air start 40 s: 12 s-end": (0.8726, 0.7625),
+    "EuRoC MH, aided, mid-air start 40 s: 12 s-end": (0.8726, 0.7626),
     "EuRoC MH, aided, mid-air start 60 s: 12 s-end": (0.8561, 0.7580),
     "thesis acceleration, aided: peak (limit 90')": (51.7145, None),
 }
@@ -292,7 +295,7 @@ def test_target_phantom4_horizontal_below_vqf_online_no_recording_above_6(table)
 
 def test_target_simulated_multirotor_cases_at_most_vqf_online(table):
     """Issue 22's RMS target on every simulated multirotor case (zig-zags 3.96° against 5.11°,
-    figure-8s 4.05° against 5.01° since the loop gain follows the velocity swing; their
+    figure-8s 3.28° against 5.01° since the loop gain follows the velocity swing; their
     learned-bias target, < 0.05 °/s, is missed: module docstring)."""
     rows, _ = table
     labels = [label for label in rows
@@ -345,21 +348,20 @@ def test_target_magnet_on_a_turning_sensor_heading_below_5_deg_on_every_seed(tab
 def test_covariance_consistency_rows(table):
     """Issue 27: the reported orientation covariance against the real errors (σ² = cov[0] +
     cov[4] for the tilt, cov[8] for the heading). Floor fitted on phantom4 (vertical) only;
-    mean(e²/σ²) in [0.5, 2] on every family it is met on (EuRoC, phantom4, BROAD tilt since the
+    mean(e²/σ²) in [0.5, 2] on every recorded family (EuRoC, phantom4 and its horizontal
+    campaign — 0.57 since the loop's drift term takes the bias estimate's error,
+    bias.error_sigma, and the correction term follows the loop —, BROAD tilt since the
     acceleration term is the correction the loop made, BROAD heading), the beyond-2σ share
-    within the issue's 25 %. The horizontal campaign sits just below the band (0.48, with the
-    loop's running gain in the correction term; held at 0.4) and is never overconfident
-    (BENCHMARKS.md "Covariance")."""
+    within the issue's 25 %. The simulated compass cases stay conservative while a magnet is on
+    (0.09: their field and gyro are perfect, the floors are fitted on real sensors; never
+    overconfident)."""
     rows, _ = table
-    for label in ("EuRoC MH: tilt", "phantom4: tilt", "BROAD all: tilt",
-                  "BROAD all 9-D: heading"):
+    for label in ("EuRoC MH: tilt", "phantom4: tilt", "phantom4 horizontal: tilt",
+                  "BROAD all: tilt", "BROAD all 9-D: heading"):
         ratio = _row(rows, f"{label} mean(e²/σ²)")["cf_estimator"]
         beyond = _row(rows, f"{label} beyond 2σ")["cf_estimator"]
         assert 0.5 <= ratio <= 2.0, (label, ratio)
         assert beyond <= 25.0, (label, beyond)
-    label = "phantom4 horizontal: tilt"
-    assert 0.4 <= _row(rows, f"{label} mean(e²/σ²)")["cf_estimator"] <= 2.0
-    assert _row(rows, f"{label} beyond 2σ")["cf_estimator"] <= 4.6
     for f in ("0.3", "0.5", "1"):  # the compass: conservative while a magnet is on
         assert _row(rows, f"magnet {f}x on a turning sensor: heading mean")["cf_estimator"] <= 2.0
 

@@ -34,8 +34,8 @@ C_HELPERS = ("mul", "expmap", "rotate", "turn_heading")
 #: The step's stages, in the order step() and cf_step() call them: one name in both files.
 STAGES = ("predict", "classify_motion", "tilt_error", "saturate", "aperiodic", "regulate",
           "recover", "heading")
-C_STEP = ("toward_unit", "up", "stillness", "turn_share", "loop_gain", "learning_gains",
-          "cf_step") + STAGES
+C_STEP = ("toward_unit", "up", "stillness", "turn_share", "error_sigma", "loop_gain",
+          "learning_gains", "cf_step") + STAGES
 #: Where a C constant's Python counterpart may live (the step's modules, then the checks', then
 #: the covariance model's, whose row loop the C repeats for the bulk replay).
 PY_HOMES = (step, stillness, bias, ops, filter, covariance)

@@ -94,7 +94,7 @@ typedef struct {
     double qw, qx, qy, qz, bx, by, bz, cx, cy, cz, lx, ly, lz, z_m, time_s, clip_timer_s,
         rest_timer_s, blk_n, blk_t, blk_gx, blk_gy, blk_gz, blk_ax, blk_ay, blk_az, blk_g2, blk_a2,
         prev_n, pgx, pgy, pgz, pax, pay, paz, blk_d, last_n, lgx, lgy, lgz, lax, lay, laz,
-        noise_g2, noise_a2, bias_var, blk_mx, blk_my, blk_mz, blk_mn, pmx, pmy, pmz, pm_n,
+        noise_g2, noise_a2, bias_var, bias_err_var, blk_mx, blk_my, blk_mz, blk_mn, pmx, pmy, pmz, pm_n,
         mag_clip_timer_s, mag_ref_norm, mag_ref_dip, mag_ref_count,
         mag_last_time_s, mvx, mvy, mvz, mcx, mcy, mcz, mmx, mmy, mmz, mag_cand_norm, mag_seen_time_s,
         mag_ok_timer_s, mag_cand_timer_s, mag_ref_time_s, g_ref, accel_hold, acx, acy, acz, rate_lp, ex, ey,
@@ -113,6 +113,7 @@ static void state_init(cf_state *s)
     s->mag_last_time_s = -1.0;
     s->mag_seen_time_s = -1.0;
     s->bias_var = -1.0;
+    s->bias_err_var = -1.0;
 }
 
 /* ---- the step (mirrors step.py) ----------------------------------------------------------- */
@@ -181,6 +182,9 @@ static void turn_heading(cf_state *s, double angle)
     double lx = c * s->lx - sn * s->ly, ly = sn * s->lx + c * s->ly;
     s->lx = lx;
     s->ly = ly;
+    double pvx = c * s->pvx - sn * s->pvy, pvy = sn * s->pvx + c * s->pvy;
+    s->pvx = pvx;
+    s->pvy = pvy;
 }
 
 /* _toward_unit() of step.py: v <- normalise(v + a (u - v)) */
@@ -396,6 +400,7 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
         s->by = s->by + k * (mgy - s->by);
         s->bz = s->bz + k * (mgz - s->bz);
         s->bias_var = s->bias_var - k * s->bias_var;
+        s->bias_err_var = sq(1.0 - k) * s->bias_err_var + k * k * r;
     }
     if (still) {
         double gw = s->blk_t / (GRAVITY_TIME_CONSTANT_S + s->blk_t);
@@ -525,11 +530,17 @@ static double turn_share(const cf_state *s, const cf_params *p)
     return share * share;
 }
 
+/* bias.error_sigma of bias.py: sigma of the bias estimate's error */
+static double error_sigma(const cf_state *s)
+{
+    return sqrt(maxd(s->bias_err_var, 0.0));
+}
+
 /* bias.loop_gain of bias.py: the k1 the disturbance allows, sqrt(d / sigma_V), at most k1 */
 static double loop_gain(const cf_state *s, const cf_params *p)
 {
     double sigma_v = maxd(sqrt(s->pv_var), TINY);
-    double drift = sqrt(maxd(s->bias_var, 0.0)) + GYRO_SCALE_UNCERTAINTY * s->rate_lp;
+    double drift = error_sigma(s) + GYRO_SCALE_UNCERTAINTY * s->rate_lp;
     return s->aided ? p->k1 : mind(p->k1, sqrt(drift / sigma_v));
 }
 
@@ -595,7 +606,9 @@ static void regulate(cf_state *s, const cf_params *p, const double *f, double en
     s->bx = s->bx - ldt * (k2 * f[0] + s->cx);
     s->by = s->by - ldt * (k2 * f[1] + s->cy);
     s->bz = s->bz - ldt * (k2 * f[2] + s->cz);
-    s->bias_var = s->bias_var / (1.0 + ldt * k2 / maxd(k1, BIAS_LEARNING_MIN_K1));
+    double k1m = maxd(k1, BIAS_LEARNING_MIN_K1);
+    s->bias_var = s->bias_var / (1.0 + ldt * k2 / k1m);
+    s->bias_err_var = s->bias_err_var / (1.0 + 2.0 * ldt * k2 / k1m);
     /* start-up in motion: the running mean of the accelerometer since initialisation (1/t) */
     int averaging = (s->time_s <= p->startup_duration_s) && s->moved;
     k1 = averaging ? 1.0 / maxd(s->time_s, dt) : (quick ? maxd(k1, p->startup_k1) : k1);
@@ -627,8 +640,9 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
                     const double *mag, double dt)
 {
     s->time_s = s->time_s + dt;
-    s->bias_var = (s->bias_var < 0.0 ? sq(p->bias_prior_sigma_rad_s) : s->bias_var) +
-                  sq(BIAS_RANDOM_WALK_RAD_S_SQRT_S) * dt;
+    double walk = sq(BIAS_RANDOM_WALK_RAD_S_SQRT_S) * dt, prior = sq(p->bias_prior_sigma_rad_s);
+    s->bias_var = (s->bias_var < 0.0 ? prior : s->bias_var) + walk;
+    s->bias_err_var = (s->bias_err_var < 0.0 ? prior : s->bias_err_var) + walk;
     int startup = s->time_s <= p->startup_duration_s;
     int fast = startup || s->recovering || (s->time_s <= s->quick_until_s);
     int learn = !fast;
@@ -1197,7 +1211,7 @@ static PyMemberDef State_members[] = {
     SD(blk_d), SD(blk_mx), SD(blk_my), SD(blk_mz), SD(blk_mn), SD(prev_n), SD(pgx), SD(pgy),
     SD(pgz), SD(pax), SD(pay), SD(paz), SD(pmx), SD(pmy), SD(pmz), SD(pm_n), SD(last_n), SD(lgx),
     SD(lgy), SD(lgz), SD(lax), SD(lay), SD(laz), SD(noise_g2), SD(noise_a2), SD(g_ref), SD(bx),
-    SD(by), SD(bz), SD(bias_var), SB(bias_unverified), SD(pvx), SD(pvy), SD(pv_var), SD(turn_rate_lp), SD(z_m), SD(mag_ref_norm), SD(mag_ref_dip),
+    SD(by), SD(bz), SD(bias_var), SD(bias_err_var), SB(bias_unverified), SD(pvx), SD(pvy), SD(pv_var), SD(turn_rate_lp), SD(z_m), SD(mag_ref_norm), SD(mag_ref_dip),
     SD(mag_ref_count), SB(mag_disturbed), SD(mag_last_time_s), SB(heading_initialized),
     SD(mag_clip_timer_s), SB(mag_recovering), SD(mvx), SD(mvy), SD(mvz), SD(mcx), SD(mcy),
     SD(mcz), SD(mmx), SD(mmy), SD(mmz), SD(mag_cand_norm), SD(mag_seen_time_s), SD(mag_ok_timer_s), SD(mag_cand_timer_s),

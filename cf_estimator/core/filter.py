@@ -317,6 +317,7 @@ class ComplementaryFilter:
             # what the bias estimator learned from the untrustworthy error is suspect: uncertain
             # again (the prior), so it is learned afresh from the trustworthy one
             s.bias_var = max(float(s.bias_var), self._params.bias_prior_sigma_rad_s ** 2)
+            s.bias_err_var = max(float(s.bias_err_var), self._params.bias_prior_sigma_rad_s ** 2)
 
     def initialize_from(self, accel_m_s2: Vector, mag: Vector | None = None) -> bool:
         """Initialise from one accelerometer (and magnetometer) sample; False if not valid."""

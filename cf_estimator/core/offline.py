@@ -121,12 +121,12 @@ def _run_rows(f: ComplementaryFilter, gyro: np.ndarray, accel: np.ndarray,
 def _pass(params: FilterParams, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None,
           dt: np.ndarray, q_out: np.ndarray, extra_out: np.ndarray | None,
           q0: Sequence[float] | None = None, bias: Sequence[float] | None = None,
-          bias_var: float | None = None, backend: str | None = None,
+          bias_var: tuple[float, float] | None = None, backend: str | None = None,
           flags: np.ndarray | None = None) -> ComplementaryFilter | None:
     """One filter pass over rows 0..N−1 (dt[0] unused). Starts from ``q0`` (world frame) with
-    ``bias`` [rad/s] and its variance, or else initialises at the first valid accelerometer
-    row (rows before stay NaN). None if it never initialises. ``flags``: see
-    :func:`_run_rows`."""
+    ``bias`` [rad/s] and its variances (``bias_var``: the state's bias_var and bias_err_var),
+    or else initialises at the first valid accelerometer row (rows before stay NaN). None if it
+    never initialises. ``flags``: see :func:`_run_rows`."""
     f = ComplementaryFilter(params, backend=backend)
     start = 0
     if q0 is not None:
@@ -142,7 +142,7 @@ def _pass(params: FilterParams, gyro: np.ndarray, accel: np.ndarray, mag: np.nda
     if bias is not None:
         s.bx, s.by, s.bz = (float(c) for c in bias)
     if bias_var is not None:
-        s.bias_var = float(bias_var)
+        s.bias_var, s.bias_err_var = (float(v) for v in bias_var)
     q_out[start - 1] = f.orientation_tuple()
     if extra_out is not None:
         extra_out[start - 1] = state_extras(s)
@@ -195,11 +195,12 @@ CHUNK_ROWS = 1 << 16
 
 def _backward_pass(params: FilterParams, gyro: np.ndarray, accel: np.ndarray,
                    mag: np.ndarray | None, dt: np.ndarray, q_out: np.ndarray,
-                   q0: Sequence[float], bias: Sequence[float], bias_var: float,
+                   q0: Sequence[float], bias: Sequence[float], bias_var: tuple[float, float],
                    backend: str | None = None, flags: np.ndarray | None = None
                    ) -> ComplementaryFilter:
     """The filter over the time-reversed rows (:func:`reverse_rows`), started at the last
-    row from ``q0`` with ``bias`` (already negated) and its variance; writes ``q_out`` in the
+    row from ``q0`` with ``bias`` (already negated) and its variances (``bias_var``,
+    ``bias_err_var``); writes ``q_out`` in the
     original row order. Runs in chunks of :data:`CHUNK_ROWS` reversed rows (no reversed copy
     of the whole recording)."""
     n = len(dt)
@@ -207,7 +208,7 @@ def _backward_pass(params: FilterParams, gyro: np.ndarray, accel: np.ndarray,
     f.initialize(q0, heading_known=True)
     s = f._state  # noqa: SLF001 - the documented writable bias fields
     s.bx, s.by, s.bz = (float(c) for c in bias)
-    s.bias_var = float(bias_var)
+    s.bias_var, s.bias_err_var = (float(v) for v in bias_var)
     q_out[n - 1] = f.orientation_tuple()
     buf = np.empty((min(CHUNK_ROWS + 1, n), 4))
     for j0 in range(1, n, CHUNK_ROWS):
@@ -272,11 +273,12 @@ def smooth_segment(gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None,
     # pass 2: backward from pass 1's end
     qb = np.empty((n, 4))
     fb = _backward_pass(refined, gyro, accel, mag, dt, qb, f1.orientation_tuple(),
-                        (-s1.bx, -s1.by, -s1.bz), s1.bias_var, backend, flags)
+                        (-s1.bx, -s1.by, -s1.bz), (s1.bias_var, s1.bias_err_var), backend,
+                        flags)
     sb = fb._state  # noqa: SLF001
     # pass 3: forward from the backward pass's start
     _pass(refined, gyro, accel, mag, dt, q, extra, qb[0], (-sb.bx, -sb.by, -sb.bz),
-          sb.bias_var, backend, flags)
+          (sb.bias_var, sb.bias_err_var), backend, flags)
     _fuse(q, qb, params.use_mag and mag is not None)
 
 

@@ -89,7 +89,10 @@ CLASSIFIER: tuple[Field, ...] = (
 
 BIAS: tuple[Field, ...] = (
     *_vec("b", "rad/s", "gyro-bias estimate (the regulator's integral), sensor frame"),
-    _f("bias_var", "(rad/s)^2", "variance of the bias estimate per axis (< 0: not set yet)"),
+    _f("bias_var", "(rad/s)^2", "variance of the bias estimate per axis (< 0: not set yet): "
+       "the learning's schedule"),
+    _f("bias_err_var", "(rad/s)^2", "variance of the bias estimate's error per axis (< 0: not "
+       "set yet): as bias_var, but shrinking twice as fast while the integral learns"),
     _f("bias_unverified", "", "last rest measurement came from a power-on still phase without "
        "a magnetometer (a steady turn cannot be told from rest then)", "bool"),
     *_vec("pv", "rad*s", "pseudo-velocity over g: the accelerometer's disagreement integrated in "
@@ -174,6 +177,7 @@ class StepState:
         self.mag_last_time_s = zero - 1.0
         self.mag_seen_time_s = zero - 1.0
         self.bias_var = zero - 1.0  # < 0: not yet set from the parameters (first step sets it)
+        self.bias_err_var = zero - 1.0
 
     def copy(self) -> StepState:
         """A copy (arrays copied too)."""

@@ -17,7 +17,7 @@ stage is a function of its name here and a static function of the same name in c
                   b, the integral state, is the gyro-bias estimate; k2' = max(k2,
                   min(bias_learning_k2·σ_b²/σ_0², σ_b/σ_V)) while the bias is uncertain,
                   k1' = max(min(k1, √(d/σ_V)), 2√k2'); σ_V: the velocity swing, d: the
-                  gyro's drift rate, bias.py); then
+                  gyro's drift rate from the bias estimate's error, bias.py); then
                   l ← l − p·g(k1')·l with p = aperiodic_prefilter (0 while the tight clip
                   is on): the correction also turns the unit's memory (p = 1: a pre-filter of
                   the specific force in the world frame, as VQF's; p = 0: the thesis's unit on
@@ -192,10 +192,12 @@ def _rotate(qw: Any, qx: Any, qy: Any, qz: Any, vx: Any, vy: Any, vz: Any) -> tu
 
 
 def turn_heading(s: StepState, angle: Any, o: Any) -> None:
-    """q ← Exp_z(angle) ⊗ q (a world-vertical rotation), and the world-frame lag state with it.
+    """q ← Exp_z(angle) ⊗ q (a world-vertical rotation), and the world-frame horizontal states
+    with it: the lag state l and the pseudo-velocity pv (bias.observe_velocity_swing).
 
-    Turning the lag state too keeps the tilt path exactly independent of heading corrections:
-    f = Rᵀ·l is unchanged, so the magnetometer can never move roll/pitch.
+    Turning them too keeps the tilt path exactly independent of heading corrections: f = Rᵀ·l
+    is unchanged, and so is |pv| (the swing σ_V that sets the loop gain, bias.loop_gain), so the
+    magnetometer can never move roll/pitch.
     """
     cw, cz = o.cos(0.5 * angle), o.sin(0.5 * angle)
     s.qw, s.qx, s.qy, s.qz = (
@@ -206,6 +208,7 @@ def turn_heading(s: StepState, angle: Any, o: Any) -> None:
     )
     c, sn = cw * cw - cz * cz, 2.0 * cw * cz
     s.lx, s.ly = c * s.lx - sn * s.ly, sn * s.lx + c * s.ly
+    s.pvx, s.pvy = c * s.pvx - sn * s.pvy, sn * s.pvx + c * s.pvy
 
 
 def _toward_unit(v: tuple, u: tuple, a: Any, o: Any) -> tuple:
