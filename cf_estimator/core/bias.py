@@ -155,7 +155,7 @@ def error_sigma(s: StepState, o: Any) -> Any:
     error. Measured (shipped defaults, the reference's own rates for the true bias, per-axis
     RMS of the horizontal components at 10 / 20 / 30 s; BENCHMARKS.md "the loop's drift from
     the bias estimate's error"): phantom4 vertical error 0.39 / 0.17 / 0.18 °/s, σ_b 2.28 /
-    1.26 / 0.91, this 0.92 / 0.28 / 0.15."""
+    1.26 / 0.91, this 0.93 / 0.28 / 0.15."""
     return o.sqrt(o.maximum(s.bias_err_var, 0.0))
 
 

@@ -199,10 +199,9 @@ def _backward_pass(params: FilterParams, gyro: np.ndarray, accel: np.ndarray,
                    backend: str | None = None, flags: np.ndarray | None = None
                    ) -> ComplementaryFilter:
     """The filter over the time-reversed rows (:func:`reverse_rows`), started at the last
-    row from ``q0`` with ``bias`` (already negated) and its variances (``bias_var``,
-    ``bias_err_var``); writes ``q_out`` in the
-    original row order. Runs in chunks of :data:`CHUNK_ROWS` reversed rows (no reversed copy
-    of the whole recording)."""
+    row from ``q0`` with ``bias`` (already negated) and its variances (``bias_var``: the
+    state's bias_var and bias_err_var); writes ``q_out`` in the original row order. Runs in
+    chunks of :data:`CHUNK_ROWS` reversed rows (no reversed copy of the whole recording)."""
     n = len(dt)
     f = ComplementaryFilter(params, backend=backend)
     f.initialize(q0, heading_known=True)
