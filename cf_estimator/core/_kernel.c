@@ -71,7 +71,7 @@
 #define REST_MIN_VARIANCE 1e-12
 #define SQRT3 1.7320508075688772
 #define BIAS_LEARNING_MIN_K1 1e-3
-#define EXTRA_COLUMNS 19
+#define EXTRA_COLUMNS 20
 #define GYRO_LIMIT_RAD_S 1e9 /* filter.GYRO_LIMIT_RAD_S */
 /* extra columns: e(3), b(3), clipped, phase, at_rest, mag_status, bias sigma, l_x, l_y (the
  * aperiodic unit's world-frame state, horizontal: what the accelerometer channel corrects by),
@@ -994,6 +994,7 @@ static PyObject *State_run(StateObject *self, PyObject *args)
             x[16] = s->by - s->z_m * upy;
             x[17] = s->bz - s->z_m * upz;
             x[18] = s->loop_k1;
+            x[19] = sqrt(s->bias_err_var);
         }
     }
     Py_END_ALLOW_THREADS

@@ -126,7 +126,7 @@ def covariance_rows(extra: np.ndarray, t_s: np.ndarray, q: np.ndarray, params: F
     dts = np.diff(t_s[start:], prepend=t_s[start]).tolist()
     en = np.sqrt(x[:, 0] ** 2 + x[:, 1] ** 2 + x[:, 2] ** 2).tolist()
     clipped = (x[:, 6] != 0.0).tolist()
-    phase, sigma, status = x[:, 7].tolist(), x[:, 10].tolist(), x[:, 9].tolist()
+    phase, sigma, status = x[:, 7].tolist(), x[:, 19].tolist(), x[:, 9].tolist()
     lx, ly = x[:, 11].tolist(), x[:, 12].tolist()
     yaw_err, na2, loop_k1 = x[:, 13].tolist(), x[:, 14].tolist(), x[:, 18].tolist()
     heading = False

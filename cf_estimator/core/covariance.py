@@ -18,8 +18,9 @@ the world x and y axes::
   still being pulled in: the error is the best evidence of how wrong it is), else 0.
 - ``σ_b·t_clip``: ``t_clip`` [s] = how long the error has been clipped without a break (the
   accelerometer is distrusted: the tilt is gyro-integrated for that long, its drift bounded by
-  the bias uncertainty ``σ_b`` [rad/s], √bias_var, the prior ``bias_prior_sigma_rad_s`` before
-  the first estimate).
+  the bias estimate's error ``σ_b`` [rad/s], √bias_err_var
+  (:func:`cf_estimator.core.bias.error_sigma`: not bias_var, the learning's schedule), the
+  prior ``bias_prior_sigma_rad_s`` before the first estimate).
 - ``M`` [rad²] = the mean square, over the loop's own memory ``1/k1`` [s], of ``|c|``: the tilt
   correction the accelerometer channel has made over the last CORRECTION_WINDOW_S,
   ``c = k1·∫l_h·dt`` high-passed over that window [rad], k1 the loop's running gain (``loop_k1``
@@ -121,12 +122,12 @@ class OrientationCovariance:
     def update(self, dt_s: float, state: object, mag_used: bool, mag_age_s: float | None
                ) -> tuple[float, ...]:
         """Covariance after one filter step. ``state``: the filter's step state (phase,
-        error_norm, clipped, bias_var, lx, ly, noise_a2, heading_initialized, yaw_error_rad,
+        error_norm, clipped, bias_err_var, lx, ly, noise_a2, heading_initialized, yaw_error_rad,
         loop_k1);
         ``mag_used``: the step used a magnetometer sample; ``mag_age_s``: time since the last
         used one (None: never)."""
         s = state
-        bv = s.bias_var  # type: ignore[attr-defined]
+        bv = s.bias_err_var  # type: ignore[attr-defined]
         return self.step(dt_s, bool(s.clipped),  # type: ignore[attr-defined]
                          math.sqrt(bv) if bv >= 0.0 else None, s.phase,  # type: ignore[attr-defined]
                          s.error_norm, s.lx, s.ly, s.noise_a2,  # type: ignore[attr-defined]
@@ -139,7 +140,8 @@ class OrientationCovariance:
              heading_initialized: bool, yaw_error_rad: float, mag_used: bool,
              mag_age_s: float | None, loop_k1: float = 0.0) -> tuple[float, ...]:
         """:meth:`update` from the state's figures (the bulk pipeline and ``estimate`` have them
-        per row): ``bias_sigma_rad_s`` = √bias_var (None: no estimate yet, the prior is used),
+        per row): ``bias_sigma_rad_s`` = √bias_err_var, the bias estimate's error (None: no
+        estimate yet, the prior is used),
         ``lx_rad``, ``ly_rad`` the aperiodic unit's world-frame state, ``noise_a2``
         [(m/s²)²] the accelerometer noise of the stillness blocks, ``yaw_error_rad`` read only
         when ``mag_used``, ``loop_k1`` [1/s] the loop's running gain (≤ 0: none yet, the

@@ -139,8 +139,10 @@ class FilterStatus:
 #: channel's last error [rad] (0 when the step used no magnetometer sample) and the stillness
 #: blocks' accelerometer noise noise_a2 [(m/s²)²]: what core/covariance.py reads; then the
 #: gyro-bias estimate (3, rad/s, sensor: :attr:`ComplementaryFilter.gyro_bias_rad_s`, b minus
-#: the heading channel's rate on the sensor axes): what the replay samples.
-EXTRA_COLUMNS = 19
+#: the heading channel's rate on the sensor axes): what the replay samples; the loop's running
+#: gain loop_k1 [1/s]; and the bias estimate's error σ [rad/s] (bias.error_sigma), which the
+#: covariance model's drift terms take.
+EXTRA_COLUMNS = 20
 
 
 def state_extras(s: Any) -> tuple:
@@ -148,7 +150,8 @@ def state_extras(s: Any) -> tuple:
     same columns in ``State.run``)."""
     bx, by, bz = gyro_bias_of(s)
     return (s.ex, s.ey, s.ez, s.bx, s.by, s.bz, s.clipped, s.phase, s.at_rest, s.mag_status,
-            bias_sigma(s), s.lx, s.ly, s.yaw_error_rad, s.noise_a2, bx, by, bz, s.loop_k1)
+            bias_sigma(s), s.lx, s.ly, s.yaw_error_rad, s.noise_a2, bx, by, bz, s.loop_k1,
+            bias_error_sigma(s))
 
 
 def gyro_bias_of(s: Any) -> tuple[float, float, float]:
@@ -161,6 +164,12 @@ def gyro_bias_of(s: Any) -> tuple[float, float, float]:
 def bias_sigma(s: Any) -> float:
     """Standard deviation of the bias estimate [rad/s] (the prior before the first step)."""
     return math.sqrt(s.bias_var) if s.bias_var >= 0.0 else math.nan
+
+
+def bias_error_sigma(s: Any) -> float:
+    """Standard deviation of the bias estimate's error [rad/s] (bias.error_sigma; NaN before the
+    first step)."""
+    return math.sqrt(s.bias_err_var) if s.bias_err_var >= 0.0 else math.nan
 
 
 class ComplementaryFilter:
