@@ -281,13 +281,18 @@ GYRO_FAULT_RATE_RAD_S = 3.0
 GYRO_FAULT_DURATION_S = 0.2
 
 
+def gyro_fault_fits(flight: Flight, at_s: float) -> bool:
+    """The flight lasts beyond a gyro fault at ``at_s`` [s since its first sample]."""
+    return float(flight.t_s[-1]) > at_s + GYRO_FAULT_DURATION_S
+
+
 def with_gyro_fault(flight: Flight, at_s: float) -> Flight:
     """The flight with GYRO_FAULT_RATE_RAD_S added to its gyro's x axis [rad/s, sensor frame]
     on the samples in [at_s, at_s + GYRO_FAULT_DURATION_S) [s since its first sample];
     everything else, the ground truth included, unchanged. ValueError if the flight ends
     before the fault does."""
     end = at_s + GYRO_FAULT_DURATION_S
-    if not float(flight.t_s[-1]) > end:
+    if not gyro_fault_fits(flight, at_s):
         raise ValueError(f"{flight.name}: ends at {float(flight.t_s[-1]):.1f} s, before a gyro "
                          f"fault at {at_s:g} s is over")
     gyro = flight.gyro_rad_s.copy()

@@ -77,7 +77,9 @@
  * aperiodic unit's world-frame state, horizontal: what the accelerometer channel corrects by),
  * yaw_error_rad (the heading channel's last error, 0 when no sample was used), noise_a2 (the
  * stillness blocks' accelerometer noise): what the covariance model (core/covariance.py) reads;
- * then the gyro-bias estimate b - up*z_m (3, filter.gyro_bias_rad_s): what the replay samples */
+ * then the gyro-bias estimate b - up*z_m (3, filter.gyro_bias_rad_s): what the replay samples;
+ * loop_k1 (the loop's running gain) and the bias estimate's error sigma, sqrt(bias_err_var)
+ * (bias.error_sigma): what the covariance model reads too */
 
 /* ------------------------------------------------------------------------------------------ */
 typedef struct {

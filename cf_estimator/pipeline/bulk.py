@@ -14,10 +14,11 @@ threshold, first samples, warnings.
 Equality with the per-message path (same outputs, counters, diagnostics, bit for bit) is tested
 on real and hostile bags (test/test_bulk_decode.py). It relies on: ``run_rows`` = repeated
 ``update`` (a magnetometer row of NaN = no sample), the extra columns of
-:func:`cf_estimator.core.filter.state_extras` (clipped, phase, bias sigma,
-magnetometer status, the aperiodic unit's world-frame state, the heading error and the
-accelerometer noise per row: what the orientation covariance model needs), and the error norm
-being ``sqrt(ex² + ey² + ez²)`` of the error vector (core/step.py). body_frame's half turn
+:func:`cf_estimator.core.filter.state_extras` (clipped, phase, the bias estimate's error σ,
+magnetometer status, the loop's running gain, the aperiodic unit's world-frame state, the
+heading error and the accelerometer noise per row: what the orientation covariance model
+needs), and the error norm being ``sqrt(ex² + ey² + ez²)`` of the error vector
+(core/step.py). body_frame's half turn
 is applied as ``on_imu``/``on_mag`` apply it; with velocity aiding the pipeline runs per
 message.
 """

@@ -184,7 +184,7 @@ def _with_gyro_fault(flights: list, at_s: float) -> tuple[list, str]:
 
     if not at_s >= 0.0:
         raise CliError(f"--gyro-fault must be >= 0 s (got {at_s:g})", 2)
-    long_enough = [f for f in flights if float(f.t_s[-1]) > at_s + ev.GYRO_FAULT_DURATION_S]
+    long_enough = [f for f in flights if ev.gyro_fault_fits(f, at_s)]
     if not long_enough:
         raise CliError(f"--gyro-fault {at_s:g}: every flight ends before the fault is over", 2)
     note = (f"gyro fault: {ev.GYRO_FAULT_RATE_RAD_S:g} rad/s added to the sensor x axis for "
