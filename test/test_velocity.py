@@ -532,19 +532,29 @@ def test_an_aided_accelerometer_is_followed_without_the_slow_lag():
 def test_time_to_hold_counts_from_the_first_velocity_sample_until_it_stays_below_2_deg():
     from types import SimpleNamespace
 
-    from cf_estimator.bench.euroc_eval import time_to_hold_s
+    from cf_estimator.bench.euroc_eval import HOLD_TRANSIENT_S, time_to_hold_s
     from cf_estimator.core import quaternion as quat
 
     t = np.arange(0.0, 30.0, 0.1)
     ref = np.tile([1.0, 0.0, 0.0, 0.0], (t.size, 1))
-    tilt = np.radians(np.where(t < 12.0, 5.0, 0.5))  # 5 deg until 12 s, then 0.5 deg
-    tilt[(t > 15.0) & (t < 15.5)] = np.radians(3.0)  # one more excursion, until 15.5 s
-    est = quat.from_euler(tilt, np.zeros_like(t), np.zeros_like(t))
+
+    def estimate(excursions: list[tuple[float, float]]) -> np.ndarray:
+        tilt = np.radians(np.where(t < 12.0, 5.0, 0.5))  # 5 deg until 12 s, then 0.5 deg
+        for a, b in excursions:
+            tilt[(t > a) & (t < b)] = np.radians(3.0)
+        return quat.from_euler(tilt, np.zeros_like(t), np.zeros_like(t))
+
     flight = SimpleNamespace(t_s=t, q_ref=ref, has_reference=np.ones(t.size, bool),
                              velocity_t_s=np.array([4.0, 4.1]))
-    assert time_to_hold_s(flight, est) == pytest.approx(15.5 - 4.0, abs=0.11)
+    short = 0.3 * HOLD_TRANSIENT_S  # a transient (a fast rotation seen through timing)
+    est = estimate([(15.0, 15.0 + short), (20.0, 21.5)])  # the second one counts
+    assert time_to_hold_s(flight, est) == pytest.approx(21.5 - 4.0, abs=0.11)
+    assert time_to_hold_s(flight, estimate([(15.0, 15.0 + short)])) == pytest.approx(
+        12.0 - 4.0, abs=0.11)
     assert math.isnan(time_to_hold_s(flight, quat.from_euler(np.radians(5.0) + 0 * t, 0 * t,
                                                               0 * t)))
+    flight.has_reference[t > 25.0] = False  # no ground truth at the end: judged before it
+    assert time_to_hold_s(flight, est) == pytest.approx(21.5 - 4.0, abs=0.11)
     assert time_to_hold_s(SimpleNamespace(**{**vars(flight), "velocity_t_s": None}), est) != 0.0
 
 

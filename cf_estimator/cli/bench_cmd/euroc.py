@@ -146,8 +146,9 @@ def run(args: Any) -> int:
     print(ev.format_table(result), end="")
     if velocity is not None:
         print()
-        print(f"time from the first velocity sample until the inclination error stays below "
-              f"{ev.HOLD_THRESHOLD_DEG:g} deg [s] (median over the flights that get there):")
+        print(f"time from the first velocity sample until the inclination error (its "
+              f"{ev.HOLD_TRANSIENT_S:g} s running median) stays below {ev.HOLD_THRESHOLD_DEG:g} "
+              f"deg [s] (median over the flights that get there):")
         for algo in result.algorithms():
             med, ok, n = ev.median_hold_s(result, algo)
             text = f"{med:.1f}" if math.isfinite(med) else "never"
