@@ -33,7 +33,7 @@ from cf_estimator.core.velocity import (
     VelocityAiding,
     VelocityStatus,
     apply_aiding,
-    filter_bias,
+    filter_estimates,
 )
 
 
@@ -279,10 +279,10 @@ def run_aided(f: ComplementaryFilter, aiding: VelocityAiding, gyro: np.ndarray, 
             init_row = i
             a_in = a_rows[i]
             aiding.aided_accel(ts[i], g_rows[i], a_in, 1e-9, f.orientation_tuple(),
-                               filter_bias(f))
+                               filter_estimates(f))
         else:
             a_in = aiding.aided_accel(ts[i], g_rows[i], a_rows[i], dts[i],
-                                      f.orientation_tuple(), filter_bias(f))
+                                      f.orientation_tuple(), filter_estimates(f))
             apply_aiding(f, aiding)
             f.update(g_rows[i], a_in, dts[i], m)
         q_out[i] = f.orientation_tuple()

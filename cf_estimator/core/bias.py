@@ -172,8 +172,14 @@ def loop_gain(s: StepState, p: Any, o: Any) -> Any:
     accelerations are taken out of the measurement (σ_V still holds the swing from before):
     the configured k1."""
     sigma_v = o.maximum(o.sqrt(s.pv_var), TINY)
-    drift = error_sigma(s, o) + GYRO_SCALE_UNCERTAINTY * s.rate_lp
-    return o.where(s.aided, p.k1, o.minimum(p.k1, o.sqrt(drift / sigma_v)))
+    return o.where(s.aided, p.k1, o.minimum(p.k1, o.sqrt(drift_rate(s, o) / sigma_v)))
+
+
+def drift_rate(s: StepState, o: Any) -> Any:
+    """d [rad/s]: the rate the gyro's integration drifts at — the bias estimate's error
+    (:func:`error_sigma`) plus GYRO_SCALE_UNCERTAINTY × the low-passed rotation rate."""
+    return error_sigma(s, o) + GYRO_SCALE_UNCERTAINTY * s.rate_lp
+
 
 
 def integrate(s: StepState, p: Any, f: tuple, k1: Any, k2: Any, learn: Any, small: Any,

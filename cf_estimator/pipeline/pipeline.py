@@ -41,7 +41,7 @@ from typing import Any
 from cf_estimator.core.filter import ComplementaryFilter
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import MAG_DISABLED, MAG_REJECTED, MAG_USED
-from cf_estimator.core.velocity import VelocityAiding, apply_aiding, filter_bias
+from cf_estimator.core.velocity import VelocityAiding, apply_aiding, filter_estimates
 from cf_estimator.pipeline import checks, frames
 from cf_estimator.pipeline.covariance import OrientationCovariance
 from cf_estimator.pipeline.diagnostics import (
@@ -544,7 +544,7 @@ class ImuPipeline:
             acc = (ax, ay, az)
             if self._aiding is not None:
                 acc = self._aiding.aided_accel(t_ns * 1e-9, (gx, gy, gz), acc, dt,
-                                               f.orientation_tuple(), filter_bias(f))
+                                               f.orientation_tuple(), filter_estimates(f))
                 apply_aiding(f, self._aiding)
             q = f.update((gx, gy, gz), acc, dt, mag)
             s = f._state  # noqa: SLF001 - per-sample flags without building FilterStatus (20 us)
