@@ -21,8 +21,10 @@ offline (its own offline mode). Rows (inclination [deg] unless marked):
 - multirotor (simulated, 6-D, :mod:`cf_estimator.scenarios`): the sustained-acceleration
   cases of issue 22, in the air from the first sample — horizontal zig-zags like the Phantom's
   (``zigzag``, 120 Hz, the DOTs' bias size) and figure-8s on a de-biased gyro (``circles``, at
-  1 kHz and at 100 Hz): inclination RMS and peak after 10 s [deg], and our learned gyro bias's
-  error at the end |b − b_true| [deg/s] (our online column), mean over MULTIROTOR_SEEDS;
+  1 kHz and at 100 Hz, 3 m/s at 0.6 rad/s; and tight ones at 1 kHz, 1 m/s at 1.5 rad/s, a
+  nano-quadrotor's: the case VQF wins, as on the real nano-quadrotor of issue 22): inclination
+  RMS and peak after 10 s [deg], and our learned gyro bias's error at the end |b − b_true|
+  [deg/s] (our online column), mean over MULTIROTOR_SEEDS;
 - aided (6-D, velocity aiding, :mod:`cf_estimator.core.velocity`): ours aided online and
   offline in our two columns (VQF takes no velocity: '-'): phantom4 and phantom4_horizontal with
   their RTK velocity as given, EuRoC with its ground truth's velocity degraded to GNSS quality
@@ -62,10 +64,15 @@ AIDED_FAMILIES = (("phantom4_horizontal", "phantom4 horizontal"), ("phantom4", "
 COMPASS_FRACTIONS = (0.3, 0.5, 1.0)
 COMPASS_SEEDS = (0, 1, 2, 3)
 MIDAIR_STARTS_S = (20.0, 40.0, 60.0)
-#: The simulated multirotor cases: (label, scenario name, rate [Hz] or None for its own).
-MULTIROTOR_CASES = (("zig-zags 4 m/s², 120 Hz", "zigzag", None),
-                    ("figure-8s 1.8 m/s², 1 kHz", "circles", None),
-                    ("figure-8s 1.8 m/s², 100 Hz", "circles", 100.0))
+#: The simulated multirotor cases: (label, scenario name, rate [Hz] or None for its own, the
+#: scenario's keyword arguments).
+MULTIROTOR_CASES: tuple[tuple[str, str, float | None, dict[str, float]], ...] = (
+    ("zig-zags 4 m/s², 120 Hz", "zigzag", None, {}),
+    ("figure-8s 1.8 m/s², 1 kHz", "circles", None, {}),
+    ("figure-8s 1.8 m/s², 100 Hz", "circles", 100.0, {}),
+    ("tight figure-8s 1.5 m/s², 1 kHz", "circles", None,
+     {"speed_m_s": 1.0, "turn_rate_rad_s": 1.5}),
+)
 MULTIROTOR_SEEDS = (0, 1, 2)
 SCENARIOS = ("impacts", "vibration", "acceleration")
 #: A consistent Gaussian's share beyond 2σ (tilt 2-D with σ² = cov[0] + cov[4]; heading 1-D).
@@ -240,8 +247,8 @@ def _compass_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> list
     return rows
 
 
-def _multirotor_case(args: tuple[str, float | None, int, FilterParams, tuple[str, ...]]
-                     ) -> dict[str, tuple[float, ...]]:
+def _multirotor_case(args: tuple[str, float | None, dict[str, float], int, FilterParams,
+                                  tuple[str, ...]]) -> dict[str, tuple[float, ...]]:
     """{column: (RMS, peak) [deg] after 10 s}; ours online also the learned-bias error at the
     end [deg/s] as a third element."""
     import numpy as np
@@ -252,8 +259,8 @@ def _multirotor_case(args: tuple[str, float | None, int, FilterParams, tuple[str
     from cf_estimator.metrics import tilt_error_rad
     from cf_estimator.scenarios import make_scenario
 
-    name, rate, seed, params, peers = args
-    sc = make_scenario(name, rate_hz=rate, seed=seed)
+    name, rate, kwargs, seed, params, peers = args
+    sc = make_scenario(name, rate_hz=rate, seed=seed, **kwargs)
     g, a, t = sc.imu.gyro_rad_s, sc.imu.accel_m_s2, sc.imu.t_s
     p6 = dataclasses.replace(params, use_mag=False)
     runs = {col: estimate(g, a, None, timestamps_s=t, params=p6, offline=off)
@@ -275,12 +282,12 @@ def _multirotor_case(args: tuple[str, float | None, int, FilterParams, tuple[str
 def _multirotor_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> list[Row]:
     from cf_estimator.bench.parallel import run_tasks
 
-    work = [(name, rate, seed, params, tuple(peers))
-            for _, name, rate in MULTIROTOR_CASES for seed in MULTIROTOR_SEEDS]
+    work = [(name, rate, kwargs, seed, params, tuple(peers))
+            for _, name, rate, kwargs in MULTIROTOR_CASES for seed in MULTIROTOR_SEEDS]
     found = run_tasks(_multirotor_case, work, jobs)
     rows = []
     n = len(MULTIROTOR_SEEDS)
-    for k, (label, _, _) in enumerate(MULTIROTOR_CASES):
+    for k, (label, *_) in enumerate(MULTIROTOR_CASES):
         runs = found[k * n:(k + 1) * n]
         for i, (what, unit) in enumerate((("inclination RMS after 10 s", "deg"),
                                           ("inclination peak after 10 s", "deg"),
