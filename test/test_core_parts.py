@@ -224,16 +224,16 @@ def test_a_turn_about_the_vertical_withholds_the_learning_raise():
     s = _bias_state(var)
     raised = bias.learning_gains(s, p, FloatOps)
     assert bias.turn_share(s, p, FloatOps) == 1.0 and raised[1] > p.k2
-    s.turn_rate_lp = -0.05  # the size of a bias still to be learned: the raise barely moves
+    s.turn_hold = 0.05  # the size of a bias still to be learned: the raise barely moves
     assert 0.95 < bias.turn_share(s, p, FloatOps) < 1.0
-    for sign in (1.0, -1.0):  # a figure-8's either loop
-        s.turn_rate_lp = sign * 0.6
+    for sign in (1.0, -1.0):  # a figure-8's either loop (the held size of either)
+        s.turn_hold = abs(sign * 0.6)
         share = bias.turn_share(s, p, FloatOps)
         assert share == pytest.approx((p.k1 ** 2 / (p.k1 ** 2 + 0.36)) ** 2) and share < 0.1
         k1, k2 = bias.learning_gains(s, p, FloatOps)
         assert k2 == pytest.approx(max(p.k2, raised[1] * share)) and k2 < 0.1 * raised[1]
     s = _bias_state(1e-10)
-    s.turn_rate_lp = 3.0  # a fast turn never takes the gains below the shipped ones
+    s.turn_hold = 3.0  # a fast turn never takes the gains below the shipped ones
     assert bias.learning_gains(s, p, FloatOps) == (p.k1, p.k2)
 
 
@@ -255,6 +255,35 @@ def test_the_turn_rate_is_the_rotation_about_the_estimated_vertical():
         for _ in range(int(10 * TURN_LOWPASS_TIME_CONSTANT_S / dt)):
             classify_motion(s, p, gyro, accel, None, up_direction(s), False, dt, FloatOps)
         assert s.turn_rate_lp == pytest.approx(turn, abs=1e-3), (gyro, q)
+
+
+def test_a_figure_8_reversal_keeps_the_turn_held_over_the_loops_memory():
+    """step.classify_motion holds |turn_rate_lp| in turn_hold, decaying over 1/k1: when a turn
+    reverses, the signed low-pass passes through zero, the held size does not (the loop's error
+    still holds the lean of the turn just flown), and it fades as 1/k1 once the turning stops."""
+    from cf_estimator.core.step import classify_motion, up_direction
+
+    p = step_params(FilterParams())
+    s = _bias_state(1e-4)
+    dt, accel = 0.01, (0.0, 0.0, G)
+
+    def fly(rate: float, seconds: float) -> list[tuple[float, float]]:
+        out = []
+        for _ in range(int(round(seconds / dt))):
+            classify_motion(s, p, (0.0, 0.0, rate), accel, None, up_direction(s), False, dt,
+                            FloatOps)
+            out.append((s.turn_rate_lp, s.turn_hold))
+        return out
+
+    fly(1.5, 20.0)  # a sustained turn
+    assert s.turn_hold == pytest.approx(1.5, abs=1e-3)
+    reversal = fly(-1.5, 3.0)
+    lp_min = min(abs(lp) for lp, _ in reversal)
+    assert lp_min < 0.05  # the signed low-pass crosses zero ...
+    assert min(h for _, h in reversal) > 0.5  # ... the held size does not
+    assert all(h >= abs(lp) for lp, h in reversal)
+    fly(0.0, 10.0 / p.k1)  # straight for ten of the loop's memories: the turn is forgotten
+    assert s.turn_hold < 0.01
 
 
 def test_the_velocity_swing_is_the_disagreement_integrated_and_high_passed():

@@ -102,7 +102,7 @@ typedef struct {
         mag_ok_timer_s, mag_cand_timer_s, mag_ref_time_s, g_ref, accel_hold, acx, acy, acz, rate_lp, ex, ey,
         ez, error_norm,
         fx, fy, fz, yaw_error_rad, recovery_count, quick_until_s, pvx, pvy, pv_var,
-        turn_rate_lp, loop_k1;
+        turn_rate_lp, turn_hold, loop_k1;
     char recovering, at_rest, mag_disturbed, heading_initialized, clipped, accel_used, moved,
         bias_unverified, mag_recovering, aided;
     int mag_status, phase;
@@ -492,6 +492,10 @@ static int classify_motion(cf_state *s, const cf_params *p, const double *g, con
     double turn = (gx - s->bx) * v[0] + (gy - s->by) * v[1] + (gz - s->bz) * v[2];
     double tw = dt / (TURN_LOWPASS_TIME_CONSTANT_S + dt);
     s->turn_rate_lp = s->turn_rate_lp + tw * (turn - s->turn_rate_lp);
+    /* its size held over the loop's memory 1/k1 (turn_share) */
+    double memory = 1.0 / maxd(p->k1, BIAS_LEARNING_MIN_K1);
+    s->turn_hold = maxd(maxd(s->turn_rate_lp, -s->turn_rate_lp),
+                        s->turn_hold * (memory / (memory + dt)));
     return quick;
 }
 
@@ -527,7 +531,7 @@ static double saturate(const cf_state *s, const cf_params *p, double en, int qui
 static double turn_share(const cf_state *s, const cf_params *p)
 {
     double k1_2 = sq(maxd(p->k1, BIAS_LEARNING_MIN_K1));
-    double w = s->turn_rate_lp;
+    double w = s->turn_hold;
     double share = k1_2 / (k1_2 + w * w);
     return share * share;
 }
@@ -1214,7 +1218,7 @@ static PyMemberDef State_members[] = {
     SD(blk_d), SD(blk_mx), SD(blk_my), SD(blk_mz), SD(blk_mn), SD(prev_n), SD(pgx), SD(pgy),
     SD(pgz), SD(pax), SD(pay), SD(paz), SD(pmx), SD(pmy), SD(pmz), SD(pm_n), SD(last_n), SD(lgx),
     SD(lgy), SD(lgz), SD(lax), SD(lay), SD(laz), SD(noise_g2), SD(noise_a2), SD(g_ref), SD(bx),
-    SD(by), SD(bz), SD(bias_var), SD(bias_err_var), SB(bias_unverified), SD(pvx), SD(pvy), SD(pv_var), SD(turn_rate_lp), SD(z_m), SD(mag_ref_norm), SD(mag_ref_dip),
+    SD(by), SD(bz), SD(bias_var), SD(bias_err_var), SB(bias_unverified), SD(pvx), SD(pvy), SD(pv_var), SD(turn_rate_lp), SD(turn_hold), SD(z_m), SD(mag_ref_norm), SD(mag_ref_dip),
     SD(mag_ref_count), SB(mag_disturbed), SD(mag_last_time_s), SB(heading_initialized),
     SD(mag_clip_timer_s), SB(mag_recovering), SD(mvx), SD(mvy), SD(mvz), SD(mcx), SD(mcy),
     SD(mcz), SD(mmx), SD(mmy), SD(mmz), SD(mag_cand_norm), SD(mag_seen_time_s), SD(mag_ok_timer_s), SD(mag_cand_timer_s),

@@ -109,18 +109,22 @@ def learning_limit_rad(s: StepState, o: Any) -> Any:
 
 def turn_share(s: StepState, p: Any, o: Any) -> Any:
     """The share [0, 1] of the learning raise left while the vehicle turns about the vertical
-    at ω = ``turn_rate_lp`` [rad/s]: (k1²/(k1² + ω²))², k1 the configured loop gain
+    at ω = ``turn_hold`` [rad/s]: (k1²/(k1² + ω²))², k1 the configured loop gain
     (FilterParams.k1, not the raised one). Turning, a horizontal bias b rotates in the world
     frame and tilts the estimate by only b/|k1 + jω| (its evidence power falls as 1/ω²), while
     the accelerometer's disagreement is the turn's centripetal acceleration ω × v over g (its
     power grows as ω²): the evidence ratio falls as ω⁻⁴ above the loop's bandwidth. A
     constant-rate turn looks the same in the body frame as a bias (a steady error), so raising
     the loop there learns the turn: on a figure-8 the raised loop took up to 6 °/s of a
-    de-biased gyro for bias. ω is low-passed over TURN_LOWPASS_TIME_CONSTANT_S (step.py): a
-    turn long enough to pass for a bias; a gyro bias about the vertical as large as the prior
-    (0.1 rad/s) counts as a turn too, and takes 15 % of the raise."""
+    de-biased gyro for bias. ω is the rate low-passed over TURN_LOWPASS_TIME_CONSTANT_S
+    (step.py: a turn long enough to pass for a bias), its size held while the loop still holds
+    the turn's lean — decaying over the loop's memory 1/k1: a figure-8's reversal passes the
+    signed low-pass through zero in a second, and with it the full raise came back and learned
+    the lean the loop's error still held (tight figure-8s, 1 m/s at 1.5 rad/s: 1.79 → 1.15 °/s
+    learned, 2.12° → 1.55°; BENCHMARKS.md "The tight turn"). A gyro bias about the vertical as
+    large as the prior (0.1 rad/s) counts as a turn too, and takes 15 % of the raise."""
     k1_2 = sq(o.maximum(p.k1, BIAS_LEARNING_MIN_K1))
-    w = s.turn_rate_lp
+    w = s.turn_hold
     share = k1_2 / (k1_2 + w * w)
     return share * share
 

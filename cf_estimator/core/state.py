@@ -100,6 +100,8 @@ BIAS: tuple[Field, ...] = (
     _f("pv_var", "rad^2*s^2", "mean square of |pv|: the vehicle's velocity swing over g^2"),
     _f("turn_rate_lp", "rad/s", "bias-corrected rotation rate about the estimated vertical, "
        "low-passed: the vehicle turning"),
+    _f("turn_hold", "rad/s", "|turn_rate_lp| held, decaying over the loop's memory 1/k1: the "
+       "turn whose lean the loop's error still holds"),
 )
 
 HEADING: tuple[Field, ...] = (

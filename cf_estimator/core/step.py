@@ -66,6 +66,7 @@ from cf_estimator.core import bias
 from cf_estimator.core.bias import (  # noqa: F401 - the constants of the whole step, here too
     BIAS_CONVERGED_SIGMA_RAD_S,
     BIAS_LEARNING_MAX_ERROR_RAD,
+    BIAS_LEARNING_MIN_K1,
     BIAS_LEARNING_NOISE_SIGMAS,
     BIAS_RANDOM_WALK_RAD_S_SQRT_S,
     SWING_TIME_CONSTANT_S,
@@ -335,6 +336,11 @@ def classify_motion(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple 
     turn = (gx - s.bx) * vx + (gy - s.by) * vy + (gz - s.bz) * vz
     tw = dt / (TURN_LOWPASS_TIME_CONSTANT_S + dt)
     s.turn_rate_lp = s.turn_rate_lp + tw * (turn - s.turn_rate_lp)
+    # its size held over the loop's memory 1/k1: the lean a turn left in the loop's error
+    # outlasts a figure-8's reversal (bias.turn_share)
+    memory = 1.0 / o.maximum(p.k1, BIAS_LEARNING_MIN_K1)
+    s.turn_hold = o.maximum(o.maximum(s.turn_rate_lp, -s.turn_rate_lp),
+                            s.turn_hold * (memory / (memory + dt)))
     return quick, accelerating
 
 
