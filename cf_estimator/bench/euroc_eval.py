@@ -307,8 +307,8 @@ HOLD_THRESHOLD_DEG = 2.0
 #: and every estimator part for tens of milliseconds in the fastest rotations (H12_imu1 at
 #: 16.9 s, 235 deg/s: ours online 5.0 deg, offline 4.7, the DOT's own filter 5.9 for 70 ms)
 #: — the two systems' timing, not a filter's hold; judged sample by sample, the DOT's filter,
-#: converged long before each recording starts, "took hold" after a median 45 s (horizontal)
-#: and 22 s (vertical), 0 s with this window.
+#: converged long before each recording starts, "took hold" after a median 31.3 s
+#: (horizontal) and 21.0 s (vertical), 0 s with this window (bench euroc --peers onboard).
 HOLD_TRANSIENT_S = 1.0
 
 

@@ -185,7 +185,6 @@ def drift_rate(s: StepState, o: Any) -> Any:
     return error_sigma(s, o) + GYRO_SCALE_UNCERTAINTY * s.rate_lp
 
 
-
 def integrate(s: StepState, p: Any, f: tuple, k1: Any, k2: Any, learn: Any, small: Any,
               dt: Any, o: Any) -> None:
     """The integral states on the processed error ``f`` [rad, sensor]: the k3 path c and b
