@@ -40,7 +40,7 @@ from cf_estimator.bag.metrics import (
     reference_quaternion,
 )
 from cf_estimator.core import quaternion as quat
-from cf_estimator.core.filter import ComplementaryFilter, bias_sigma
+from cf_estimator.core.filter import ComplementaryFilter, bias_error_sigma
 from cf_estimator.core.kernel import resolve_backend
 from cf_estimator.core.offline import ROW_AIDED, ROW_MOVING
 from cf_estimator.core.params import FilterParams
@@ -94,7 +94,7 @@ class ReplaySeries:
     error_norm_rad: np.ndarray  #: (N,) |e| of the accelerometer channel
     bias_t_s: np.ndarray  #: stamps of the bias samples (decimated to <= 50 Hz) [s]
     gyro_bias_rad_s: np.ndarray  #: (M, 3) gyro-bias estimate at bias_t_s [rad/s, sensor frame]
-    gyro_bias_sigma_rad_s: np.ndarray  #: (M,) its standard deviation [rad/s]
+    gyro_bias_sigma_rad_s: np.ndarray  #: (M,) σ of its error [rad/s] (bias.error_sigma)
     at_rest: np.ndarray  #: (N,) bool per IMU sample: the filter's still phase
     ref_t_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     ref_q_wxyz: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
@@ -494,7 +494,7 @@ class _Run:
         if t >= self.next_bias_t and out.initialized:
             self.bias_t.append(t)
             self.bias.append(tuple(float(c) for c in flt.gyro_bias_rad_s))
-            self.bias_sigma.append(bias_sigma(s))
+            self.bias_sigma.append(bias_error_sigma(s))
             self.next_bias_t = t + _BIAS_SAMPLE_PERIOD_S
         if out.warnings:
             for text in out.warnings:

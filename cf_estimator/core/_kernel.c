@@ -71,15 +71,15 @@
 #define REST_MIN_VARIANCE 1e-12
 #define SQRT3 1.7320508075688772
 #define BIAS_LEARNING_MIN_K1 1e-3
-#define EXTRA_COLUMNS 20
+#define EXTRA_COLUMNS 19
 #define GYRO_LIMIT_RAD_S 1e9 /* filter.GYRO_LIMIT_RAD_S */
-/* extra columns: e(3), b(3), clipped, phase, at_rest, mag_status, bias sigma, l_x, l_y (the
- * aperiodic unit's world-frame state, horizontal: what the accelerometer channel corrects by),
- * yaw_error_rad (the heading channel's last error, 0 when no sample was used), noise_a2 (the
- * stillness blocks' accelerometer noise): what the covariance model (core/covariance.py) reads;
- * then the gyro-bias estimate b - up*z_m (3, filter.gyro_bias_rad_s): what the replay samples;
- * loop_k1 (the loop's running gain) and the bias estimate's error sigma, sqrt(bias_err_var)
- * (bias.error_sigma): what the covariance model reads too */
+/* extra columns: e(3), b(3), clipped, phase, at_rest, mag_status, the bias estimate's error
+ * sigma sqrt(bias_err_var) (bias.error_sigma), l_x, l_y (the aperiodic unit's world-frame state,
+ * horizontal: what the accelerometer channel corrects by), yaw_error_rad (the heading channel's
+ * last error, 0 when no sample was used), noise_a2 (the stillness blocks' accelerometer noise):
+ * what the covariance model (core/covariance.py) reads; then the gyro-bias estimate
+ * b - up*z_m (3, filter.gyro_bias_rad_s): what the replay samples; loop_k1 (the loop's running
+ * gain), which the covariance model reads too */
 
 /* ------------------------------------------------------------------------------------------ */
 typedef struct {
@@ -987,7 +987,7 @@ static PyObject *State_run(StateObject *self, PyObject *args)
             x[7] = s->phase;
             x[8] = s->at_rest;
             x[9] = s->mag_status;
-            x[10] = sqrt(s->bias_var);
+            x[10] = sqrt(s->bias_err_var);
             x[11] = s->lx;
             x[12] = s->ly;
             x[13] = s->yaw_error_rad;
@@ -1000,7 +1000,6 @@ static PyObject *State_run(StateObject *self, PyObject *args)
             x[16] = s->by - s->z_m * upy;
             x[17] = s->bz - s->z_m * upz;
             x[18] = s->loop_k1;
-            x[19] = sqrt(s->bias_err_var);
         }
     }
     Py_END_ALLOW_THREADS

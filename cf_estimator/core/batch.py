@@ -49,7 +49,8 @@ class EstimateResult:
     phase: np.ndarray  #: (N,) int: 0 uninitialized, 1 startup, 2 running, 3 recovering
     at_rest: np.ndarray  #: (N,) bool: still (block statistics); the bias is learned from the gyro
     mag_status: np.ndarray  #: (N,) int: 0 none, 1 used, 2 rejected, 3 disabled
-    gyro_bias_sigma_rad_s: np.ndarray  #: (N,) standard deviation of the bias estimate [rad/s]
+    #: (N,) σ of the bias estimate's error [rad/s] (bias.error_sigma)
+    gyro_bias_sigma_rad_s: np.ndarray
     #: (N,) bool: the sample was velocity-aided (None: no velocity given)
     velocity_aided: np.ndarray | None = None
     #: the velocity aiding's counters and heading offset at the end (None: no velocity given)
@@ -126,7 +127,7 @@ def covariance_rows(extra: np.ndarray, t_s: np.ndarray, q: np.ndarray, params: F
     dts = np.diff(t_s[start:], prepend=t_s[start]).tolist()
     en = np.sqrt(x[:, 0] ** 2 + x[:, 1] ** 2 + x[:, 2] ** 2).tolist()
     clipped = (x[:, 6] != 0.0).tolist()
-    phase, sigma, status = x[:, 7].tolist(), x[:, 19].tolist(), x[:, 9].tolist()
+    phase, sigma, status = x[:, 7].tolist(), x[:, 10].tolist(), x[:, 9].tolist()
     lx, ly = x[:, 11].tolist(), x[:, 12].tolist()
     yaw_err, na2, loop_k1 = x[:, 13].tolist(), x[:, 14].tolist(), x[:, 18].tolist()
     heading = False

@@ -112,7 +112,7 @@ class FilterStatus:
     clipped: bool  #: the saturation unit was active
     processed_error_rad: tuple[float, float, float]  #: after saturation and aperiodic unit
     gyro_bias_rad_s: tuple[float, float, float]  #: bias estimate, sensor frame
-    gyro_bias_sigma_rad_s: float  #: standard deviation of the bias estimate [rad/s]
+    gyro_bias_sigma_rad_s: float  #: σ of the bias estimate's error [rad/s] (bias.error_sigma)
     gyro_bias_converged: bool  #: sigma below BIAS_CONVERGED_SIGMA_RAD_S
     at_rest: bool  #: still (block statistics) for rest_time_s: the bias is learned from the gyro
     accel_used: bool
@@ -133,16 +133,17 @@ class FilterStatus:
 
 
 #: Columns of :meth:`ComplementaryFilter.run_rows`'s ``extra_out``: raw error e (3, rad, sensor),
-#: bias b (3, rad/s, sensor), clipped, phase, at_rest, mag_status, bias sigma [rad/s], and the
-#: aperiodic unit's world-frame state l_x, l_y [rad] (ENU inside: the horizontal error the
+#: bias b (3, rad/s, sensor), clipped, phase, at_rest, mag_status, the bias estimate's error σ
+#: [rad/s] (bias.error_sigma: what the diagnostics report and the covariance model's drift
+#: terms take), and the aperiodic unit's world-frame state l_x, l_y [rad] (ENU inside: the
+#: horizontal error the
 #: accelerometer channel corrects the tilt by; the covariance model averages it), the heading
 #: channel's last error [rad] (0 when the step used no magnetometer sample) and the stillness
 #: blocks' accelerometer noise noise_a2 [(m/s²)²]: what core/covariance.py reads; then the
 #: gyro-bias estimate (3, rad/s, sensor: :attr:`ComplementaryFilter.gyro_bias_rad_s`, b minus
-#: the heading channel's rate on the sensor axes): what the replay samples; the loop's running
-#: gain loop_k1 [1/s]; and the bias estimate's error σ [rad/s] (bias.error_sigma), which the
-#: covariance model's drift terms take.
-EXTRA_COLUMNS = 20
+#: the heading channel's rate on the sensor axes): what the replay samples; and the loop's
+#: running gain loop_k1 [1/s].
+EXTRA_COLUMNS = 19
 
 
 def state_extras(s: Any) -> tuple:
@@ -150,8 +151,7 @@ def state_extras(s: Any) -> tuple:
     same columns in ``State.run``)."""
     bx, by, bz = gyro_bias_of(s)
     return (s.ex, s.ey, s.ez, s.bx, s.by, s.bz, s.clipped, s.phase, s.at_rest, s.mag_status,
-            bias_sigma(s), s.lx, s.ly, s.yaw_error_rad, s.noise_a2, bx, by, bz, s.loop_k1,
-            bias_error_sigma(s))
+            bias_error_sigma(s), s.lx, s.ly, s.yaw_error_rad, s.noise_a2, bx, by, bz, s.loop_k1)
 
 
 def gyro_bias_of(s: Any) -> tuple[float, float, float]:
@@ -159,11 +159,6 @@ def gyro_bias_of(s: Any) -> tuple[float, float, float]:
     channel's world-vertical rate z_m on the sensor axes (b − Rᵀ·ẑ·z_m)."""
     upx, upy, upz = up_direction(s)
     return (s.bx - s.z_m * upx, s.by - s.z_m * upy, s.bz - s.z_m * upz)
-
-
-def bias_sigma(s: Any) -> float:
-    """Standard deviation of the bias estimate [rad/s] (the prior before the first step)."""
-    return math.sqrt(s.bias_var) if s.bias_var >= 0.0 else math.nan
 
 
 def bias_error_sigma(s: Any) -> float:
@@ -440,8 +435,8 @@ class ComplementaryFilter:
             clipped=bool(s.clipped),
             processed_error_rad=(float(s.fx), float(s.fy), float(s.fz)),
             gyro_bias_rad_s=tuple(float(c) for c in self.gyro_bias_rad_s),  # type: ignore[arg-type]
-            gyro_bias_sigma_rad_s=bias_sigma(s),
-            gyro_bias_converged=bias_sigma(s) < BIAS_CONVERGED_SIGMA_RAD_S,
+            gyro_bias_sigma_rad_s=bias_error_sigma(s),
+            gyro_bias_converged=bias_error_sigma(s) < BIAS_CONVERGED_SIGMA_RAD_S,
             at_rest=bool(s.at_rest),
             accel_used=bool(s.accel_used),
             mag_status=MAG_STATUS_NAMES[int(s.mag_status)],

@@ -522,7 +522,7 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
     else:
         ages = None
     tilts, yaws = p.covariance_model.rows(
-        dt, clipped_col, extra[:, 19], extra[:, 7], en_arr, extra[:, 11], extra[:, 12],
+        dt, clipped_col, extra[:, 10], extra[:, 7], en_arr, extra[:, 11], extra[:, 12],
         extra[:, 14], heading, extra[:, 13], used, ages, extra[:, 18], f.backend)
     cov = np.zeros((n, 9))
     cov[:, 0] = tilts
