@@ -136,9 +136,9 @@ class FilterStatus:
 #: bias b (3, rad/s, sensor), clipped, phase, at_rest, mag_status, the bias estimate's error σ
 #: [rad/s] (bias.error_sigma: what the diagnostics report and the covariance model's drift
 #: terms take), and the aperiodic unit's world-frame state l_x, l_y [rad] (ENU inside: the
-#: horizontal error the
-#: accelerometer channel corrects the tilt by; the covariance model averages it), the heading
-#: channel's last error [rad] (0 when the step used no magnetometer sample) and the stillness
+#: horizontal error the accelerometer channel corrects the tilt by; the covariance model
+#: averages it), the heading channel's last error [rad] (0 when the step used no magnetometer
+#: sample) and the stillness
 #: blocks' accelerometer noise noise_a2 [(m/s²)²]: what core/covariance.py reads; then the
 #: gyro-bias estimate (3, rad/s, sensor: :attr:`ComplementaryFilter.gyro_bias_rad_s`, b minus
 #: the heading channel's rate on the sensor axes): what the replay samples; and the loop's
