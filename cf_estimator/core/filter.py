@@ -138,11 +138,10 @@ class FilterStatus:
 #: terms take), and the aperiodic unit's world-frame state l_x, l_y [rad] (ENU inside: the
 #: horizontal error the accelerometer channel corrects the tilt by; the covariance model
 #: averages it), the heading channel's last error [rad] (0 when the step used no magnetometer
-#: sample) and the stillness
-#: blocks' accelerometer noise noise_a2 [(m/s²)²]: what core/covariance.py reads; then the
-#: gyro-bias estimate (3, rad/s, sensor: :attr:`ComplementaryFilter.gyro_bias_rad_s`, b minus
-#: the heading channel's rate on the sensor axes): what the replay samples; and the loop's
-#: running gain loop_k1 [1/s].
+#: sample) and the stillness blocks' accelerometer noise noise_a2 [(m/s²)²]: what
+#: core/covariance.py reads; then the gyro-bias estimate (3, rad/s, sensor:
+#: :attr:`ComplementaryFilter.gyro_bias_rad_s`, b minus the heading channel's rate on the
+#: sensor axes): what the replay samples; and the loop's running gain loop_k1 [1/s].
 EXTRA_COLUMNS = 19
 
 
