@@ -145,17 +145,18 @@ def test_euroc_ground_rest_is_still_found_and_the_bias_learned():
 def test_euroc_mid_air_start_learns_the_horizontal_bias_within_20_s():
     """Cropped to start in the air 20, 40, 60 s into each flight: the sensor's x axis is up, y
     and z are horizontal (the observable ones); their ground-rest bias (0.021, 0.077 rad/s).
-    After 20 s in the air y is within 0.015 rad/s on every crop; z settles 0.007-0.015 rad/s
-    below its ground-rest value on every crop (and stays there at 25 and 30 s, in every release
-    since this test was written: the bias in flight, not a learning still under way), so z is
-    held to a common value within 0.015 rad/s and every crop within 0.006 rad/s of it."""
+    Over 20-30 s in the air (the estimate's mean: a single instant catches the loop's
+    fluctuation, 0.004 rad/s on MH_03) y is within 0.015 rad/s on every crop; z settles
+    0.007-0.015 rad/s below its ground-rest value on every crop (in every release since this
+    test was written: the bias in flight, not a learning still under way), so z is held to a
+    common value within 0.015 rad/s and every crop within 0.006 rad/s of it."""
     errors = []
     for start_s in (20.0, 40.0, 60.0):
         for f in _flights("euroc"):
             c = f.cropped(start_s)
             r = estimate(c.gyro_rad_s, c.accel_m_s2, None, timestamps_s=c.t_s,
                          params=FilterParams(use_mag=False))
-            b = r.gyro_bias_rad_s[int(np.searchsorted(c.t_s, 20.0))]
+            b = r.gyro_bias_rad_s[(c.t_s >= 20.0) & (c.t_s <= 30.0)].mean(axis=0)
             errors.append((c.name, b[1] - 0.021, b[2] - 0.077))
     assert len(errors) == 9
     assert max(abs(y) for _, y, _ in errors) < 0.015, errors

@@ -136,12 +136,14 @@ def test_horizontal_zig_zags_leave_an_imu_only_filter_far_more_than_vertical_one
     # the loop itself is not what fails in the zig-zags: with the bias the reference shows
     # (learning off) it is below ours online there (0.70 of it; 0.42 before the running mean in
     # start-up), and below it on the vertical flights too; on the horizontal ones the in-flight
-    # learned bias is still wrong at the end
+    # learned bias is still further off at the end (0.49 against 0.34 °/s on these; 0.76
+    # against 0.38 °/s before the integral learned through the unit's own lag,
+    # step.learning_input)
     assert (horizontal.measured_deg["cf_estimator_reference_bias"]
             < 0.85 * horizontal.measured_deg["cf_estimator"])
     assert (vertical.measured_deg["cf_estimator_reference_bias"]
             < vertical.measured_deg["cf_estimator"])
-    assert horizontal.bias_error_end_deg_s > 2 * vertical.bias_error_end_deg_s
+    assert horizontal.bias_error_end_deg_s > vertical.bias_error_end_deg_s
     # ... and most of what ours loses is in the first seconds after the in-air start
     early, late = horizontal.measured_split_deg["cf_estimator"]
     assert early > late

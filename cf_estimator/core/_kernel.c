@@ -93,7 +93,8 @@ typedef struct {
 } cf_params;
 
 typedef struct {
-    double qw, qx, qy, qz, bx, by, bz, cx, cy, cz, lx, ly, lz, z_m, time_s, clip_timer_s,
+    double qw, qx, qy, qz, bx, by, bz, cx, cy, cz, lx, ly, lz, rxx, rxy, rxz, ryx, ryy, ryz, rzx,
+        rzy, rzz, z_m, time_s, clip_timer_s,
         rest_timer_s, blk_n, blk_t, blk_gx, blk_gy, blk_gz, blk_ax, blk_ay, blk_az, blk_g2, blk_a2,
         prev_n, pgx, pgy, pgz, pax, pay, paz, blk_d, last_n, lgx, lgy, lgz, lax, lay, laz,
         noise_g2, noise_a2, bias_var, bias_err_var, blk_mx, blk_my, blk_mz, blk_mn, pmx, pmy, pmz, pm_n,
@@ -187,6 +188,15 @@ static void turn_heading(cf_state *s, double angle)
     double pvx = c * s->pvx - sn * s->pvy, pvy = sn * s->pvx + c * s->pvy;
     s->pvx = pvx;
     s->pvy = pvy;
+    double rxx = c * s->rxx - sn * s->ryx, ryx = sn * s->rxx + c * s->ryx;
+    double rxy = c * s->rxy - sn * s->ryy, ryy = sn * s->rxy + c * s->ryy;
+    double rxz = c * s->rxz - sn * s->ryz, ryz = sn * s->rxz + c * s->ryz;
+    s->rxx = rxx;
+    s->ryx = ryx;
+    s->rxy = rxy;
+    s->ryy = ryy;
+    s->rxz = rxz;
+    s->ryz = ryz;
 }
 
 /* _toward_unit() of step.py: v <- normalise(v + a (u - v)) */
@@ -562,9 +572,29 @@ static void learning_gains(const cf_state *s, const cf_params *p, double loop, d
     *k1 = maxd(loop, 2.0 * sqrt(*k2));
 }
 
-/* aperiodic() of step.py: the unit in the world frame on the saturated error; f into s->fx.. */
+/* learning_input() of step.py: R low-passed as the unit (its weight), and R-bar^T l into g */
+static void learning_input(cf_state *s, const double *l, double weight, double *g)
+{
+    double qw = s->qw, qx = s->qx, qy = s->qy, qz = s->qz;
+    double w = (s->rxx * s->rxx + s->ryy * s->ryy + s->rzz * s->rzz == 0.0) ? 1.0 : weight;
+    s->rxx = s->rxx + w * (1.0 - 2.0 * (qy * qy + qz * qz) - s->rxx);
+    s->rxy = s->rxy + w * (2.0 * (qx * qy - qw * qz) - s->rxy);
+    s->rxz = s->rxz + w * (2.0 * (qx * qz + qw * qy) - s->rxz);
+    s->ryx = s->ryx + w * (2.0 * (qx * qy + qw * qz) - s->ryx);
+    s->ryy = s->ryy + w * (1.0 - 2.0 * (qx * qx + qz * qz) - s->ryy);
+    s->ryz = s->ryz + w * (2.0 * (qy * qz - qw * qx) - s->ryz);
+    s->rzx = s->rzx + w * (2.0 * (qx * qz - qw * qy) - s->rzx);
+    s->rzy = s->rzy + w * (2.0 * (qy * qz + qw * qx) - s->rzy);
+    s->rzz = s->rzz + w * (1.0 - 2.0 * (qx * qx + qy * qy) - s->rzz);
+    g[0] = s->rxx * l[0] + s->ryx * l[1] + s->rzx * l[2];
+    g[1] = s->rxy * l[0] + s->ryy * l[1] + s->rzy * l[2];
+    g[2] = s->rxz * l[0] + s->ryz * l[1] + s->rzz * l[2];
+}
+
+/* aperiodic() of step.py: the unit in the world frame on the saturated error; f into s->fx..,
+   the learning input into g */
 static void aperiodic(cf_state *s, const cf_params *p, double scale, int quick, int tight,
-                      double dt, double *f)
+                      double dt, double *f, double *g)
 {
     double w[3], k1, k2;
     rotate(s->qw, s->qx, s->qy, s->qz, s->ex * scale, s->ey * scale, s->ez * scale, w);
@@ -575,19 +605,21 @@ static void aperiodic(cf_state *s, const cf_params *p, double scale, int quick, 
     s->lx = s->lx + weight * (w[0] - s->lx);
     s->ly = s->ly + weight * (w[1] - s->ly);
     s->lz = s->lz + weight * (w[2] - s->lz);
-    if (quick)
-        rotate(s->qw, -s->qx, -s->qy, -s->qz, w[0], w[1], w[2], f);
-    else
-        rotate(s->qw, -s->qx, -s->qy, -s->qz, s->lx, s->ly, s->lz, f);
+    double l[3];
+    l[0] = quick ? w[0] : s->lx;
+    l[1] = quick ? w[1] : s->ly;
+    l[2] = quick ? w[2] : s->lz;
+    rotate(s->qw, -s->qx, -s->qy, -s->qz, l[0], l[1], l[2], f);
     s->fx = f[0];
     s->fy = f[1];
     s->fz = f[2];
+    learning_input(s, l, weight, g);
 }
 
 /* regulate() of step.py (bias.integrate inlined) */
-static void regulate(cf_state *s, const cf_params *p, const double *f, double en,
-                     const double *u, const double *v, int quick, int tight, int learn,
-                     double dt)
+static void regulate(cf_state *s, const cf_params *p, const double *f, const double *g,
+                     double en, const double *u, const double *v, int quick, int tight,
+                     int learn, double dt)
 {
     double d[4], w[3];
     /* bias.observe_velocity_swing: the raw error integrated in the world frame */
@@ -601,17 +633,17 @@ static void regulate(cf_state *s, const cf_params *p, const double *f, double en
     learning_gains(s, p, loop, &k1, &k2);
     s->loop_k1 = maxd(loop, 2.0 * sqrt(p->k2));
     double k3dt = learn ? p->k3 * dt : 0.0;
-    s->cx = s->cx + k3dt * f[0];
-    s->cy = s->cy + k3dt * f[1];
-    s->cz = s->cz + k3dt * f[2];
+    s->cx = s->cx + k3dt * g[0];
+    s->cy = s->cy + k3dt * g[1];
+    s->cz = s->cz + k3dt * g[2];
     /* bias.learning_limit_rad: unaided, widened by one sample's scatter */
     double widen = BIAS_LEARNING_NOISE_SIGMAS * sqrt(s->noise_a2) / s->g_ref;
     double limit = BIAS_LEARNING_MAX_ERROR_RAD + (s->aided ? 0.0 : widen);
     int small = (en < limit) && (u[0] * v[0] + u[1] * v[1] + u[2] * v[2] > 0.0);
     double ldt = (learn && small) ? dt : 0.0;
-    s->bx = s->bx - ldt * (k2 * f[0] + s->cx);
-    s->by = s->by - ldt * (k2 * f[1] + s->cy);
-    s->bz = s->bz - ldt * (k2 * f[2] + s->cz);
+    s->bx = s->bx - ldt * (k2 * g[0] + s->cx);
+    s->by = s->by - ldt * (k2 * g[1] + s->cy);
+    s->bz = s->bz - ldt * (k2 * g[2] + s->cz);
     double k1m = maxd(k1, BIAS_LEARNING_MIN_K1);
     s->bias_var = s->bias_var / (1.0 + ldt * k2 / k1m);
     s->bias_err_var = s->bias_err_var / (1.0 + 2.0 * ldt * k2 / k1m);
@@ -658,13 +690,13 @@ static void cf_step(cf_state *s, const cf_params *p, const double *g, const doub
     s->accel_used = acc != NULL;
     if (acc != NULL) {
         int accelerating, tight, clipped;
-        double u[3], v[3], f[3], limit;
+        double u[3], v[3], f[3], li[3], limit;
         up(s, v); /* q is the predicted one until regulate() corrects it */
         int quick = classify_motion(s, p, g, acc, mag, v, fast, dt, &accelerating);
         double en = tilt_error(s, acc, v, u);
         double scale = saturate(s, p, en, quick, accelerating, &limit, &tight, &clipped);
-        aperiodic(s, p, scale, quick, tight, dt, f);
-        regulate(s, p, f, en, u, v, quick, tight, learn, dt);
+        aperiodic(s, p, scale, quick, tight, dt, f, li);
+        regulate(s, p, f, li, en, u, v, quick, tight, learn, dt);
         recover(s, p, clipped, en, limit, learn, dt);
     }
     double lim = p->bias_limit_rad_s;
@@ -1210,7 +1242,8 @@ static PyMethodDef State_methods[] = {
 #define SB(n) {#n, T_BOOL, offsetof(StateObject, s) + offsetof(cf_state, n), 0, NULL}
 #define SI(n) {#n, T_INT, offsetof(StateObject, s) + offsetof(cf_state, n), 0, NULL}
 static PyMemberDef State_members[] = {
-    SD(qw), SD(qx), SD(qy), SD(qz), SD(cx), SD(cy), SD(cz), SD(lx), SD(ly), SD(lz), SD(time_s),
+    SD(qw), SD(qx), SD(qy), SD(qz), SD(cx), SD(cy), SD(cz), SD(lx), SD(ly), SD(lz), SD(rxx),
+    SD(rxy), SD(rxz), SD(ryx), SD(ryy), SD(ryz), SD(rzx), SD(rzy), SD(rzz), SD(time_s),
     SD(clip_timer_s), SB(recovering), SD(recovery_count), SD(accel_hold), SD(acx), SD(acy), SD(acz),
     SD(rate_lp), SI(phase), SB(aided), SD(quick_until_s), SD(rest_timer_s), SB(at_rest), SB(moved), SD(blk_n), SD(blk_t),
     SD(blk_gx), SD(blk_gy), SD(blk_gz), SD(blk_ax), SD(blk_ay), SD(blk_az), SD(blk_g2), SD(blk_a2),

@@ -16,7 +16,8 @@ The estimate b (sensor frame, rad/s) is the PI regulator's integral state; its v
   itself is lowered below the configured one when the velocity swing is large
   (:func:`loop_gain`: √(d/σ_V), the gyro's drift rate d — from the estimate's error,
   :func:`error_sigma`, not the schedule's σ_b — against the swing);
-- :func:`integrate` — the integral itself (k2 and the k3 path on the processed error), except
+- :func:`integrate` — the integral itself (k2 and the k3 path on the learning input R̄ᵀ·l,
+  step.learning_input: the bias direction the aperiodic unit's state shows), except
   from an error too large to be a bias (:func:`learning_limit_rad`, anti-windup, no narrower
   than the samples' own scatter); the variance shrinks as it learns (time constant k1/k2);
 - :func:`clamp` — bounded by ``bias_limit_rad_s``.
@@ -121,7 +122,10 @@ def turn_share(s: StepState, p: Any, o: Any) -> Any:
     the turn's lean — decaying over the loop's memory 1/k1: a figure-8's reversal passes the
     signed low-pass through zero in a second, and with it the full raise came back and learned
     the lean the loop's error still held (tight figure-8s, 1 m/s at 1.5 rad/s: 1.79 → 1.15 °/s
-    learned, 2.12° → 1.55°; BENCHMARKS.md "The tight turn"). A gyro bias about the vertical as
+    learned, 2.12° → 1.55°; with the integral learning through the unit's own lag,
+    step.learning_input, 0.25 °/s and 0.75°; BENCHMARKS.md "The tight turn"). Without the
+    share, the raise at full power in a turn learns what the turn leaves: tight 4.85°. A gyro
+    bias about the vertical as
     large as the prior (0.1 rad/s) counts as a turn too, and takes 15 % of the raise."""
     k1_2 = sq(o.maximum(p.k1, BIAS_LEARNING_MIN_K1))
     w = s.turn_hold
@@ -187,7 +191,8 @@ def drift_rate(s: StepState, o: Any) -> Any:
 
 def integrate(s: StepState, p: Any, f: tuple, k1: Any, k2: Any, learn: Any, small: Any,
               dt: Any, o: Any) -> None:
-    """The integral states on the processed error ``f`` [rad, sensor]: the k3 path c and b
+    """The integral states on the learning input ``f`` [rad, sensor] (R̄ᵀ·l,
+    step.learning_input): the k3 path c and b
     (``learn``: not in start-up/recovery; ``small``: the raw error is small enough to be a
     bias's, see :func:`learning_limit_rad`); the variance shrinks as the integral learns."""
     fx, fy, fz = f

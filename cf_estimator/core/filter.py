@@ -266,8 +266,8 @@ class ComplementaryFilter:
         alignment, once it is known): q ← Exp(tilt_rad) ⊗ q, ``tilt_rad`` the rotation vector
         [rad] in the output world frame (ENU or NED) from the filter's tilt to the outside one;
         the bias estimate ← ``bias_rad_s`` [rad/s] (sensor frame). The aperiodic unit's memory
-        of errors measured against the old tilt is cleared. ValueError (state untouched) unless
-        both are 3 finite values."""
+        of errors measured against the old tilt (and its low-passed R̄) is cleared. ValueError
+        (state untouched) unless both are 3 finite values."""
         rot = np.asarray(tilt_rad, dtype=float)
         bias = np.asarray(bias_rad_s, dtype=float)
         if rot.shape != (3,) or bias.shape != (3,) or not (np.isfinite(rot).all()
@@ -281,6 +281,8 @@ class ComplementaryFilter:
         s.qw, s.qx, s.qy, s.qz = (float(c) for c in q)
         s.bx, s.by, s.bz = (float(c) for c in bias)
         s.lx = s.ly = s.lz = 0.0
+        for name in ("rxx", "rxy", "rxz", "ryx", "ryy", "ryz", "rzx", "rzy", "rzz"):
+            setattr(s, name, 0.0)  # the unit's R̄ starts again with it (step.learning_input)
 
     def set_aided(self, aided: bool) -> None:
         """Say whether the next update's accelerometer sample is velocity-aided (the vehicle's

@@ -194,11 +194,12 @@ def _rotate(qw: Any, qx: Any, qy: Any, qz: Any, vx: Any, vy: Any, vz: Any) -> tu
 
 def turn_heading(s: StepState, angle: Any, o: Any) -> None:
     """q ← Exp_z(angle) ⊗ q (a world-vertical rotation), and the world-frame horizontal states
-    with it: the lag state l and the pseudo-velocity pv (bias.observe_velocity_swing).
+    with it: the lag state l, the low-passed R̄ (rows x, y) and the pseudo-velocity pv
+    (bias.observe_velocity_swing).
 
     Turning them too keeps the tilt path exactly independent of heading corrections: f = Rᵀ·l
-    is unchanged, and so is |pv| (the swing σ_V that sets the loop gain, bias.loop_gain), so the
-    magnetometer can never move roll/pitch.
+    and the learning input R̄ᵀ·l are unchanged, and so is |pv| (the swing σ_V that sets the
+    loop gain, bias.loop_gain), so the magnetometer can never move roll/pitch.
     """
     cw, cz = o.cos(0.5 * angle), o.sin(0.5 * angle)
     s.qw, s.qx, s.qy, s.qz = (
@@ -210,6 +211,9 @@ def turn_heading(s: StepState, angle: Any, o: Any) -> None:
     c, sn = cw * cw - cz * cz, 2.0 * cw * cz
     s.lx, s.ly = c * s.lx - sn * s.ly, sn * s.lx + c * s.ly
     s.pvx, s.pvy = c * s.pvx - sn * s.pvy, sn * s.pvx + c * s.pvy
+    s.rxx, s.ryx = c * s.rxx - sn * s.ryx, sn * s.rxx + c * s.ryx
+    s.rxy, s.ryy = c * s.rxy - sn * s.ryy, sn * s.rxy + c * s.ryy
+    s.rxz, s.ryz = c * s.rxz - sn * s.ryz, sn * s.rxz + c * s.ryz
 
 
 def _toward_unit(v: tuple, u: tuple, a: Any, o: Any) -> tuple:
@@ -262,8 +266,8 @@ def step(
         quick, accelerating = classify_motion(s, p, gyro, accel, mag, up, fast, dt, o)
         u, v, en = tilt_error(s, accel, up, o)
         scale, limit, tight, clipped = saturate(s, p, en, quick, accelerating, o)
-        f = aperiodic(s, p, scale, quick, tight, dt, o)
-        regulate(s, p, f, en, u, v, quick, tight, learn, dt, o)
+        f, g = aperiodic(s, p, scale, quick, tight, dt, o)
+        regulate(s, p, f, g, en, u, v, quick, tight, learn, dt, o)
         recover(s, p, clipped, en, limit, learn, dt, o)
     bias.clamp(s, p, o)
 
@@ -398,12 +402,45 @@ def aperiodic(s: StepState, p: Any, scale: Any, quick: Any, tight: Any, dt: Any,
     lx, ly, lz = o.where(quick, wx, s.lx), o.where(quick, wy, s.ly), o.where(quick, wz, s.lz)
     fx, fy, fz = _rotate(s.qw, -s.qx, -s.qy, -s.qz, lx, ly, lz)
     s.fx, s.fy, s.fz = fx, fy, fz
-    return fx, fy, fz
+    return (fx, fy, fz), learning_input(s, (lx, ly, lz), weight, o)
 
 
-def regulate(s: StepState, p: Any, f: tuple, en: Any, u: tuple, v: tuple, quick: Any,
-             tight: Any, learn: Any, dt: Any, o: Any) -> None:
-    """Stage 5: the PI(+k3) regulator on f; its integral states are the bias estimate.
+def learning_input(s: StepState, lag: tuple, weight: Any, o: Any) -> tuple:
+    """R̄ᵀ·l [rad, sensor frame]: what the integral (the bias estimate) learns from.
+
+    The unit's state l is the world-frame error low-passed over its memory T. The proportional
+    path corrects by f = Rᵀ·l, the current attitude's view of it; the integral learns from
+    R̄ᵀ·l, R̄ the rotation R (sensor → world) low-passed as the unit low-passes (the same
+    ``weight``): a lagged world vector mapped back by an equally lagged rotation. At rest or in
+    a translation R̄ = R and the two agree. While the body turns about the vertical at ω, a
+    sensor-fixed error e (what a gyro bias leaves, and what a multirotor's rotor drag and a
+    steady turn's lean leave too) comes back along its own axis as e/(1 + (ωT)²): the turn
+    averages it out of the world frame, and the learning fades as that evidence does. Through
+    f = Rᵀ·l the same e came back turned by atan(ωT) about the vertical (72° at 1.5 rad/s over
+    2 s), into other axes, one way in a left turn and the other in a right one: a tight
+    figure-8 taught 1.15 °/s of bias to a de-biased gyro (now 0.25 °/s; BENCHMARKS.md "The
+    tight turn"). R̄ starts as R (all zero: not set yet), is turned with heading corrections
+    (:func:`turn_heading`) and cleared with the unit (ComplementaryFilter.realign)."""
+    lx, ly, lz = lag
+    qw, qx, qy, qz = s.qw, s.qx, s.qy, s.qz
+    w = o.where(s.rxx * s.rxx + s.ryy * s.ryy + s.rzz * s.rzz == 0.0, 1.0, weight)
+    s.rxx = s.rxx + w * (1.0 - 2.0 * (qy * qy + qz * qz) - s.rxx)
+    s.rxy = s.rxy + w * (2.0 * (qx * qy - qw * qz) - s.rxy)
+    s.rxz = s.rxz + w * (2.0 * (qx * qz + qw * qy) - s.rxz)
+    s.ryx = s.ryx + w * (2.0 * (qx * qy + qw * qz) - s.ryx)
+    s.ryy = s.ryy + w * (1.0 - 2.0 * (qx * qx + qz * qz) - s.ryy)
+    s.ryz = s.ryz + w * (2.0 * (qy * qz - qw * qx) - s.ryz)
+    s.rzx = s.rzx + w * (2.0 * (qx * qz - qw * qy) - s.rzx)
+    s.rzy = s.rzy + w * (2.0 * (qy * qz + qw * qx) - s.rzy)
+    s.rzz = s.rzz + w * (1.0 - 2.0 * (qx * qx + qy * qy) - s.rzz)
+    return (s.rxx * lx + s.ryx * ly + s.rzx * lz, s.rxy * lx + s.ryy * ly + s.rzy * lz,
+            s.rxz * lx + s.ryz * ly + s.rzz * lz)
+
+
+def regulate(s: StepState, p: Any, f: tuple, g: tuple, en: Any, u: tuple, v: tuple,
+             quick: Any, tight: Any, learn: Any, dt: Any, o: Any) -> None:
+    """Stage 5: the PI(+k3) regulator on f; its integral states are the bias estimate, learned
+    from g = R̄ᵀ·l (:func:`learning_input`).
 
     While the bias is uncertain (no still phase yet) the loop runs faster: k2 up to
     bias_learning_k2 in proportion to the bias variance (at most σ_b/σ_V: the vehicle's
@@ -426,7 +463,7 @@ def regulate(s: StepState, p: Any, f: tuple, en: Any, u: tuple, v: tuple, quick:
     # does not learn from it (anti-windup; beyond 90° the cross product shrinks again, hence
     # the sign of the dot product too)
     small = (en < bias.learning_limit_rad(s, o)) & (ux * vx + uy * vy + uz * vz > 0.0)
-    bias.integrate(s, p, (fx, fy, fz), k1, k2, learn, small, dt, o)
+    bias.integrate(s, p, g, k1, k2, learn, small, dt, o)
     # start-up in motion (a block that was not still, or a velocity that says so: moved is
     # also set by ComplementaryFilter.mark_moving): the running mean of the accelerometer
     # since initialisation (gain 1/t, the least-squares tilt of the samples so far, turned by
