@@ -575,20 +575,34 @@ static void learning_gains(const cf_state *s, const cf_params *p, double loop, d
 /* learning_input() of step.py: R low-passed as the unit (its weight), and R-bar^T l into g */
 static void learning_input(cf_state *s, const double *l, double weight, double *g)
 {
-    double qw = s->qw, qx = s->qx, qy = s->qy, qz = s->qz;
-    double w = (s->rxx * s->rxx + s->ryy * s->ryy + s->rzz * s->rzz == 0.0) ? 1.0 : weight;
-    s->rxx = s->rxx + w * (1.0 - 2.0 * (qy * qy + qz * qz) - s->rxx);
-    s->rxy = s->rxy + w * (2.0 * (qx * qy - qw * qz) - s->rxy);
-    s->rxz = s->rxz + w * (2.0 * (qx * qz + qw * qy) - s->rxz);
-    s->ryx = s->ryx + w * (2.0 * (qx * qy + qw * qz) - s->ryx);
-    s->ryy = s->ryy + w * (1.0 - 2.0 * (qx * qx + qz * qz) - s->ryy);
-    s->ryz = s->ryz + w * (2.0 * (qy * qz - qw * qx) - s->ryz);
-    s->rzx = s->rzx + w * (2.0 * (qx * qz - qw * qy) - s->rzx);
-    s->rzy = s->rzy + w * (2.0 * (qy * qz + qw * qx) - s->rzy);
-    s->rzz = s->rzz + w * (1.0 - 2.0 * (qx * qx + qy * qy) - s->rzz);
-    g[0] = s->rxx * l[0] + s->ryx * l[1] + s->rzx * l[2];
-    g[1] = s->rxy * l[0] + s->ryy * l[1] + s->rzy * l[2];
-    g[2] = s->rxz * l[0] + s->ryz * l[1] + s->rzz * l[2];
+    /* the products once (the same bits as the Python's inline ones), R-bar in locals */
+    double xx = s->qx * s->qx, yy = s->qy * s->qy, zz = s->qz * s->qz, xy = s->qx * s->qy,
+           xz = s->qx * s->qz, yz = s->qy * s->qz, wx = s->qw * s->qx, wy = s->qw * s->qy,
+           wz = s->qw * s->qz;
+    double rxx = s->rxx, rxy = s->rxy, rxz = s->rxz, ryx = s->ryx, ryy = s->ryy, ryz = s->ryz,
+           rzx = s->rzx, rzy = s->rzy, rzz = s->rzz;
+    double w = (rxx * rxx + ryy * ryy + rzz * rzz == 0.0) ? 1.0 : weight;
+    rxx = rxx + w * (1.0 - 2.0 * (yy + zz) - rxx);
+    rxy = rxy + w * (2.0 * (xy - wz) - rxy);
+    rxz = rxz + w * (2.0 * (xz + wy) - rxz);
+    ryx = ryx + w * (2.0 * (xy + wz) - ryx);
+    ryy = ryy + w * (1.0 - 2.0 * (xx + zz) - ryy);
+    ryz = ryz + w * (2.0 * (yz - wx) - ryz);
+    rzx = rzx + w * (2.0 * (xz - wy) - rzx);
+    rzy = rzy + w * (2.0 * (yz + wx) - rzy);
+    rzz = rzz + w * (1.0 - 2.0 * (xx + yy) - rzz);
+    g[0] = rxx * l[0] + ryx * l[1] + rzx * l[2];
+    g[1] = rxy * l[0] + ryy * l[1] + rzy * l[2];
+    g[2] = rxz * l[0] + ryz * l[1] + rzz * l[2];
+    s->rxx = rxx;
+    s->rxy = rxy;
+    s->rxz = rxz;
+    s->ryx = ryx;
+    s->ryy = ryy;
+    s->ryz = ryz;
+    s->rzx = rzx;
+    s->rzy = rzy;
+    s->rzz = rzz;
 }
 
 /* aperiodic() of step.py: the unit in the world frame on the saturated error; f into s->fx..,
