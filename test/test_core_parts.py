@@ -5,7 +5,8 @@
   blocks are never rest, EuRoC's ground phase is; a steady turn with a magnetometer is motion;
 - bias estimator (core/bias.py): the Kalman fusion at rest, the gains while uncertain (withheld
   in a turn), the anti-windup (widened by the samples' scatter, unaided) and the bound;
-- the aperiodic unit (core/step.py) kept at most 0.75/k1 inside a raised loop.
+- the aperiodic unit (core/step.py) kept at most 0.75/k1 inside a raised loop, and what the
+  integral learns from it (R̄ᵀ·l: a sensor-fixed error along its own axis, faded by a turn).
 """
 
 from __future__ import annotations
@@ -372,3 +373,57 @@ def test_the_unit_bound_takes_a_loop_without_gains():
     assert bias.learning_gains(s, p, FloatOps) == (0.0, 0.0)
     T = p.aperiodic_time_constant_s
     assert _unit_weight(s, p, False) == pytest.approx(0.01 / (T + 0.01))
+
+
+def _turning_unit(omega: float, lag: float, e_sensor: tuple, seconds: float, dt: float = 0.01):
+    """A body yawing at ``omega`` [rad/s] with a constant sensor-frame error ``e_sensor`` [rad]:
+    the unit low-passes its world image over ``lag`` [s]; returns the state, (f, g) at the end."""
+    from cf_estimator.core.step import _rotate, learning_input
+
+    s = state.StepState(0.0, False)
+    weight = dt / (lag + dt)
+    f = g = (0.0, 0.0, 0.0)
+    for k in range(int(seconds / dt)):
+        half = 0.5 * omega * k * dt
+        s.qw, s.qx, s.qy, s.qz = math.cos(half), 0.0, 0.0, math.sin(half)
+        wx, wy, wz = _rotate(s.qw, s.qx, s.qy, s.qz, *e_sensor)
+        s.lx, s.ly, s.lz = (s.lx + weight * (wx - s.lx), s.ly + weight * (wy - s.ly),
+                            s.lz + weight * (wz - s.lz))
+        f = _rotate(s.qw, -s.qx, -s.qy, -s.qz, s.lx, s.ly, s.lz)
+        g = learning_input(s, (s.lx, s.ly, s.lz), weight, FloatOps)
+    return s, f, g
+
+
+def test_the_bias_learns_a_sensor_fixed_error_along_its_own_axis_faded_by_the_turn():
+    """step.learning_input: R̄ᵀ·l, R̄ low-passed as the unit. Turning at ω with the unit's lag T,
+    a sensor-fixed error comes back along its own axis, scaled by 1/(1 + (ωT)²); f = Rᵀ·l, what
+    the proportional path corrects by, comes back turned by atan(ωT) about the vertical (the
+    other way in the opposite turn). Still, both are the error itself."""
+    e = (0.0, 0.02, 0.0)
+    lag = 2.0
+    for omega in (1.5, -1.5, 0.6):
+        _, f, g = _turning_unit(omega, lag, e, 30.0)
+        scale = 1.0 / (1.0 + (omega * lag) ** 2)
+        assert g == pytest.approx((0.0, 0.02 * scale, 0.0), abs=2e-4 * scale)
+        turned = math.atan2(f[1], f[0]) - math.atan2(e[1], e[0])
+        assert turned == pytest.approx(-math.atan(omega * lag), abs=0.02)
+        assert math.hypot(f[0], f[1]) == pytest.approx(0.02 / math.hypot(1.0, omega * lag),
+                                                       rel=0.02)
+    _, f, g = _turning_unit(0.0, lag, e, 30.0)
+    assert g == pytest.approx(f) and g == pytest.approx(e)
+
+
+def test_a_heading_correction_leaves_the_learning_input_as_it_was():
+    """step.turn_heading turns R̄'s world rows with the attitude and the unit: R̄ᵀ·l (and f) do
+    not change, so the magnetometer never teaches the tilt's bias."""
+    from cf_estimator.core.step import _rotate, learning_input, turn_heading
+
+    s, _, _ = _turning_unit(1.0, 2.0, (0.01, 0.02, 0.005), 10.0)
+    before = s.copy()
+    turn_heading(s, 0.7, FloatOps)
+    assert (s.rxx, s.rxy) != pytest.approx((before.rxx, before.rxy))
+    g0 = learning_input(before, (before.lx, before.ly, before.lz), 0.0, FloatOps)
+    g1 = learning_input(s, (s.lx, s.ly, s.lz), 0.0, FloatOps)
+    assert g1 == pytest.approx(g0, abs=1e-12)
+    f0 = _rotate(before.qw, -before.qx, -before.qy, -before.qz, before.lx, before.ly, before.lz)
+    assert _rotate(s.qw, -s.qx, -s.qy, -s.qz, s.lx, s.ly, s.lz) == pytest.approx(f0, abs=1e-12)
