@@ -398,7 +398,7 @@ def test_the_bias_learns_a_sensor_fixed_error_along_its_own_axis_faded_by_the_tu
     """step.learning_input: R̄ᵀ·l, R̄ low-passed as the unit. Turning at ω with the unit's lag T,
     a sensor-fixed error comes back along its own axis, scaled by 1/(1 + (ωT)²); f = Rᵀ·l, what
     the proportional path corrects by, comes back turned by atan(ωT) about the vertical (the
-    other way in the opposite turn). Still, both are the error itself."""
+    other way in the opposite turn). Not turning, both are the error itself."""
     e = (0.0, 0.02, 0.0)
     lag = 2.0
     for omega in (1.5, -1.5, 0.6):

@@ -125,8 +125,8 @@ def turn_share(s: StepState, p: Any, o: Any) -> Any:
     learned, 2.12° → 1.55°; with the integral learning through the unit's own lag,
     step.learning_input, 0.25 °/s and 0.75°; BENCHMARKS.md "The tight turn"). Without the
     share, the raise at full power in a turn learns what the turn leaves: tight 4.85°. A gyro
-    bias about the vertical as
-    large as the prior (0.1 rad/s) counts as a turn too, and takes 15 % of the raise."""
+    bias about the vertical as large as the prior (0.1 rad/s) counts as a turn too, and takes
+    15 % of the raise."""
     k1_2 = sq(o.maximum(p.k1, BIAS_LEARNING_MIN_K1))
     w = s.turn_hold
     share = k1_2 / (k1_2 + w * w)
