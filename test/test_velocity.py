@@ -270,6 +270,26 @@ def test_an_uncertain_heading_weighs_the_measurement_across_the_acceleration_onl
     assert aiding._across_heading_error(*meas, 0.0, 0.0, (0.0, 0.0, 0.0, 1e-6, sigma_t)) == meas
 
 
+def test_a_loop_without_gain_is_aided_without_dividing_by_it():
+    """k1 = k2 = 0 (a gyro-only loop, a valid set) with a velocity: the tilt σ the aiding reads
+    is unbounded (no loop holds the tilt), not a division by zero, and the run completes."""
+    from cf_estimator.core.filter import ComplementaryFilter
+    from cf_estimator.core.velocity import filter_estimates
+
+    p = FilterParams(use_mag=False, k1=0.0, k2=0.0, bias_learning_k2=0.0)
+    f = ComplementaryFilter(p)
+    f.initialize_from((0.0, 0.0, 9.81))
+    assert filter_estimates(f)[4] == math.inf
+    n = 2000
+    t = np.arange(n) / 100.0
+    tv = np.arange(0.0, 20.0, 0.1)
+    v = np.zeros((tv.size, 3))
+    v[:, 0] = np.sin(tv)
+    r = estimate(np.zeros((n, 3)), np.tile([0.0, 0.0, 9.81], (n, 1)), None, timestamps_s=t,
+                 params=p, velocity=(tv, v))
+    assert np.isfinite(r.quaternion[100:]).all() and r.velocity_aided.any()
+
+
 def test_aiding_with_an_uncertain_heading_in_a_strong_acceleration_stays_near_the_known_one():
     """The thesis manoeuvre (5 m/s² for 5 s from a standstill, no compass): the heading offset
     becomes known half a second into the acceleration with σ near the required 0.3 rad; aided

@@ -714,7 +714,8 @@ def filter_estimates(f: Any) -> tuple[float, float, float, float, float]:
     state b [rad/s] (sensor frame), its variance per axis [(rad/s)²] (< 0: none yet), and the
     σ [rad] of the tilt error the gyro's drift leaves in the aided loop: d/k1, d the drift
     rate (:func:`~cf_estimator.core.bias.drift_rate`), k1 the configured gain (the aided
-    loop's)."""
+    loop's); unbounded (inf) with k1 = 0, a loop that never corrects its tilt."""
     s = f._state  # noqa: SLF001 - read-only access to the state fields
     k1 = f._params.k1  # noqa: SLF001
-    return (s.bx, s.by, s.bz, s.bias_var, drift_rate(s, FloatOps) / k1)
+    sigma_t = drift_rate(s, FloatOps) / k1 if k1 > 0.0 else math.inf
+    return (s.bx, s.by, s.bz, s.bias_var, sigma_t)
