@@ -22,7 +22,8 @@ offline (its own offline mode). Rows (inclination [deg] unless marked):
   cases of issue 22, in the air from the first sample — horizontal zig-zags like the Phantom's
   (``zigzag``, 120 Hz, the DOTs' bias size) and figure-8s on a de-biased gyro (``circles``, at
   1 kHz and at 100 Hz, 3 m/s at 0.6 rad/s; and tight ones at 1 kHz, 1 m/s at 1.5 rad/s, a
-  nano-quadrotor's: the case VQF wins, as on the real nano-quadrotor of issue 22): inclination
+  nano-quadrotor's: VQF won them, as on the real nano-quadrotor of issue 22, until the bias was
+  learned through the aperiodic unit's own lag, step.learning_input): inclination
   RMS and peak after 10 s [deg], and our learned gyro bias's error at the end |b − b_true|
   [deg/s] (our online column), mean over MULTIROTOR_SEEDS;
 - aided (6-D, velocity aiding, :mod:`cf_estimator.core.velocity`): ours aided online and
