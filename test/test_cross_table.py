@@ -33,7 +33,8 @@ looser bound would pretend); they stay open in BENCHMARKS.md:
   on each — zig-zags 0.50 °/s (the vertical component a level 6-D flight cannot observe),
   figure-8s 1.56 °/s (1 kHz and 100 Hz; about the pitch axis, where forward flight's rotor
   drag leaves a steady sensor-fixed error), tight figure-8s 0.25 °/s; their inclination RMS at
-  most VQF online's is met on all four (asserted; BENCHMARKS.md "The tight turn");
+  most VQF online's is met on all four (asserted; BENCHMARKS.md "The tight turn"), and so is a
+  learned bias no further off than VQF online's (asserted: VQF 0.81 / 2.04 / 2.04 / 1.92 °/s);
 - issue 27: the simulated compass cases' heading mean(e²/σ²) in [0.5, 2] — 0.11-0.12 while the
   magnet is on (conservative: a perfect simulated sensor against floors fitted on real ones);
 - issue 23: thesis acceleration aided ≤ 15' — 42.9' on the table's seed (seeds 0-2: 42.9 /
@@ -196,9 +197,14 @@ def consistency(label: str) -> bool:
     return "beyond 2σ" in label or "mean(e²/σ²)" in label
 
 
+def learned_bias(label: str) -> bool:
+    """A learned gyro bias's error (ours and VQF online; no offline column)."""
+    return label.endswith("learned-bias error at the end")
+
+
 def ours_only(label: str) -> bool:
-    """A row only our filter has: aided, covariance consistency, our learned gyro bias."""
-    return aided(label) or consistency(label) or label.endswith("learned-bias error at the end")
+    """A row only our filter has: aided, covariance consistency."""
+    return aided(label) or consistency(label)
 
 
 def _row(rows: dict, start: str) -> dict:
@@ -223,6 +229,8 @@ def test_every_row_has_a_baseline_and_vqf_beside(table):
             assert math.isnan(row["values"]["vqf"]), label
         else:
             assert math.isfinite(row["values"]["vqf"]), label
+        if ours_only(label) or learned_bias(label):
+            assert math.isnan(row["values"]["vqf_offline"]), label
 
 
 def test_every_guard_has_a_positive_finite_margin(table):
@@ -303,6 +311,18 @@ def test_target_simulated_multirotor_cases_at_most_vqf_online(table):
     rows, _ = table
     labels = [label for label in rows
               if label.startswith("simulated") and label.endswith("inclination RMS after 10 s")]
+    assert len(labels) == 4
+    for label in labels:
+        assert _ours(rows, label) <= _ours(rows, label, "vqf"), label
+
+
+def test_simulated_multirotor_learned_bias_at_most_vqf_online(table):
+    """Issue 22's learned-bias target (< 0.05 °/s) is missed (module docstring); what the table
+    holds instead: on each simulated multirotor case our learned bias is no further from the
+    truth than VQF online's (zig-zags 0.50 against 0.81 °/s, figure-8s 1.56 against 2.04, tight
+    figure-8s 0.25 against 1.92)."""
+    rows, _ = table
+    labels = [label for label in rows if label.startswith("simulated") and learned_bias(label)]
     assert len(labels) == 4
     for label in labels:
         assert _ours(rows, label) <= _ours(rows, label, "vqf"), label

@@ -124,18 +124,19 @@ def _nan_rows_to_zero(a: np.ndarray) -> np.ndarray:
 
 def run_vqf(gyro: np.ndarray, acc: np.ndarray, mag: np.ndarray | None, rate_hz: float
             ) -> dict[str, np.ndarray]:
-    """Online VQF at its defaults; ``{"6d": (N,4), "9d": (N,4)}`` (9d only with ``mag``)."""
+    """Online VQF at its defaults; ``{"6d": (N,4), "9d": (N,4), "bias": (N,3)}`` (9d only with
+    ``mag``; bias: VQF's gyro-bias estimate [rad/s], sensor frame)."""
     vqf = _require("vqf")
     est = vqf.VQF(1.0 / rate_hz)
     g = np.ascontiguousarray(gyro, dtype=float)
     a = np.ascontiguousarray(acc, dtype=float)
     if mag is None:
         out = est.updateBatch(g, a)
-        return {"6d": out["quat6D"]}
+        return {"6d": out["quat6D"], "bias": out["bias"]}
     # VQF ignores zero magnetometer samples (NaN rows would poison its state)
     m = np.ascontiguousarray(_nan_rows_to_zero(mag))
     out = est.updateBatch(g, a, m)
-    return {"6d": out["quat6D"], "9d": out["quat9D"]}
+    return {"6d": out["quat6D"], "9d": out["quat9D"], "bias": out["bias"]}
 
 
 def run_fusion(gyro: np.ndarray, acc: np.ndarray, mag: np.ndarray | None, rate_hz: float
