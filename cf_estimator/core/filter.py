@@ -25,6 +25,7 @@ from cf_estimator.core import quaternion as quat
 from cf_estimator.core.kernel import compiled_kernel, resolve_backend
 from cf_estimator.core.ops import FloatOps
 from cf_estimator.core.params import FilterParams
+from cf_estimator.core.state import LAGGED_ROTATION
 from cf_estimator.core.step import (
     BIAS_CONVERGED_SIGMA_RAD_S,
     MAG_STATUS_NAMES,
@@ -281,8 +282,8 @@ class ComplementaryFilter:
         s.qw, s.qx, s.qy, s.qz = (float(c) for c in q)
         s.bx, s.by, s.bz = (float(c) for c in bias)
         s.lx = s.ly = s.lz = 0.0
-        for name in ("rxx", "rxy", "rxz", "ryx", "ryy", "ryz", "rzx", "rzy", "rzz"):
-            setattr(s, name, 0.0)  # the unit's R̄ starts again with it (step.learning_input)
+        for field in LAGGED_ROTATION:
+            setattr(s, field.name, 0.0)  # the unit's R̄ starts again with it (learning_input)
 
     def set_aided(self, aided: bool) -> None:
         """Say whether the next update's accelerometer sample is velocity-aided (the vehicle's

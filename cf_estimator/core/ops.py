@@ -23,6 +23,14 @@ def sq(x: Any) -> Any:
     return x * x
 
 
+def rotation_elements(qw: Any, qx: Any, qy: Any, qz: Any) -> tuple[Any, ...]:
+    """R(q) of a unit quaternion (w, x, y, z), row-major (r00, r01, … r22): plain arithmetic,
+    floats and arrays alike, the operations of ``_kernel.c`` in the same order."""
+    return (1.0 - 2.0 * (qy * qy + qz * qz), 2.0 * (qx * qy - qw * qz), 2.0 * (qx * qz + qw * qy),
+            2.0 * (qx * qy + qw * qz), 1.0 - 2.0 * (qx * qx + qz * qz), 2.0 * (qy * qz - qw * qx),
+            2.0 * (qx * qz - qw * qy), 2.0 * (qy * qz + qw * qx), 1.0 - 2.0 * (qx * qx + qy * qy))
+
+
 class FloatOps:
     """Scalar back-end: Python floats and bools (fast for one 3-vector at a time)."""
 

@@ -42,15 +42,20 @@ def _vec(prefix: str, unit: str, doc: str, axes: str = "xyz") -> tuple[Field, ..
     return tuple(_f(f"{prefix}{a}", unit, f"{doc} ({a})") for a in axes)
 
 
+#: R̄: R (sensor -> world) low-passed as the aperiodic unit (step.learning_input), row-major.
+LAGGED_ROTATION: tuple[Field, ...] = (
+    *_vec("rx", "1", "R (sensor -> world) low-passed as the aperiodic unit, its row x (world "
+          "x in the sensor frame's components; all 0: not set yet)"),
+    *_vec("ry", "1", "R low-passed as the aperiodic unit, its row y"),
+    *_vec("rz", "1", "R low-passed as the aperiodic unit, its row z"),
+)
+
 LOOP: tuple[Field, ...] = (
     _f("qw", "1", "attitude q_world(ENU)_from_sensor, w"),
     *_vec("q", "1", "attitude q_world(ENU)_from_sensor"),
     *_vec("c", "rad/s", "k3-path (double integral) state, sensor frame"),
     *_vec("l", "rad", "aperiodic unit's state, world frame"),
-    *_vec("rx", "1", "R (sensor -> world) low-passed as the aperiodic unit, its row x (world "
-          "x in the sensor frame's components; all 0: not set yet)"),
-    *_vec("ry", "1", "R low-passed as the aperiodic unit, its row y"),
-    *_vec("rz", "1", "R low-passed as the aperiodic unit, its row z"),
+    *LAGGED_ROTATION,
     _f("time_s", "s", "time since initialisation"),
     _f("clip_timer_s", "s", "how long the error has been clipped without a break"),
     _f("recovering", "", "tilt recovery in progress", "bool"),

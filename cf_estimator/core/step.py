@@ -72,7 +72,7 @@ from cf_estimator.core.bias import (  # noqa: F401 - the constants of the whole 
     SWING_TIME_CONSTANT_S,
     SWING_VAR_TIME_CONSTANT_S,
 )
-from cf_estimator.core.ops import TINY, sq
+from cf_estimator.core.ops import TINY, rotation_elements, sq
 from cf_estimator.core.state import StepState
 from cf_estimator.core.stillness import (  # noqa: F401
     GRAVITY_TIME_CONSTANT_S,
@@ -422,17 +422,17 @@ def learning_input(s: StepState, lag: tuple, weight: Any, o: Any) -> tuple:
     tight turn"). R̄ starts as R (all zero: not set yet), is turned with heading corrections
     (:func:`turn_heading`) and cleared with the unit (ComplementaryFilter.realign)."""
     lx, ly, lz = lag
-    qw, qx, qy, qz = s.qw, s.qx, s.qy, s.qz
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation_elements(s.qw, s.qx, s.qy, s.qz)
     w = o.where(s.rxx * s.rxx + s.ryy * s.ryy + s.rzz * s.rzz == 0.0, 1.0, weight)
-    s.rxx = s.rxx + w * (1.0 - 2.0 * (qy * qy + qz * qz) - s.rxx)
-    s.rxy = s.rxy + w * (2.0 * (qx * qy - qw * qz) - s.rxy)
-    s.rxz = s.rxz + w * (2.0 * (qx * qz + qw * qy) - s.rxz)
-    s.ryx = s.ryx + w * (2.0 * (qx * qy + qw * qz) - s.ryx)
-    s.ryy = s.ryy + w * (1.0 - 2.0 * (qx * qx + qz * qz) - s.ryy)
-    s.ryz = s.ryz + w * (2.0 * (qy * qz - qw * qx) - s.ryz)
-    s.rzx = s.rzx + w * (2.0 * (qx * qz - qw * qy) - s.rzx)
-    s.rzy = s.rzy + w * (2.0 * (qy * qz + qw * qx) - s.rzy)
-    s.rzz = s.rzz + w * (1.0 - 2.0 * (qx * qx + qy * qy) - s.rzz)
+    s.rxx = s.rxx + w * (r00 - s.rxx)
+    s.rxy = s.rxy + w * (r01 - s.rxy)
+    s.rxz = s.rxz + w * (r02 - s.rxz)
+    s.ryx = s.ryx + w * (r10 - s.ryx)
+    s.ryy = s.ryy + w * (r11 - s.ryy)
+    s.ryz = s.ryz + w * (r12 - s.ryz)
+    s.rzx = s.rzx + w * (r20 - s.rzx)
+    s.rzy = s.rzy + w * (r21 - s.rzy)
+    s.rzz = s.rzz + w * (r22 - s.rzz)
     return (s.rxx * lx + s.ryx * ly + s.rzx * lz, s.rxy * lx + s.ryy * ly + s.rzy * lz,
             s.rxz * lx + s.ryz * ly + s.rzz * lz)
 

@@ -97,7 +97,7 @@ from cf_estimator.core.bias import (
     SWING_VAR_TIME_CONSTANT_S,
     drift_rate,
 )
-from cf_estimator.core.ops import FloatOps
+from cf_estimator.core.ops import FloatOps, rotation_elements
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.quaternion import to_matrix
 
@@ -355,12 +355,7 @@ class VelocityAiding:
                 self._active = self._started = self._first = False
                 return accel_m_s2
             # P as a matrix: ∫P·dt and ∫P·b̂·dt for the alignment's drift model
-            xx, yy, zz = px * px, py * py, pz * pz
-            xy, xz, yz = px * py, px * pz, py * pz
-            wx_, wy_, wz_ = pw * px, pw * py, pw * pz
-            r00, r01, r02 = 1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz_), 2.0 * (xz + wy_)
-            r10, r11, r12 = 2.0 * (xy + wz_), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx_)
-            r20, r21, r22 = 2.0 * (xz - wy_), 2.0 * (yz + wx_), 1.0 - 2.0 * (xx + yy)
+            r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation_elements(pw, px, py, pz)
             b0, b1, b2 = filter_state[0], filter_state[1], filter_state[2]
             s_ = self._sum
             self._sum = (s_[0] + fx * d, s_[1] + fy * d, s_[2] + fz * d,
