@@ -427,3 +427,38 @@ def test_a_heading_correction_leaves_the_learning_input_as_it_was():
     assert g1 == pytest.approx(g0, abs=1e-12)
     f0 = _rotate(before.qw, -before.qx, -before.qy, -before.qz, before.lx, before.ly, before.lz)
     assert _rotate(s.qw, -s.qx, -s.qy, -s.qz, s.lx, s.ly, s.lz) == pytest.approx(f0, abs=1e-12)
+
+
+def test_rotation_elements_are_the_quaternions_matrix_for_floats_and_arrays():
+    """ops.rotation_elements (R̄'s input and the aiding's P): R(q) row-major, as
+    quaternion.to_matrix, one quaternion at a time or many at once."""
+    from cf_estimator.core import quaternion
+    from cf_estimator.core.ops import rotation_elements
+
+    q = np.random.default_rng(3).normal(size=(50, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    expected = quaternion.to_matrix(q).reshape(50, 9)
+    for k in range(50):
+        assert rotation_elements(*(float(c) for c in q[k])) == pytest.approx(expected[k],
+                                                                             abs=1e-15)
+    assert np.stack(rotation_elements(*q.T), axis=1) == pytest.approx(expected, abs=1e-15)
+
+
+def test_realign_clears_every_lagged_rotation_field_and_the_unit():
+    """ComplementaryFilter.realign: the unit's memory and R̄ (state.LAGGED_ROTATION: nine
+    fields, rows x, y, z) start again with the outside tilt."""
+    from cf_estimator.core.filter import ComplementaryFilter
+
+    assert [f.name for f in state.LAGGED_ROTATION] == [
+        f"r{row}{col}" for row in "xyz" for col in "xyz"]
+    f = ComplementaryFilter(FilterParams(use_mag=False))
+    f.update((0.0, 0.0, 0.0), (0.5, 0.0, G), 0.01)
+    for _ in range(300):  # turning while the accelerometer disagrees: R̄ and l are set
+        f.update((0.0, 0.0, 0.8), (0.5, 0.3, G), 0.01)
+    s = f.step_state
+    assert all(getattr(s, field.name) != 0.0 for field in state.LAGGED_ROTATION)
+    assert (s.lx, s.ly) != (0.0, 0.0)
+    f.realign((0.01, 0.0, 0.0), (0.0, 0.0, 0.0))
+    s = f.step_state
+    assert all(getattr(s, field.name) == 0.0 for field in state.LAGGED_ROTATION)
+    assert (s.lx, s.ly, s.lz) == (0.0, 0.0, 0.0)
