@@ -97,3 +97,29 @@ def test_a_jump_of_the_field_direction_alone_is_rejected():
         statuses.append(f.status().mag_status)
     after = statuses[int(10.1 * RATE_HZ):]
     assert after.count("rejected") == len(after)  # 5 s on: not re-learned (in use for 10 s)
+
+
+MAGNET_TRIALS = ("29_disturbed_stationary_magnet_B", "30_disturbed_stationary_magnet_C",
+                 "32_disturbed_attached_magnet_1cm", "34_disturbed_attached_magnet_3cm",
+                 "36_disturbed_attached_magnet_5cm")
+
+
+@pytest.mark.parametrize("name", MAGNET_TRIALS)
+def test_every_broad_magnet_trial_within_vqf_online_plus_1_deg(name):
+    """Issue 22's target per magnet trial (bench cross holds the group means): the 9-D total
+    RMSE over the movement, shipped defaults, at most VQF online's + 1°. Today: 1.90 / 1.76 /
+    2.17 / 3.29 / 1.82° against VQF's 2.38 / 2.57 / 7.67 / 3.35 / 2.39°."""
+    from pathlib import Path
+
+    from cf_estimator.bench import broad
+    from cf_estimator.bench.evaluate import evaluate_trial
+
+    pytest.importorskip("vqf")
+    data = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "broad"
+    if not data.is_dir():
+        pytest.skip(f"{data} not present")
+    path = broad.list_trials(data, [name])[0]
+    _, _, res = evaluate_trial(path, broad.read_trial_info(data), FilterParams(), ("vqf",),
+                               ("9d",))
+    ours, vqf = res["cf_estimator_9d"]["total_rmse_deg"], res["vqf_9d"]["total_rmse_deg"]
+    assert ours <= vqf + 1.0, (ours, vqf)

@@ -42,9 +42,9 @@ looser bound would pretend); they stay open in BENCHMARKS.md:
   32.5 / 34.9 / 31.3' with the heading known from the start).
 
 Targets of those issues that this table does not print (so not checked here): the
-compass 90° off at power-on, each magnet *trial* within VQF + 1° (the table has group means:
-checked on them as a necessary condition), BROAD peaks against every peer other than VQF, the
-per-sample speed; issue 23's node load with velocity.
+compass 90° off at power-on, each magnet *trial* within VQF + 1° (the table has group means,
+checked here as a necessary condition; per trial: test_compass_disturbance.py), BROAD peaks
+against every peer other than VQF, the per-sample speed; issue 23's node load with velocity.
 """
 
 from __future__ import annotations
