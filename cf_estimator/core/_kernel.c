@@ -575,7 +575,7 @@ static void learning_gains(const cf_state *s, const cf_params *p, double loop, d
 /* learning_input() of step.py: R low-passed as the unit (its weight), and R-bar^T l into g */
 static void learning_input(cf_state *s, const double *l, double weight, double *g)
 {
-    /* the products once (the same bits as the Python's inline ones), R-bar in locals */
+    /* the products once (the same bits as ops.rotation_elements), R-bar in locals */
     double xx = s->qx * s->qx, yy = s->qy * s->qy, zz = s->qz * s->qz, xy = s->qx * s->qy,
            xz = s->qx * s->qz, yz = s->qy * s->qz, wx = s->qw * s->qx, wy = s->qw * s->qy,
            wz = s->qw * s->qz;
