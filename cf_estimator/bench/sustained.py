@@ -104,6 +104,9 @@ class FamilyFloors:
     reference_bias_deg_s: float  # |b_ref|, the bias the reference shows
     bias_error_deg_s: float  # |b − b_ref| of ours online at SETTLE_S
     bias_error_end_deg_s: float  # |b − b_ref| of ours online at the last sample
+    #: |b − b_ref| of VQF online's own bias estimate at SETTLE_S and at the last sample [deg/s]
+    #: (NaN without VQF)
+    vqf_bias_error_deg_s: tuple[float, float] = (math.nan, math.nan)
 
 
 def _rms(x: np.ndarray, mask: np.ndarray) -> float:
@@ -142,19 +145,24 @@ def estimators(params: FilterParams, with_vqf: bool) -> dict[str, Callable[[Flig
         "cf_estimator_aided": lambda f: aided.run(f, p),
     }
     if with_vqf:
-        from cf_estimator.bench.peers import run_vqf
-
-        out["vqf"] = lambda f: run_vqf(f.gyro_rad_s, f.accel_m_s2, None,
-                                       1.0 / float(np.median(np.diff(f.t_s))))["6d"]
+        out["vqf"] = lambda f: _run_vqf(f)["6d"]
     return out
+
+
+def _run_vqf(flight: Flight) -> dict[str, np.ndarray]:
+    """VQF online, 6-D, at the flight's median rate: {"6d": q (N, 4), "bias": (N, 3) [rad/s]}."""
+    from cf_estimator.bench.peers import run_vqf
+
+    return run_vqf(flight.gyro_rad_s, flight.accel_m_s2, None,
+                   1.0 / float(np.median(np.diff(flight.t_s))))
 
 
 def analyse(family: str, flights: Sequence[Flight], params: FilterParams,
             with_vqf: bool = True) -> FamilyFloors:
     """The floors e_acc(T) for :data:`MEMORIES_S` and the measured inclination errors, each
     the mean over ``flights`` of its RMS over the scored samples (t ≥ SETTLE_S, reference);
-    the reference's gyro bias and ours' learned-bias error at SETTLE_S and at the end, means
-    over ``flights``."""
+    the reference's gyro bias and ours' (and VQF online's) learned-bias error at SETTLE_S and
+    at the end, means over ``flights``."""
     flights = [f for f in flights if f.velocity_t_s is not None]
     if not flights:
         raise ValueError(f"{family}: no recording with a reference velocity")
@@ -163,6 +171,7 @@ def analyse(family: str, flights: Sequence[Flight], params: FilterParams,
     measured: dict[str, list[float]] = {k: [] for k in runs}
     split: dict[str, tuple[list[float], list[float]]] = {k: ([], []) for k in runs}
     accel, bias_ref, bias_err, bias_err_end = [], [], [], []
+    vqf_err: list[tuple[float, float]] = []
     p = dataclasses.replace(params, use_mag=False)
     for f in flights:
         # ours online once: its attitude is a measured row, its bias the learned-bias rows
@@ -170,13 +179,22 @@ def analyse(family: str, flights: Sequence[Flight], params: FilterParams,
         bias_ref.append(math.degrees(float(np.linalg.norm(reference_bias_rad_s(f)))))
         bias_err.append(learned_bias_error_deg_s(f, ours.gyro_bias_rad_s))
         bias_err_end.append(learned_bias_error_deg_s(f, ours.gyro_bias_rad_s, at_s=math.inf))
+        vqf = _run_vqf(f) if with_vqf else None
+        if vqf is not None:
+            vqf_err.append((learned_bias_error_deg_s(f, vqf["bias"]),
+                            learned_bias_error_deg_s(f, vqf["bias"], at_s=math.inf)))
         mask = (f.t_s >= SETTLE_S) & f.has_reference
         for t in MEMORIES_S:
             floors[t].append(_rms(mean_acceleration_tilt_deg(f, t), mask))
         a_h = GRAVITY_M_S2 * np.tan(np.radians(mean_acceleration_tilt_deg(f, 0.5)))
         accel.append(float(np.nanmedian(a_h[mask])))
         for name, run in runs.items():
-            q = ours.quaternion if name == OURS else run(f)
+            if name == OURS:
+                q = ours.quaternion
+            elif name == "vqf" and vqf is not None:
+                q = vqf["6d"]
+            else:
+                q = run(f)
             measured[name].append(score(f, q))
             for part, window in zip(split[name], ((SETTLE_S, SPLIT_S), (SPLIT_S, math.inf)),
                                     strict=True):
@@ -187,7 +205,10 @@ def analyse(family: str, flights: Sequence[Flight], params: FilterParams,
                         {k: (float(np.nanmean(a)), float(np.nanmean(b)) if np.isfinite(b).any()
                              else math.nan) for k, (a, b) in split.items()},
                         float(np.mean(bias_ref)), float(np.mean(bias_err)),
-                        float(np.mean(bias_err_end)))
+                        float(np.mean(bias_err_end)),
+                        (float(np.mean([e[0] for e in vqf_err])),
+                         float(np.mean([e[1] for e in vqf_err]))) if vqf_err
+                        else (math.nan, math.nan))
 
 
 def score(flight: Flight, q: np.ndarray, window: tuple[float, float] = (SETTLE_S, math.inf)
@@ -237,6 +258,11 @@ def format_table(rows: Sequence[FamilyFloors]) -> str:
     label = "ours online: learned-bias error at the end [deg/s]"
     lines.append(f"  {label:58s}"
                  + "".join(f"{r.bias_error_end_deg_s:>{width + 2}.2f}" for r in rows))
+    if any(math.isfinite(r.vqf_bias_error_deg_s[0]) for r in rows):
+        for j, when in enumerate((f"{SETTLE_S:g} s", "the end")):
+            label = f"vqf online: learned-bias error at {when} [deg/s]"
+            lines.append(f"  {label:58s}" + "".join(
+                f"{r.vqf_bias_error_deg_s[j]:>{width + 2}.2f}" for r in rows))
     return "\n".join(lines) + "\n"
 
 
