@@ -462,3 +462,24 @@ def test_realign_clears_every_lagged_rotation_field_and_the_unit():
     s = f.step_state
     assert all(getattr(s, field.name) == 0.0 for field in state.LAGGED_ROTATION)
     assert (s.lx, s.ly, s.lz) == (0.0, 0.0, 0.0)
+
+
+def test_the_named_extra_columns_are_the_fields_state_extras_writes():
+    """filter.Extra (what estimate(), the bulk pipeline and the replay read) names the columns
+    state_extras writes, in its order; the compiled run writes the same row."""
+    from cf_estimator.core.filter import EXTRA_COLUMNS, ComplementaryFilter, Extra, state_extras
+
+    f = ComplementaryFilter(FilterParams())
+    f.update((0.0, 0.0, 0.0), (0.3, 0.0, G), 0.01, (0.0, 2e-5, -4e-5))
+    for _ in range(200):
+        f.update((0.01, 0.2, 0.3), (0.5, 0.3, G), 0.01, (0.0, 2e-5, -4e-5))
+    s = f.step_state
+    row = state_extras(s)
+    assert len(row) == EXTRA_COLUMNS
+    assert row[Extra.ERROR] == (s.ex, s.ey, s.ez) and row[Extra.BIAS] == (s.bx, s.by, s.bz)
+    assert (row[Extra.CLIPPED], row[Extra.PHASE], row[Extra.AT_REST], row[Extra.MAG_STATUS]) == (
+        s.clipped, s.phase, s.at_rest, s.mag_status)
+    assert row[Extra.BIAS_SIGMA] == math.sqrt(s.bias_err_var) > 0.0
+    assert (row[Extra.LX], row[Extra.LY], row[Extra.YAW_ERROR], row[Extra.NOISE_A2],
+            row[Extra.LOOP_K1]) == (s.lx, s.ly, s.yaw_error_rad, s.noise_a2, s.loop_k1)
+    assert row[Extra.GYRO_BIAS] == pytest.approx(tuple(f.gyro_bias_rad_s), abs=0.0)

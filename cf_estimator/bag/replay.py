@@ -40,7 +40,7 @@ from cf_estimator.bag.metrics import (
     reference_quaternion,
 )
 from cf_estimator.core import quaternion as quat
-from cf_estimator.core.filter import ComplementaryFilter, bias_error_sigma
+from cf_estimator.core.filter import ComplementaryFilter, Extra, bias_error_sigma
 from cf_estimator.core.kernel import resolve_backend
 from cf_estimator.core.offline import ROW_AIDED, ROW_MOVING
 from cf_estimator.core.params import FilterParams
@@ -455,9 +455,9 @@ class _Run:
         self.t.add(ts)
         self.q.add(c.q_wxyz)
         self.rpy.add(c.rpy)
-        self.clipped.add(c.extra[:, 6] != 0.0)
+        self.clipped.add(c.extra[:, Extra.CLIPPED] != 0.0)
         self.enorm.add(c.error_norm)
-        self.rest.add(c.extra[:, 8] != 0.0)
+        self.rest.add(c.extra[:, Extra.AT_REST] != 0.0)
         self.tilt_var.add(c.covariance[:, 0] + c.covariance[:, 4])
         self.yaw_var.add(c.covariance[:, 8])
 

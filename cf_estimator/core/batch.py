@@ -24,7 +24,7 @@ from cf_estimator.core.covariance import (
     YAW_FLOOR_RAD2,
     OrientationCovariance,
 )
-from cf_estimator.core.filter import EXTRA_COLUMNS, ComplementaryFilter, state_extras
+from cf_estimator.core.filter import EXTRA_COLUMNS, ComplementaryFilter, Extra, state_extras
 from cf_estimator.core.input_checks import warn_units
 from cf_estimator.core.kernel import resolve_backend
 from cf_estimator.core.params import FilterParams
@@ -125,11 +125,14 @@ def covariance_rows(extra: np.ndarray, t_s: np.ndarray, q: np.ndarray, params: F
     x = extra[start:]
     ts = t_s[start:].tolist()
     dts = np.diff(t_s[start:], prepend=t_s[start]).tolist()
-    en = np.sqrt(x[:, 0] ** 2 + x[:, 1] ** 2 + x[:, 2] ** 2).tolist()
-    clipped = (x[:, 6] != 0.0).tolist()
-    phase, sigma, status = x[:, 7].tolist(), x[:, 10].tolist(), x[:, 9].tolist()
-    lx, ly = x[:, 11].tolist(), x[:, 12].tolist()
-    yaw_err, na2, loop_k1 = x[:, 13].tolist(), x[:, 14].tolist(), x[:, 18].tolist()
+    ex, ey, ez = x[:, Extra.ERROR].T
+    en = np.sqrt(ex ** 2 + ey ** 2 + ez ** 2).tolist()
+    clipped = (x[:, Extra.CLIPPED] != 0.0).tolist()
+    phase, sigma = x[:, Extra.PHASE].tolist(), x[:, Extra.BIAS_SIGMA].tolist()
+    status = x[:, Extra.MAG_STATUS].tolist()
+    lx, ly = x[:, Extra.LX].tolist(), x[:, Extra.LY].tolist()
+    yaw_err, na2 = x[:, Extra.YAW_ERROR].tolist(), x[:, Extra.NOISE_A2].tolist()
+    loop_k1 = x[:, Extra.LOOP_K1].tolist()
     heading = False
     last: float | None = None
     rows = []
@@ -359,9 +362,10 @@ def estimate(
         extra = np.zeros((n, EXTRA_COLUMNS))
         _run_filter(f, gyro, acc, mg, t, out_q, extra)
     return EstimateResult(
-        t, out_q, extra[:, 0:3], extra[:, 6] != 0.0, extra[:, 3:6],
-        extra[:, 7].astype(np.int8), extra[:, 8] != 0.0, extra[:, 9].astype(np.int8),
-        extra[:, 10], aided, status, f.params, extra,
+        t, out_q, extra[:, Extra.ERROR], extra[:, Extra.CLIPPED] != 0.0, extra[:, Extra.BIAS],
+        extra[:, Extra.PHASE].astype(np.int8), extra[:, Extra.AT_REST] != 0.0,
+        extra[:, Extra.MAG_STATUS].astype(np.int8), extra[:, Extra.BIAS_SIGMA], aided, status,
+        f.params, extra,
     )
 
 

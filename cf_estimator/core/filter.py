@@ -146,6 +146,24 @@ class FilterStatus:
 EXTRA_COLUMNS = 19
 
 
+class Extra:
+    """Column indices of ``extra_out`` (the order above; ``_kernel.c`` writes the same)."""
+
+    ERROR = slice(0, 3)  #: raw error e (3)
+    BIAS = slice(3, 6)  #: integral state b (3)
+    CLIPPED = 6
+    PHASE = 7
+    AT_REST = 8
+    MAG_STATUS = 9
+    BIAS_SIGMA = 10  #: the bias estimate's error σ (bias.error_sigma)
+    LX = 11
+    LY = 12
+    YAW_ERROR = 13
+    NOISE_A2 = 14
+    GYRO_BIAS = slice(15, 18)  #: the gyro-bias estimate (3)
+    LOOP_K1 = 18
+
+
 def state_extras(s: Any) -> tuple:
     """One ``extra_out`` row (EXTRA_COLUMNS values) from a filter state (_kernel.c writes the
     same columns in ``State.run``)."""

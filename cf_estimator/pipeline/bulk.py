@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from cf_estimator.core.filter import EXTRA_COLUMNS
+from cf_estimator.core.filter import EXTRA_COLUMNS, Extra
 from cf_estimator.core.kernel import compiled_kernel
 from cf_estimator.core.step import MAG_DISABLED, MAG_REJECTED, MAG_USED
 from cf_estimator.pipeline import checks
@@ -488,15 +488,15 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
     state = f.step_state
     # -- counters, statistics and the covariance model ----------------------------------------
     st = run.state
-    ex, ey, ez = extra[:, 0], extra[:, 1], extra[:, 2]
+    ex, ey, ez = extra[:, Extra.ERROR].T
     en_arr = np.sqrt(ex * ex + ey * ey + ez * ez)
-    clipped_col = extra[:, 6]
+    clipped_col = extra[:, Extra.CLIPPED]
     heading = bool(state.heading_initialized)  # constant over the run
     last_mag = p.mag_input.last_used_ns
     ages: np.ndarray | None
     if mag is not None:
         has = ~np.isnan(mag[:, 0])
-        status = extra[:, 9]
+        status = extra[:, Extra.MAG_STATUS]
         used_arr = has & (status == MAG_USED)
         p.tally.mag_used += int(np.count_nonzero(used_arr))
         p.tally.mag_rejected += int(np.count_nonzero(has & (status == MAG_REJECTED)))
@@ -522,8 +522,9 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
     else:
         ages = None
     tilts, yaws = p.covariance_model.rows(
-        dt, clipped_col, extra[:, 10], extra[:, 7], en_arr, extra[:, 11], extra[:, 12],
-        extra[:, 14], heading, extra[:, 13], used, ages, extra[:, 18], f.backend)
+        dt, clipped_col, extra[:, Extra.BIAS_SIGMA], extra[:, Extra.PHASE], en_arr,
+        extra[:, Extra.LX], extra[:, Extra.LY], extra[:, Extra.NOISE_A2], heading,
+        extra[:, Extra.YAW_ERROR], used, ages, extra[:, Extra.LOOP_K1], f.backend)
     cov = np.zeros((n, 9))
     cov[:, 0] = tilts
     cov[:, 4] = tilts
