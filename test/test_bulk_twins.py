@@ -35,12 +35,12 @@ def _model() -> OrientationCovariance:
 
 
 def _state(m: OrientationCovariance) -> tuple[float, ...]:
-    return (m._clip_s, m._ms, m._yaw_err, m._cx, m._cy)  # noqa: SLF001
+    return (m._clip_s, m._ms, m._yaw_err, m._cx, m._cy, m._yaw_lp, m._yaw_gap)  # noqa: SLF001
 
 
 def _inputs(rng: np.random.Generator, n: int) -> dict:
     """One run's columns, as the bulk pipeline gives them (a row-major block: strided)."""
-    block = np.empty((n, 12))
+    block = np.empty((n, 13))
     dt = rng.choice([0.0025, 0.01, 1e-6, 0.5], n) * rng.uniform(0.5, 1.5, n)
     block[:, 0] = dt
     block[:, 1] = rng.random(n) < 0.3  # clipped (runs of them: the drift term grows)
@@ -51,17 +51,19 @@ def _inputs(rng: np.random.Generator, n: int) -> dict:
     block[:, 6] = rng.normal(0.0, 0.05, n)  # ly
     block[:, 7] = rng.uniform(0.0, 5.0, n)  # noise_a2
     block[:, 8] = rng.normal(0.0, 1.0, n)  # yaw error (a magnitude where x**2 != x*x too)
-    block[:, 9] = rng.random(n) < 0.25  # magnetometer used
+    used = rng.random(n) < 0.25
+    block[:, 9] = used  # magnetometer used
     block[:, 10] = rng.choice([0.0, -0.0, 0.01, 3.0, np.nan], n)  # age
     block[:, 11] = rng.choice([0.35, 0.2, 0.0, -1.0, np.nan], n)  # loop gain
+    block[:, 12] = ~used & (rng.random(n) < 0.3)  # magnetometer rejected (a disturbed field)
     return {"block": block}
 
 
 def _run_both(m_c: OrientationCovariance, m_p: OrientationCovariance, block: np.ndarray,
               heading: bool, ages: bool) -> None:
-    cols = [block[:, j] for j in range(12)]
+    cols = [block[:, j] for j in range(13)]
     args = (cols[0], cols[1], cols[2], cols[3], cols[4], cols[5], cols[6], cols[7], heading,
-            cols[8], cols[9], cols[10] if ages else None, cols[11])
+            cols[8], cols[9], cols[10] if ages else None, cols[11], cols[12])
     t_c, y_c = m_c.rows(*args, backend="compiled")
     t_p, y_p = m_p.rows(*args, backend="python")
     assert np.array_equal(_bits(t_c), _bits(t_p))
@@ -78,6 +80,7 @@ def test_compiled_covariance_rows_equal_the_python_steps_bit_for_bit(seed):
         _run_both(m_c, m_p, block, heading=bool(k % 4), ages=bool(k % 3))
     assert np.isfinite(m_c._ms)  # noqa: SLF001 - the state moved: a real comparison
     assert m_c._ms > 0.0  # noqa: SLF001
+    assert m_c._yaw_lp != 0.0  # noqa: SLF001
 
 
 def test_compiled_covariance_rows_take_libm_pow_not_a_product():
@@ -88,7 +91,8 @@ def test_compiled_covariance_rows_take_libm_pow_not_a_product():
     one = np.ones(1)
     for m, backend in ((m_c, "compiled"), (m_p, "python")):
         _t, y = m.rows(0.0025 * one, 0 * one, 0 * one, 2 * one, 0 * one, 0 * one, 0 * one,
-                       0 * one, True, x * one, one, 0 * one, 0.35 * one, backend=backend)
+                       0 * one, True, x * one, one, 0 * one, 0.35 * one, 0 * one,
+                       backend=backend)
         assert y[0] == 4e-4 + x**2
         assert _bits(y)[0] != _bits(np.array([4e-4 + x * x]))[0]
 
@@ -97,7 +101,7 @@ def test_compiled_covariance_rows_overflow_as_python_does_and_keep_the_state():
     m_c, m_p = _model(), _model()
     one = np.ones(2)
     args = (0.0025 * one, 0 * one, 0 * one, 2 * one, 0 * one, 0 * one, 0 * one, 0 * one, True,
-            np.array([1.0, 1e200]), one, None, 0.35 * one)
+            np.array([1.0, 1e200]), one, None, 0.35 * one, 0 * one)
     before = _state(m_c)
     with pytest.raises(OverflowError):
         m_c.rows(*args, backend="compiled")
@@ -111,9 +115,11 @@ def test_compiled_covariance_rows_refuse_wrong_arrays():
     one = np.ones(3)
     good = [0.0025 * one] + [one] * 7
     with pytest.raises(ValueError, match="yaw_error"):
-        m.rows(*good, True, np.ones(2), one, None, one, backend="compiled")
+        m.rows(*good, True, np.ones(2), one, None, one, one, backend="compiled")
+    with pytest.raises(ValueError, match="mag_rejected"):
+        m.rows(*good, True, one, one, None, one, np.ones(4), backend="compiled")
     with pytest.raises(ValueError, match="dt"):
-        m.rows(np.ones(3, dtype=np.float32), *good[1:], True, one, one, None, one,
+        m.rows(np.ones(3, dtype=np.float32), *good[1:], True, one, one, None, one, one,
                backend="compiled")
 
 

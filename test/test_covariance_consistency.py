@@ -19,10 +19,12 @@ from ros_test_helpers import Header, Imu, MagneticField, Quaternion, Time, Vecto
 from cf_estimator import metrics
 from cf_estimator.bench.consistency import consistency, family_consistency
 from cf_estimator.core.batch import estimate
+from cf_estimator.core.bias import BIAS_RANDOM_WALK_RAD_S_SQRT_S
 from cf_estimator.core.covariance import (
     CORRECTION_WINDOW_S,
     TILT_FLOOR_RAD2,
     OrientationCovariance,
+    gyro_drift_var,
 )
 from cf_estimator.core.params import FilterParams
 from cf_estimator.pipeline import ImuPipeline, PipelineParams
@@ -219,12 +221,49 @@ def test_model_terms_have_their_documented_sizes() -> None:
     m.reset()
     c = m.step(0.01, False, 0.001, 2, 0.0, 0.0, 0.0, 6.0 * 2.0**2, False, 0.0, False, None)
     assert c[0] == pytest.approx(1e-4 + 0.5 * (2.0 / 9.8) ** 2 * 0.01 * 0.35, rel=1e-12)
-    # a clip of 2 s: the bias sigma times the gyro-only time
+    # a clip of 2 s: the bias error's σ known at its start times the gyro-only time, and the
+    # random walk since, integrated (q·t³/3)
+    q = BIAS_RANDOM_WALK_RAD_S_SQRT_S**2
     m.reset()
     for _ in range(200):
         c = m.step(0.01, True, 0.01, 2, 0.0, 0.0, 0.0, 0.0, True, 0.0, False, 5.0)
-    assert c[0] == pytest.approx(1e-4 + (0.01 * 2.0) ** 2, rel=1e-9)
-    assert c[8] == pytest.approx(4e-4 + (0.01 * 5.0) ** 2, rel=1e-12)  # 5 s without a field
+    assert c[0] == pytest.approx(1e-4 + (0.01**2 - 2.0 * q) * 2.0**2 + q * 2.0**3 / 3.0,
+                                 rel=1e-9)
+    # 5 s without a field
+    assert c[8] == pytest.approx(4e-4 + (0.01**2 - 5.0 * q) * 5.0**2 + q * 5.0**3 / 3.0,
+                                 rel=1e-12)
+    # a bias error that is the walk alone: a third of (σ_b·t)², which counted the walk's
+    # latest part for the whole time
+    t = 60.0
+    assert gyro_drift_var(math.sqrt(q * t), t) == pytest.approx(q * t**3 / 3.0, rel=1e-12)
+    assert gyro_drift_var(0.01, 0.0) == 0.0
+
+
+def test_a_disturbed_field_leaves_the_heading_error_measured_before_it() -> None:
+    """A magnet appears: the first samples pass the channel's tests (their innovation is the
+    magnet's, 0.9 rad) and then the field is rejected. While rejected the heading runs on the
+    gyro, and its variance is the heading error the channel measured before — the running mean
+    of the innovations over 1/r1, which the few disturbed samples barely move —, not the last
+    disturbed innovation held for as long as the magnet stays (BROAD's attached-magnet trials
+    reported 41° for a heading 2° off)."""
+    assert OrientationCovariance(1e-4, 4e-4, 10.0, 0.1, r1=0.5).yaw_memory_s == 2.0
+    m = OrientationCovariance(1e-4, 4e-4, 10.0, 0.1, k1=0.35, r1=0.07)
+    assert m.yaw_memory_s == CORRECTION_WINDOW_S  # 1/r1 = 14 s, at most the window
+    rng = np.random.default_rng(0)
+    dt = 0.01
+    for _ in range(3000):  # 30 s of a clean field: the heading 0.02 rad off, noise 0.04 rad
+        m.step(dt, False, 1e-4, 2, 0.0, 0.0, 0.0, 0.0, True, 0.02 + rng.normal(0.0, 0.04),
+               True, 0.0)
+    for _ in range(5):  # the magnet's first samples, used
+        c = m.step(dt, False, 1e-4, 2, 0.0, 0.0, 0.0, 0.0, True, 0.9, True, 0.0)
+    assert c[8] == pytest.approx(4e-4 + 0.9**2, rel=1e-9)  # while used: the innovation
+    ages = np.arange(1, 1001) * dt
+    yaw = [m.step(dt, False, 1e-4, 2, 0.0, 0.0, 0.0, 0.0, True, 0.0, False, a,
+                  mag_rejected=True)[8] for a in ages]
+    held = math.sqrt(yaw[0] - 4e-4)  # the running mean: 0.02 plus 5 samples' share of 0.9
+    assert held == pytest.approx(0.02 + 5 * dt / CORRECTION_WINDOW_S * 0.9, abs=0.005)
+    # then the gyro drift grows it
+    assert yaw[-1] == pytest.approx(4e-4 + held**2 + gyro_drift_var(1e-4, 10.0), rel=1e-9)
 
 
 def test_replay_summary_scores_the_covariance_against_the_ground_truth(tmp_path) -> None:

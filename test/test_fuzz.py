@@ -730,7 +730,7 @@ def test_valid_parameter_changes_apply_at_the_next_sample_without_reset(changes,
     settling = status.phase in ("startup", "recovering")
     floor = pp_new.orientation_covariance_rad2
     model = pipe.covariance_model  # the mean square it holds after this step
-    assert model.tilt0 == floor and model.k1 == fp_new.k1
+    assert model.tilt0 == floor and model.k1 == fp_new.k1 and model.r1 == fp_new.r1
     tilt = floor + (status.error_norm_rad**2 if settling else 0.0)
     if dt is not None:
         noise = pipe.filter._state.noise_a2 / (6.0 * fp_new.gravity_m_s2**2) * dt  # noqa: SLF001

@@ -30,6 +30,8 @@ from cf_estimator.core.params import FilterParams
 SETTLE_S = 10.0
 #: e > this many σ counts as beyond.
 SIGMAS = 2.0
+#: BROAD's groups of trials with a magnet near the sensor (the heading's hard case).
+MAGNET_GROUPS = frozenset({"stationary_magnet", "attached_magnet"})
 
 
 def consistency(err_rad: np.ndarray, var_rad2: np.ndarray) -> dict[str, float]:
@@ -101,8 +103,9 @@ def _pool(parts: Sequence[tuple[np.ndarray, np.ndarray]]) -> dict[str, float]:
 
 def family_consistency(folder: str | Path, family: str, params: FilterParams, jobs: int = 1
                        ) -> dict[str, dict[str, float]]:
-    """``{"tilt": figures}`` (plus ``"heading"`` for BROAD, 9-D) of one family's folder
-    (``broad`` or an EuRoC-layout family), samples pooled over its recordings."""
+    """``{"tilt": figures}`` (plus ``"heading"`` for BROAD, 9-D, and ``"heading_magnet"``
+    over its MAGNET_GROUPS' trials alone, with their number as ``"trials"``) of one family's
+    folder (``broad`` or an EuRoC-layout family), samples pooled over its recordings."""
     from cf_estimator.bench.parallel import run_tasks
 
     root = Path(folder)
@@ -110,9 +113,14 @@ def family_consistency(folder: str | Path, family: str, params: FilterParams, jo
         from cf_estimator.bench import broad
 
         info = broad.read_trial_info(root)
-        found = run_tasks(_broad_task, [(str(p), info, params) for p in broad.list_trials(root)],
-                          jobs)
-        return {"tilt": _pool([f[0] for f in found]), "heading": _pool([f[1] for f in found])}
+        trials = broad.list_trials(root)
+        found = run_tasks(_broad_task, [(str(p), info, params) for p in trials], jobs)
+        out = {"tilt": _pool([f[0] for f in found]), "heading": _pool([f[1] for f in found])}
+        magnet = [f[1] for p, f in zip(trials, found, strict=True)
+                  if MAGNET_GROUPS & set(broad.trial_groups(p.stem, info))]
+        if magnet:
+            out["heading_magnet"] = {**_pool(magnet), "trials": float(len(magnet))}
+        return out
     from cf_estimator.bench import euroc
 
     found = run_tasks(_flight_task, [(str(p), params) for p in euroc.find_flights(root)], jobs)

@@ -369,11 +369,14 @@ def _consistency_rows(folder: Path, family: str, label: str, params: FilterParam
 
     found = family_consistency(folder, family, params, jobs)
     rows = []
-    for what, head in (("tilt", f"{label}: tilt"), ("heading", f"{label} 9-D: heading")):
+    magnet = found.get("heading_magnet", {}).get("trials", 0.0)
+    for what, head in (("tilt", f"{label}: tilt"), ("heading", f"{label} 9-D: heading"),
+                       ("heading_magnet", f"BROAD magnet ({magnet:.0f}) 9-D: heading")):
         if what not in found:
             continue
         c = found[what]
-        rows.append(Row(family, f"{head} beyond 2σ (consistent {CONSISTENT_BEYOND[what]})", "%",
+        beyond = CONSISTENT_BEYOND["tilt" if what == "tilt" else "heading"]
+        rows.append(Row(family, f"{head} beyond 2σ (consistent {beyond})", "%",
                         {"cf_estimator": c["beyond_2sigma_pct"]}))
         rows.append(Row(family, f"{head} mean(e²/σ²) (consistent 1)", "1",
                         {"cf_estimator": c["mean_ratio"]}))

@@ -1114,36 +1114,45 @@ static int get_column(PyObject *o, column *c, Py_ssize_t count, int writable, co
     return 1;
 }
 
+/* covariance.gyro_drift_var: the angle's variance after t [s] of gyro alone */
+static double gyro_drift_var(double sigma_b, double t)
+{
+    const double q = BIAS_RANDOM_WALK_RAD_S_SQRT_S * BIAS_RANDOM_WALK_RAD_S_SQRT_S;
+    const double known = sigma_b * sigma_b - q * t;
+    return (known > 0.0 ? known : 0.0) * t * t + q * t * t * t / 3.0;
+}
+
 /* OrientationCovariance.steps over rows, the same operations in the same order:
  * covariance_rows(consts, state, heading_initialized, dt, clipped, bias_sigma, phase,
  *                 error_norm, lx, ly, noise_a2, yaw_error, mag_used, mag_age|None, loop_k1,
- *                 tilt_out, yaw_out) -> state
- * consts = (k1, bias_prior, inv_6g2, tilt0, yaw0, yaw_unref, tilt_cap, yaw_cap),
- * state = (clip_s, ms, yaw_err, cx, cy) before and after the rows; clipped and mag_used:
- * non-zero = true; bias_sigma NaN: the prior; mag_age None: never (the Python's None). */
+ *                 mag_rejected, tilt_out, yaw_out) -> state
+ * consts = (k1, bias_prior, inv_6g2, tilt0, yaw0, yaw_unref, tilt_cap, yaw_cap, yaw_memory),
+ * state = (clip_s, ms, yaw_err, cx, cy, yaw_lp, yaw_gap) before and after the rows; clipped,
+ * mag_used and mag_rejected: non-zero = true; bias_sigma NaN: the prior; mag_age None: never
+ * (the Python's None). */
 static PyObject *covariance_rows(PyObject *Py_UNUSED(module), PyObject *args)
 {
-    double k1_cfg, prior, inv_6g2, tilt0, yaw0, yaw_unref, tilt_cap, yaw_cap;
-    double clip_s, ms, yaw_err, cx, cy;
+    double k1_cfg, prior, inv_6g2, tilt0, yaw0, yaw_unref, tilt_cap, yaw_cap, yaw_memory;
+    double clip_s, ms, yaw_err, cx, cy, yaw_lp, yaw_gap;
     int heading;
-    PyObject *o[14];
-    if (!PyArg_ParseTuple(args, "(dddddddd)(ddddd)pOOOOOOOOOOOOOO:covariance_rows", &k1_cfg,
+    PyObject *o[15];
+    if (!PyArg_ParseTuple(args, "(ddddddddd)(ddddddd)pOOOOOOOOOOOOOOO:covariance_rows", &k1_cfg,
                           &prior, &inv_6g2, &tilt0, &yaw0, &yaw_unref, &tilt_cap, &yaw_cap,
-                          &clip_s, &ms, &yaw_err, &cx, &cy, &heading, &o[0], &o[1], &o[2],
-                          &o[3], &o[4], &o[5], &o[6], &o[7], &o[8], &o[9], &o[10], &o[11],
-                          &o[12], &o[13]))
+                          &yaw_memory, &clip_s, &ms, &yaw_err, &cx, &cy, &yaw_lp, &yaw_gap,
+                          &heading, &o[0], &o[1], &o[2], &o[3], &o[4], &o[5], &o[6], &o[7],
+                          &o[8], &o[9], &o[10], &o[11], &o[12], &o[13], &o[14]))
         return NULL;
-    static const char *names[14] = {"dt", "clipped", "bias_sigma", "phase", "error_norm", "lx",
+    static const char *names[15] = {"dt", "clipped", "bias_sigma", "phase", "error_norm", "lx",
                                     "ly", "noise_a2", "yaw_error", "mag_used", "mag_age",
-                                    "loop_k1", "tilt_out", "yaw_out"};
-    column c[14];
-    for (int j = 0; j < 14; j++) c[j].b.obj = NULL;
+                                    "loop_k1", "mag_rejected", "tilt_out", "yaw_out"};
+    column c[15];
+    for (int j = 0; j < 15; j++) c[j].b.obj = NULL;
     PyObject *result = NULL;
     Py_ssize_t n = PyObject_Length(o[0]);
     if (n < 0) return NULL;
-    for (int j = 0; j < 14; j++) {
+    for (int j = 0; j < 15; j++) {
         if (j == 10 && o[j] == Py_None) continue;
-        if (!get_column(o[j], &c[j], n, j >= 12, names[j])) goto done;
+        if (!get_column(o[j], &c[j], n, j >= 13, names[j])) goto done;
     }
     const int ages = c[10].b.obj != NULL;
     volatile double pow_two = 2.0;
@@ -1164,14 +1173,21 @@ static PyObject *covariance_rows(PyObject *Py_UNUSED(module), PyObject *args)
         ms += kdt / (1.0 + kdt) * (cx * cx + cy * cy - ms);
         const double ph = AT(c[3], i);
         const double e_t = (ph == PHASE_STARTUP || ph == PHASE_RECOVERING) ? AT(c[4], i) : 0.0;
-        const double drift = sigma_b * clip_s;
+        const double drift = gyro_drift_var(sigma_b, clip_s);
         const double noise = AT(c[7], i) * inv_6g2 * dt;
-        const double tilt = tilt0 + e_t * e_t + drift * drift + 0.5 * (ms + noise * k1);
-        WAT(c[12], i) = tilt_cap < tilt ? tilt_cap : tilt; /* Python's min(tilt, cap) */
+        const double tilt = tilt0 + e_t * e_t + drift + 0.5 * (ms + noise * k1);
+        WAT(c[13], i) = tilt_cap < tilt ? tilt_cap : tilt; /* Python's min(tilt, cap) */
+        yaw_gap += dt;
         if (heading) {
-            if (AT(c[9], i) != 0.0) yaw_err = fabs(AT(c[8], i));
+            if (AT(c[9], i) != 0.0) {
+                yaw_lp += yaw_gap / (yaw_memory + yaw_gap) * (AT(c[8], i) - yaw_lp);
+                yaw_gap = 0.0;
+                yaw_err = fabs(AT(c[8], i));
+            } else if (AT(c[12], i) != 0.0) {
+                yaw_err = fabs(yaw_lp);
+            }
             const double age = ages ? AT(c[10], i) : 0.0;
-            const double yd = sigma_b * (age != 0.0 ? age : 0.0); /* age or 0.0 */
+            const double yd = gyro_drift_var(sigma_b, age != 0.0 ? age : 0.0); /* age or 0.0 */
             /* yaw_err ** 2 as Python's float power: NaN kept, overflow an error, else libm's
              * pow itself (the exponent volatile: the compiler would make sq(x) x * x,
              * which differs from libm's pow in the last bit on some x) */
@@ -1180,18 +1196,18 @@ static PyObject *covariance_rows(PyObject *Py_UNUSED(module), PyObject *args)
                 overflow = 1;
                 break;
             }
-            const double yaw = yaw0 + y2 + yd * yd;
-            WAT(c[13], i) = yaw_cap < yaw ? yaw_cap : yaw;
+            const double yaw = yaw0 + y2 + yd;
+            WAT(c[14], i) = yaw_cap < yaw ? yaw_cap : yaw;
         } else {
-            WAT(c[13], i) = yaw_unref;
+            WAT(c[14], i) = yaw_unref;
         }
     }
     if (overflow)
         PyErr_SetString(PyExc_OverflowError, "(34, 'Numerical result out of range')");
     else
-        result = Py_BuildValue("(ddddd)", clip_s, ms, yaw_err, cx, cy);
+        result = Py_BuildValue("(ddddddd)", clip_s, ms, yaw_err, cx, cy, yaw_lp, yaw_gap);
 done:
-    for (int j = 0; j < 14; j++)
+    for (int j = 0; j < 15; j++)
         if (c[j].b.obj) PyBuffer_Release(&c[j].b);
     return result;
 }

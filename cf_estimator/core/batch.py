@@ -28,7 +28,7 @@ from cf_estimator.core.filter import EXTRA_COLUMNS, ComplementaryFilter, Extra, 
 from cf_estimator.core.input_checks import warn_units
 from cf_estimator.core.kernel import resolve_backend
 from cf_estimator.core.params import FilterParams
-from cf_estimator.core.step import BIAS_CONVERGED_SIGMA_RAD_S, MAG_USED
+from cf_estimator.core.step import BIAS_CONVERGED_SIGMA_RAD_S, MAG_REJECTED, MAG_USED
 from cf_estimator.core.velocity import (
     VelocityAiding,
     VelocityStatus,
@@ -120,7 +120,8 @@ def covariance_rows(extra: np.ndarray, t_s: np.ndarray, q: np.ndarray, params: F
     if ok.size == 0:
         return out
     model = OrientationCovariance(tilt0_rad2, yaw0_rad2, unreferenced_yaw_rad2,
-                                  params.bias_prior_sigma_rad_s, params.k1, params.gravity_m_s2)
+                                  params.bias_prior_sigma_rad_s, params.k1, params.gravity_m_s2,
+                                  params.r1)
     start = int(ok[0])
     x = extra[start:]
     ts = t_s[start:].tolist()
@@ -145,7 +146,8 @@ def covariance_rows(extra: np.ndarray, t_s: np.ndarray, q: np.ndarray, params: F
         sb = sigma[k]
         rows.append(step(dts[k], clipped[k], None if sb != sb else sb, phase[k], en[k], lx[k],
                          ly[k], na2[k], heading, yaw_err[k] if used else 0.0, used,
-                         None if last is None else ts[k] - last, loop_k1[k]))
+                         None if last is None else ts[k] - last, loop_k1[k],
+                         status[k] == MAG_REJECTED))
     out[start:] = rows
     return out
 

@@ -10,17 +10,22 @@ Tilt: the variance of the inclination error, ``S = cov[0] + cov[4]`` [rad²] (a 
 expected e² of the angle between the estimated and the true "up"); reported as ``S/2`` on each of
 the world x and y axes::
 
-    S = 2·(v0 + e_t² + (σ_b·t_clip)²) + M + V
+    S = 2·(v0 + e_t² + D(t_clip)) + M + V
 
 - ``v0`` [rad²] = ``orientation_covariance_rad2``: what the filter cannot see (accelerometer
   bias, mounting), per axis.
 - ``e_t`` [rad] = the raw error norm while the filter is in start-up or recovery (its tilt is
   still being pulled in: the error is the best evidence of how wrong it is), else 0.
-- ``σ_b·t_clip``: ``t_clip`` [s] = how long the error has been clipped without a break (the
-  accelerometer is distrusted: the tilt is gyro-integrated for that long, its drift bounded by
-  the bias estimate's error ``σ_b`` [rad/s], √bias_err_var
-  (:func:`cf_estimator.core.bias.error_sigma`: not bias_var, the learning's schedule), the
-  prior ``bias_prior_sigma_rad_s`` before the first estimate).
+- ``D(t_clip)``: ``t_clip`` [s] = how long the error has been clipped without a break (the
+  accelerometer is distrusted: the tilt is gyro-integrated for that long); ``D(t)`` [rad²] =
+  :func:`gyro_drift_var`, the variance of an angle the gyro integrates alone for t:
+  ``(σ_b² − q·t)·t² + q·t³/3`` (the first term never below 0), ``σ_b`` [rad/s] the bias
+  estimate's error now, √bias_err_var (:func:`cf_estimator.core.bias.error_sigma`: not
+  bias_var, the learning's schedule; the prior ``bias_prior_sigma_rad_s`` before the first
+  estimate), ``q`` [rad²/s³] the bias random walk's (BIAS_RANDOM_WALK_RAD_S_SQRT_S²): the error
+  known when the gyro was left alone drifts the angle as t², the walk since — which σ_b² has
+  taken on as q·t — as its integral, q·t³/3 (counting it as (σ_b·t)² took the walk's latest
+  size for the whole time, three times its share).
 - ``M`` [rad²] = the mean square, over the loop's own memory ``1/k1`` [s], of ``|c|``: the tilt
   correction the accelerometer channel has made over the last CORRECTION_WINDOW_S,
   ``c = k1·∫l_h·dt`` high-passed over that window [rad], k1 the loop's running gain (``loop_k1``
@@ -42,12 +47,18 @@ the world x and y axes::
   variance white noise leaves in the tilt through the loop ``k1/(T s² + s + k1)`` (k1/2 per
   axis, for any aperiodic time constant T), both axes.
 
-Yaw, heading referenced by the magnetometer: ``y0 + e_y² + (σ_b·t_mag)²``. ``y0`` =
+Yaw, heading referenced by the magnetometer: ``y0 + e_y² + D(t_mag)``. ``y0`` =
 ``yaw_covariance_rad2``; ``e_y`` [rad] = the last heading error the magnetometer channel measured
 (the error it is still correcting: a 120° error reports ≈ 120°, falling as the heading comes
-back); ``t_mag`` [s] = time since the last magnetometer sample the filter used (a dropout, or a
-disturbed field — heading source 'gyro' — grows the variance with the gyro drift). Not
-referenced (``use_mag`` false, or no usable sample yet): ``unreferenced_yaw_covariance_rad2``.
+back) — and once the channel rejects the field as disturbed, the mean of its innovations over
+its own memory (``yaw_memory_s``: 1/r1, at most CORRECTION_WINDOW_S) up to then: the heading
+error it had measured before the disturbance, which the few disturbed samples that passed its
+tests before it caught the change move by their share only (held as is, their innovation — the
+magnet's field, not the heading's error — was reported for as long as the magnet stayed: 41°
+on a BROAD trial whose heading was 2° off); ``t_mag`` [s] = time since the last magnetometer
+sample the filter used (a dropout, or a disturbed field — heading source 'gyro' — grows the
+variance with the gyro drift D). Not referenced (``use_mag`` false, or no usable sample yet):
+``unreferenced_yaw_covariance_rad2``.
 
 Constants: ``v0`` and ``y0`` are the only fitted ones (maximum likelihood of the errors under the
 model's Gaussian: tilt on the phantom4 vertical campaign, 6-D; yaw on BROAD's undisturbed trials,
@@ -66,6 +77,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from cf_estimator.core.bias import BIAS_RANDOM_WALK_RAD_S_SQRT_S
 from cf_estimator.core.kernel import compiled_kernel
 from cf_estimator.core.step import PHASE_RECOVERING, PHASE_STARTUP
 
@@ -86,19 +98,30 @@ YAW_FLOOR_RAD2 = 4e-4
 UNREFERENCED_YAW_RAD2 = 10.0
 
 
+def gyro_drift_var(sigma_b: float, t: float) -> float:
+    """Variance [rad²] of the angle a gyro integrates alone for ``t`` [s], whose bias error
+    has the σ ``sigma_b`` [rad/s] now: the error's part known at the start of ``t`` (σ_b² less
+    the random walk's ``q·t`` since, never below 0) drifts as t², the walk's as ``q·t³/3`` (the
+    integral of a random walk: a bias that wandered off late has turned the angle less)."""
+    q = BIAS_RANDOM_WALK_RAD_S_SQRT_S * BIAS_RANDOM_WALK_RAD_S_SQRT_S
+    known = sigma_b * sigma_b - q * t
+    return (known if known > 0.0 else 0.0) * t * t + q * t * t * t / 3.0
+
+
 class OrientationCovariance:
     """Per-message covariance model (see the module docstring); ``reset`` with the filter.
 
     ``k1`` [1/s]: the accelerometer channel's gain (FilterParams.k1); ``gravity_m_s2``: ‖g‖.
     """
 
-    __slots__ = ("_clip_s", "_yaw_err", "_ms", "_cx", "_cy", "tilt0", "yaw0", "yaw_unref",
-                 "bias_prior", "k1", "_inv_6g2")
+    __slots__ = ("_clip_s", "_yaw_err", "_ms", "_cx", "_cy", "_yaw_lp", "_yaw_gap", "tilt0",
+                 "yaw0", "yaw_unref", "bias_prior", "k1", "r1", "_inv_6g2")
 
     def __init__(self, tilt0_rad2: float, yaw0_rad2: float, yaw_unreferenced_rad2: float,
                  bias_prior_sigma_rad_s: float, k1: float = 0.35,
-                 gravity_m_s2: float = 9.80665) -> None:
+                 gravity_m_s2: float = 9.80665, r1: float = 0.07) -> None:
         self.tilt0 = tilt0_rad2
+        self.r1 = r1
         self.yaw0 = yaw0_rad2
         self.yaw_unref = yaw_unreferenced_rad2
         self.bias_prior = bias_prior_sigma_rad_s
@@ -106,26 +129,34 @@ class OrientationCovariance:
         self._inv_6g2 = 1.0 / (6.0 * gravity_m_s2 * gravity_m_s2)
         self.reset()
 
+    @property
+    def yaw_memory_s(self) -> float:
+        """Memory [s] of the heading error's running mean: the magnetometer channel's own,
+        1/r1, at most CORRECTION_WINDOW_S."""
+        return 1.0 / self.r1 if self.r1 * CORRECTION_WINDOW_S > 1.0 else CORRECTION_WINDOW_S
+
     def set_gravity(self, gravity_m_s2: float) -> None:
         """‖g‖ [m/s²] the vibration term divides by."""
         self._inv_6g2 = 1.0 / (6.0 * gravity_m_s2 * gravity_m_s2)
 
     def reset(self) -> None:
-        """Forget the clip duration, the correction and its mean square, and the last heading
-        error (a filter reset)."""
+        """Forget the clip duration, the correction and its mean square, and the heading error
+        (last and running mean; a filter reset)."""
         self._clip_s = 0.0
         self._yaw_err = 0.0
         self._ms = 0.0
         self._cx = 0.0
         self._cy = 0.0
+        self._yaw_lp = 0.0
+        self._yaw_gap = 0.0
 
-    def update(self, dt_s: float, state: object, mag_used: bool, mag_age_s: float | None
-               ) -> tuple[float, ...]:
+    def update(self, dt_s: float, state: object, mag_used: bool, mag_age_s: float | None,
+               mag_rejected: bool = False) -> tuple[float, ...]:
         """Covariance after one filter step. ``state``: the filter's step state (phase,
         error_norm, clipped, bias_err_var, lx, ly, noise_a2, heading_initialized, yaw_error_rad,
         loop_k1);
         ``mag_used``: the step used a magnetometer sample; ``mag_age_s``: time since the last
-        used one (None: never)."""
+        used one (None: never); ``mag_rejected``: the step rejected one (a disturbed field)."""
         s = state
         bv = s.bias_err_var  # type: ignore[attr-defined]
         return self.step(dt_s, bool(s.clipped),  # type: ignore[attr-defined]
@@ -133,19 +164,21 @@ class OrientationCovariance:
                          s.error_norm, s.lx, s.ly, s.noise_a2,  # type: ignore[attr-defined]
                          bool(s.heading_initialized),  # type: ignore[attr-defined]
                          s.yaw_error_rad if mag_used else 0.0,  # type: ignore[attr-defined]
-                         mag_used, mag_age_s, s.loop_k1)  # type: ignore[attr-defined]
+                         mag_used, mag_age_s, s.loop_k1,  # type: ignore[attr-defined]
+                         mag_rejected)
 
     def step(self, dt_s: float, clipped: bool, bias_sigma_rad_s: float | None, phase: float,
              error_norm_rad: float, lx_rad: float, ly_rad: float, noise_a2: float,
              heading_initialized: bool, yaw_error_rad: float, mag_used: bool,
-             mag_age_s: float | None, loop_k1: float = 0.0) -> tuple[float, ...]:
+             mag_age_s: float | None, loop_k1: float = 0.0, mag_rejected: bool = False
+             ) -> tuple[float, ...]:
         """:meth:`update` from the state's figures (the bulk pipeline and ``estimate`` have them
         per row): ``bias_sigma_rad_s`` = √bias_err_var, the bias estimate's error (None: no
         estimate yet, the prior is used),
         ``lx_rad``, ``ly_rad`` the aperiodic unit's world-frame state, ``noise_a2``
         [(m/s²)²] the accelerometer noise of the stillness blocks, ``yaw_error_rad`` read only
         when ``mag_used``, ``loop_k1`` [1/s] the loop's running gain (≤ 0: none yet, the
-        configured k1)."""
+        configured k1), ``mag_rejected`` the step rejected a magnetometer sample (disturbed)."""
         self._clip_s = self._clip_s + dt_s if clipped else 0.0
         sigma_b = bias_sigma_rad_s if bias_sigma_rad_s is not None else self.bias_prior
         k1 = loop_k1 if loop_k1 > 0.0 else self.k1
@@ -157,15 +190,21 @@ class OrientationCovariance:
         ms += kdt / (1.0 + kdt) * (cx * cx + cy * cy - ms)
         self._cx, self._cy, self._ms = cx, cy, ms
         e_t = error_norm_rad if phase in _SETTLING else 0.0
-        drift = sigma_b * self._clip_s
+        drift = gyro_drift_var(sigma_b, self._clip_s)
         noise = noise_a2 * self._inv_6g2 * dt_s  # σ_a²/g²·dt [rad²·s]
-        tilt = min(self.tilt0 + e_t * e_t + drift * drift + 0.5 * (ms + noise * k1),
+        tilt = min(self.tilt0 + e_t * e_t + drift + 0.5 * (ms + noise * k1),
                    max(_PI2, self.tilt0))
+        self._yaw_gap += dt_s
         if heading_initialized:
             if mag_used:
+                gap = self._yaw_gap
+                self._yaw_lp += gap / (self.yaw_memory_s + gap) * (yaw_error_rad - self._yaw_lp)
+                self._yaw_gap = 0.0
                 self._yaw_err = abs(yaw_error_rad)
-            yd = sigma_b * (mag_age_s or 0.0)
-            yaw = min(self.yaw0 + self._yaw_err**2 + yd * yd,
+            elif mag_rejected:
+                self._yaw_err = abs(self._yaw_lp)
+            yd = gyro_drift_var(sigma_b, mag_age_s or 0.0)
+            yaw = min(self.yaw0 + self._yaw_err**2 + yd,
                       max(_PI2, self.yaw_unref, self.yaw0))
         else:
             yaw = self.yaw_unref
@@ -176,21 +215,23 @@ class OrientationCovariance:
               error_norm_rad: Sequence[float], lx_rad: Sequence[float], ly_rad: Sequence[float],
               noise_a2: Sequence[float], heading_initialized: bool,
               yaw_error_rad: Sequence[float], mag_used: Sequence[bool],
-              mag_age_s: Sequence[float | None], loop_k1: Sequence[float]
-              ) -> tuple[list[float], list[float]]:
+              mag_age_s: Sequence[float | None], loop_k1: Sequence[float],
+              mag_rejected: Sequence[bool]) -> tuple[list[float], list[float]]:
         """:meth:`step` over rows, the same operations in the same order, as
         (tilt, yaw) variances per row [rad²] (the bulk pipeline: one call per run instead of one
         per row). ``bias_sigma_rad_s`` NaN: no estimate yet (the prior is used)."""
         clip_s, ms, yaw_err, cx, cy = self._clip_s, self._ms, self._yaw_err, self._cx, self._cy
+        yaw_lp, yaw_gap, yaw_memory = self._yaw_lp, self._yaw_gap, self.yaw_memory_s
         k1_cfg, prior, inv_6g2 = self.k1, self.bias_prior, self._inv_6g2
         tilt0, yaw0, yaw_unref = self.tilt0, self.yaw0, self.yaw_unref
         tilt_cap, yaw_cap = max(_PI2, tilt0), max(_PI2, yaw_unref, yaw0)
         settling = _SETTLING
         tilts: list[float] = []
         yaws: list[float] = []
-        for dt, clip, sb, ph, en, lx, ly, na2, ye, used, age, kr in zip(
+        for dt, clip, sb, ph, en, lx, ly, na2, ye, used, age, kr, rejected in zip(
                 dt_s, clipped, bias_sigma_rad_s, phase, error_norm_rad, lx_rad, ly_rad,
-                noise_a2, yaw_error_rad, mag_used, mag_age_s, loop_k1, strict=True):
+                noise_a2, yaw_error_rad, mag_used, mag_age_s, loop_k1, mag_rejected,
+                strict=True):
             clip_s = clip_s + dt if clip else 0.0
             sigma_b = sb if sb == sb else prior
             k1 = kr if kr > 0.0 else k1_cfg
@@ -199,46 +240,55 @@ class OrientationCovariance:
             cx, cy = cx + kdt * lx - leak * cx, cy + kdt * ly - leak * cy
             ms += kdt / (1.0 + kdt) * (cx * cx + cy * cy - ms)
             e_t = en if ph in settling else 0.0
-            drift = sigma_b * clip_s
+            drift = gyro_drift_var(sigma_b, clip_s)
             noise = na2 * inv_6g2 * dt
-            tilts.append(min(tilt0 + e_t * e_t + drift * drift + 0.5 * (ms + noise * k1),
+            tilts.append(min(tilt0 + e_t * e_t + drift + 0.5 * (ms + noise * k1),
                              tilt_cap))
+            yaw_gap += dt
             if heading_initialized:
                 if used:
+                    yaw_lp += yaw_gap / (yaw_memory + yaw_gap) * (ye - yaw_lp)
+                    yaw_gap = 0.0
                     yaw_err = abs(ye)
-                yd = sigma_b * (age or 0.0)
-                yaws.append(min(yaw0 + yaw_err**2 + yd * yd, yaw_cap))
+                elif rejected:
+                    yaw_err = abs(yaw_lp)
+                yd = gyro_drift_var(sigma_b, age or 0.0)
+                yaws.append(min(yaw0 + yaw_err**2 + yd, yaw_cap))
             else:
                 yaws.append(yaw_unref)
         self._clip_s, self._ms, self._yaw_err, self._cx, self._cy = clip_s, ms, yaw_err, cx, cy
+        self._yaw_lp, self._yaw_gap = yaw_lp, yaw_gap
         return tilts, yaws
 
     def rows(self, dt_s: np.ndarray, clipped: np.ndarray, bias_sigma_rad_s: np.ndarray,
              phase: np.ndarray, error_norm_rad: np.ndarray, lx_rad: np.ndarray,
              ly_rad: np.ndarray, noise_a2: np.ndarray, heading_initialized: bool,
              yaw_error_rad: np.ndarray, mag_used: np.ndarray, mag_age_s: np.ndarray | None,
-             loop_k1: np.ndarray, backend: str = "python") -> tuple[np.ndarray, np.ndarray]:
+             loop_k1: np.ndarray, mag_rejected: np.ndarray, backend: str = "python"
+             ) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`steps` over 1-D float64 arrays (columns of a row-major array will do):
-        ``clipped``, ``mag_used`` non-zero = true, ``mag_age_s`` None = never. ``backend``
-        'compiled': the C twin of :meth:`steps` (same bits; the bulk pipeline's path), else
-        :meth:`steps` itself. Returns the (tilt, yaw) variances per row [rad²]."""
+        ``clipped``, ``mag_used``, ``mag_rejected`` non-zero = true, ``mag_age_s`` None =
+        never. ``backend`` 'compiled': the C twin of :meth:`steps` (same bits; the bulk
+        pipeline's path), else :meth:`steps` itself. Returns the (tilt, yaw) variances per row
+        [rad²]."""
         n = int(dt_s.shape[0])
         if backend == "compiled" and compiled_kernel is not None:
             tilt, yaw = np.empty(n), np.empty(n)
             consts = (self.k1, self.bias_prior, self._inv_6g2, self.tilt0, self.yaw0,
                       self.yaw_unref, max(_PI2, self.tilt0),
-                      max(_PI2, self.yaw_unref, self.yaw0))
-            state = (self._clip_s, self._ms, self._yaw_err, self._cx, self._cy)
-            (self._clip_s, self._ms, self._yaw_err, self._cx,
-             self._cy) = compiled_kernel.covariance_rows(
+                      max(_PI2, self.yaw_unref, self.yaw0), self.yaw_memory_s)
+            state = (self._clip_s, self._ms, self._yaw_err, self._cx, self._cy, self._yaw_lp,
+                     self._yaw_gap)
+            (self._clip_s, self._ms, self._yaw_err, self._cx, self._cy, self._yaw_lp,
+             self._yaw_gap) = compiled_kernel.covariance_rows(
                 consts, state, bool(heading_initialized), dt_s, clipped, bias_sigma_rad_s,
                 phase, error_norm_rad, lx_rad, ly_rad, noise_a2, yaw_error_rad, mag_used,
-                mag_age_s, loop_k1, tilt, yaw)
+                mag_age_s, loop_k1, mag_rejected, tilt, yaw)
             return tilt, yaw
         tilts, yaws = self.steps(
             dt_s.tolist(), (clipped != 0.0).tolist(), bias_sigma_rad_s.tolist(),
             phase.tolist(), error_norm_rad.tolist(), lx_rad.tolist(), ly_rad.tolist(),
             noise_a2.tolist(), heading_initialized, yaw_error_rad.tolist(),
             (mag_used != 0).tolist(), [None] * n if mag_age_s is None else mag_age_s.tolist(),
-            loop_k1.tolist())
+            loop_k1.tolist(), (mag_rejected != 0).tolist())
         return np.asarray(tilts, dtype=np.float64), np.asarray(yaws, dtype=np.float64)

@@ -502,9 +502,10 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
         p.tally.mag_rejected += int(np.count_nonzero(has & (status == MAG_REJECTED)))
         p.tally.mag_disabled += int(np.count_nonzero(has & (status == MAG_DISABLED)))
         used = used_arr.astype(np.float64)
+        rejected = (has & (status == MAG_REJECTED)).astype(np.float64)
     else:
         used_arr = None
-        used = np.zeros(n)
+        used = rejected = np.zeros(n)
     if used_arr is not None and used_arr.any():
         # the stamp of the last sample used up to each row (the one before the run: -1)
         last_at = np.maximum.accumulate(np.where(used_arr, np.arange(n), -1))
@@ -524,7 +525,7 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
     tilts, yaws = p.covariance_model.rows(
         dt, clipped_col, extra[:, Extra.BIAS_SIGMA], extra[:, Extra.PHASE], en_arr,
         extra[:, Extra.LX], extra[:, Extra.LY], extra[:, Extra.NOISE_A2], heading,
-        extra[:, Extra.YAW_ERROR], used, ages, extra[:, Extra.LOOP_K1], f.backend)
+        extra[:, Extra.YAW_ERROR], used, ages, extra[:, Extra.LOOP_K1], rejected, f.backend)
     cov = np.zeros((n, 9))
     cov[:, 0] = tilts
     cov[:, 4] = tilts

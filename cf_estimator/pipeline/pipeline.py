@@ -139,7 +139,7 @@ class ImuPipeline:
         self.covariance_model = OrientationCovariance(
             self._pp.orientation_covariance_rad2, self._pp.yaw_covariance_rad2,
             self._pp.unreferenced_yaw_covariance_rad2, self._fp.bias_prior_sigma_rad_s,
-            self._fp.k1, self._fp.gravity_m_s2)
+            self._fp.k1, self._fp.gravity_m_s2, self._fp.r1)
         self._apply_derived()
         self._clear_time_state()
 
@@ -209,6 +209,7 @@ class ImuPipeline:
         cov.yaw_unref = pp.unreferenced_yaw_covariance_rad2
         cov.bias_prior = self._fp.bias_prior_sigma_rad_s
         cov.k1 = self._fp.k1
+        cov.r1 = self._fp.r1
         cov.set_gravity(self._fp.gravity_m_s2)
         self.rules.max_dt_ns = int(round(pp.max_dt_s * 1e9))
         # 0 = never; a positive value below 0.5 ns must not round to "never"
@@ -527,7 +528,7 @@ class ImuPipeline:
 
         # -- magnetometer sample, used once -------------------------------------------------------
         mag = None
-        mag_used = False
+        mag_used = mag_rejected = False
         pending = self.mag_input.pending
         if pending is not None:
             self.mag_input.pending = None
@@ -556,6 +557,7 @@ class ImuPipeline:
                     self.mag_input.last_used_ns = pending[0]  # type: ignore[index]
                 elif ms == MAG_REJECTED:
                     self.tally.mag_rejected += 1
+                    mag_rejected = True
                 elif ms == MAG_DISABLED:
                     self.tally.mag_disabled += 1
             w.n_err += 1
@@ -591,7 +593,7 @@ class ImuPipeline:
             last_mag = self.mag_input.last_used_ns
             cov = self.covariance_model.update(
                 dt, f._state, mag_used,  # noqa: SLF001 - flags without building FilterStatus
-                None if last_mag is None else (t_ns - last_mag) * 1e-9)
+                None if last_mag is None else (t_ns - last_mag) * 1e-9, mag_rejected)
             roll = math.atan2(2.0 * (qw * qx + qy * qz), 1.0 - 2.0 * (qx * qx + qy * qy))
             sp = 2.0 * (qw * qy - qz * qx)
             pitch = math.asin(1.0 if sp > 1.0 else (-1.0 if sp < -1.0 else sp))
