@@ -241,11 +241,13 @@ def test_model_terms_have_their_documented_sizes() -> None:
 
 def test_a_disturbed_field_leaves_the_heading_error_measured_before_it() -> None:
     """A magnet appears: the first samples pass the channel's tests (their innovation is the
-    magnet's, 0.9 rad) and then the field is rejected. While rejected the heading runs on the
-    gyro, and its variance is the heading error the channel measured before — the running mean
-    of the innovations over 1/r1, which the few disturbed samples barely move —, not the last
-    disturbed innovation held for as long as the magnet stays (BROAD's attached-magnet trials
-    reported 41° for a heading 2° off)."""
+    magnet's, 0.9 rad) and then the field is rejected. While rejected and seen to move with the
+    body (the filter reports no innovation for it), the heading's variance is the error the
+    channel measured before — the running mean of the innovations over its memory, which the
+    few disturbed samples barely move —, not the last disturbed innovation held for as long as
+    the magnet stays (BROAD's attached-magnet trials reported 41° for a heading 2° off); a
+    rejected field not seen to move with the body may be right and the heading wrong: its
+    innovation counts when larger."""
     assert OrientationCovariance(1e-4, 4e-4, 10.0, 0.1, r1=0.5).yaw_memory_s == 2.0
     m = OrientationCovariance(1e-4, 4e-4, 10.0, 0.1, k1=0.35, r1=0.07)
     assert m.yaw_memory_s == CORRECTION_WINDOW_S  # 1/r1 = 14 s, at most the window
@@ -264,6 +266,14 @@ def test_a_disturbed_field_leaves_the_heading_error_measured_before_it() -> None
     assert held == pytest.approx(0.02 + 5 * dt / CORRECTION_WINDOW_S * 0.9, abs=0.005)
     # then the gyro drift grows it
     assert yaw[-1] == pytest.approx(4e-4 + held**2 + gyro_drift_var(1e-4, 10.0), rel=1e-9)
+    # a rejected field that keeps to the world (a compass wrong at power-on, a field that
+    # jumped on a still sensor): its own innovation, when larger than the mean
+    c = m.step(dt, False, 1e-4, 2, 0.0, 0.0, 0.0, 0.0, True, 2.0, False, 10.01,
+               mag_rejected=True)
+    assert c[8] == pytest.approx(4e-4 + 2.0**2 + gyro_drift_var(1e-4, 10.01), rel=1e-9)
+    c = m.step(dt, False, 1e-4, 2, 0.0, 0.0, 0.0, 0.0, True, 0.001, False, 10.02,
+               mag_rejected=True)
+    assert c[8] == pytest.approx(4e-4 + held**2 + gyro_drift_var(1e-4, 10.02), rel=1e-9)
 
 
 def test_replay_summary_scores_the_covariance_against_the_ground_truth(tmp_path) -> None:

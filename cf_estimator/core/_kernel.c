@@ -105,7 +105,7 @@ typedef struct {
         fx, fy, fz, yaw_error_rad, recovery_count, quick_until_s, pvx, pvy, pv_var,
         turn_rate_lp, turn_hold, loop_k1;
     char recovering, at_rest, mag_disturbed, heading_initialized, clipped, accel_used, moved,
-        bias_unverified, mag_recovering, aided;
+        bias_unverified, mag_recovering, aided, mag_on_body;
     int mag_status, phase;
 } cf_state;
 
@@ -268,6 +268,8 @@ static void heading(cf_state *s, const cf_params *p, const double *mag, int fast
         (maxd(mn - s->mag_cand_norm, s->mag_cand_norm - mn) >
          MAG_CANDIDATE_NORM_TOLERANCE * s->mag_cand_norm);
     int keep = disturbed && !cand_moved;
+    int turned_away = s->rate_lp * s->mag_cand_timer_s > 2.0 * MAG_TURN_TOLERANCE_RAD;
+    s->mag_on_body = (char)(disturbed && (s->mag_on_body || (cand_moved && turned_away)));
     s->mag_cand_timer_s = keep ? s->mag_cand_timer_s + dt_s : 0.0;
     if (!keep) {
         s->mcx = mmx;
@@ -301,7 +303,7 @@ static void heading(cf_state *s, const cf_params *p, const double *mag, int fast
     double ldt = (usable && learn) ? dt_m : 0.0;
     double limit = quick ? MAG_QUICK_LIMIT_RAD : p->mag_saturation_limit_rad;
 
-    s->yaw_error_rad = usable ? yaw_error : 0.0;
+    s->yaw_error_rad = (usable || (disturbed && !s->mag_on_body)) ? yaw_error : 0.0;
     double yaw_c = mind(maxd(yaw_error, -limit), limit);
     int yaw_mode = !p->mag_full || first;
     double angle = first ? yaw_error : (yaw_mode ? gain * yaw_c : 0.0);
@@ -1184,7 +1186,9 @@ static PyObject *covariance_rows(PyObject *Py_UNUSED(module), PyObject *args)
                 yaw_gap = 0.0;
                 yaw_err = fabs(AT(c[8], i));
             } else if (AT(c[12], i) != 0.0) {
-                yaw_err = fabs(yaw_lp);
+                /* Python's max(abs(yaw_lp), abs(ye)): the first unless the second is larger */
+                const double held = fabs(yaw_lp), ye = fabs(AT(c[8], i));
+                yaw_err = ye > held ? ye : held;
             }
             const double age = ages ? AT(c[10], i) : 0.0;
             const double yd = gyro_drift_var(sigma_b, age != 0.0 ? age : 0.0); /* age or 0.0 */
@@ -1284,7 +1288,7 @@ static PyMemberDef State_members[] = {
     SD(mag_ref_count), SB(mag_disturbed), SD(mag_last_time_s), SB(heading_initialized),
     SD(mag_clip_timer_s), SB(mag_recovering), SD(mvx), SD(mvy), SD(mvz), SD(mcx), SD(mcy),
     SD(mcz), SD(mmx), SD(mmy), SD(mmz), SD(mag_cand_norm), SD(mag_seen_time_s), SD(mag_ok_timer_s), SD(mag_cand_timer_s),
-    SD(mag_ref_time_s), SD(ex), SD(ey), SD(ez),
+    SB(mag_on_body), SD(mag_ref_time_s), SD(ex), SD(ey), SD(ez),
     SD(error_norm), SD(fx), SD(fy), SD(fz), SB(clipped), SB(accel_used), SI(mag_status),
     SD(yaw_error_rad), SD(loop_k1),
     {NULL, 0, 0, 0, NULL}};

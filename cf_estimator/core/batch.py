@@ -140,14 +140,14 @@ def covariance_rows(extra: np.ndarray, t_s: np.ndarray, q: np.ndarray, params: F
     step = model.step
     for k in range(n - start):
         used = status[k] == MAG_USED
+        rejected = status[k] == MAG_REJECTED
         if used:
             heading = True
             last = ts[k]
         sb = sigma[k]
         rows.append(step(dts[k], clipped[k], None if sb != sb else sb, phase[k], en[k], lx[k],
-                         ly[k], na2[k], heading, yaw_err[k] if used else 0.0, used,
-                         None if last is None else ts[k] - last, loop_k1[k],
-                         status[k] == MAG_REJECTED))
+                         ly[k], na2[k], heading, yaw_err[k] if used or rejected else 0.0,
+                         used, None if last is None else ts[k] - last, loop_k1[k], rejected))
     out[start:] = rows
     return out
 

@@ -50,12 +50,17 @@ the world x and y axes::
 Yaw, heading referenced by the magnetometer: ``y0 + e_y² + D(t_mag)``. ``y0`` =
 ``yaw_covariance_rad2``; ``e_y`` [rad] = the last heading error the magnetometer channel measured
 (the error it is still correcting: a 120° error reports ≈ 120°, falling as the heading comes
-back) — and once the channel rejects the field as disturbed, the mean of its innovations over
-its own memory (``yaw_memory_s``: 1/r1, at most CORRECTION_WINDOW_S) up to then: the heading
-error it had measured before the disturbance, which the few disturbed samples that passed its
-tests before it caught the change move by their share only (held as is, their innovation — the
-magnet's field, not the heading's error — was reported for as long as the magnet stayed: 41°
-on a BROAD trial whose heading was 2° off); ``t_mag`` [s] = time since the last magnetometer
+back). Once the channel rejects the field as disturbed, two explanations remain: the field is
+wrong, and the heading error is what the channel had measured before — the mean of its
+innovations over its own memory (``yaw_memory_s``: 1/r1, at most CORRECTION_WINDOW_S), in which
+the few disturbed samples that passed its tests before it caught the change count by their
+share only —, or the heading is wrong and the rejected field right (a compass wrong at
+power-on, a still sensor whose field jumped: nothing tells them from a magnet): its own
+innovation. ``e_y`` is the larger of the two until the rejected field is seen to move with the
+body as it turns (``mag_on_body`` of the filter's state, which then reports no innovation for
+it: a magnet on the sensor contradicts nothing), then the mean alone. (Held as it was, the
+last used innovation — the magnet's field — was reported for as long as the magnet stayed:
+41° on a BROAD trial whose heading was 2° off.) ``t_mag`` [s] = time since the last magnetometer
 sample the filter used (a dropout, or a disturbed field — heading source 'gyro' — grows the
 variance with the gyro drift D). Not referenced (``use_mag`` false, or no usable sample yet):
 ``unreferenced_yaw_covariance_rad2``.
@@ -163,7 +168,8 @@ class OrientationCovariance:
                          math.sqrt(bv) if bv >= 0.0 else None, s.phase,  # type: ignore[attr-defined]
                          s.error_norm, s.lx, s.ly, s.noise_a2,  # type: ignore[attr-defined]
                          bool(s.heading_initialized),  # type: ignore[attr-defined]
-                         s.yaw_error_rad if mag_used else 0.0,  # type: ignore[attr-defined]
+                         s.yaw_error_rad if mag_used or mag_rejected  # type: ignore[attr-defined]
+                         else 0.0,
                          mag_used, mag_age_s, s.loop_k1,  # type: ignore[attr-defined]
                          mag_rejected)
 
@@ -202,7 +208,7 @@ class OrientationCovariance:
                 self._yaw_gap = 0.0
                 self._yaw_err = abs(yaw_error_rad)
             elif mag_rejected:
-                self._yaw_err = abs(self._yaw_lp)
+                self._yaw_err = max(abs(self._yaw_lp), abs(yaw_error_rad))
             yd = gyro_drift_var(sigma_b, mag_age_s or 0.0)
             yaw = min(self.yaw0 + self._yaw_err**2 + yd,
                       max(_PI2, self.yaw_unref, self.yaw0))
@@ -251,7 +257,7 @@ class OrientationCovariance:
                     yaw_gap = 0.0
                     yaw_err = abs(ye)
                 elif rejected:
-                    yaw_err = abs(yaw_lp)
+                    yaw_err = max(abs(yaw_lp), abs(ye))
                 yd = gyro_drift_var(sigma_b, age or 0.0)
                 yaws.append(min(yaw0 + yaw_err**2 + yd, yaw_cap))
             else:

@@ -135,6 +135,8 @@ HEADING: tuple[Field, ...] = (
     _f("mag_ok_timer_s", "s", "how long the field has agreed with the reference without a break"),
     _f("mag_cand_timer_s", "s", "how long a rejected field has been steady and as the gyro "
        "predicts (re-learning)"),
+    _f("mag_on_body", "", "the rejected field moved with the body as it turned (a magnet on the "
+       "sensor): it does not contradict the heading; until a sample is used", "bool"),
     _f("mag_ref_time_s", "s", "time the field reference was (re-)learned"),
 )
 
@@ -145,7 +147,8 @@ SIGNALS: tuple[Field, ...] = (
     _f("clipped", "", "the last error was clipped", "bool"),
     _f("accel_used", "", "the last step had a valid accelerometer sample", "bool"),
     _f("mag_status", "1", "0 none, 1 used, 2 rejected, 3 disabled", "int"),
-    _f("yaw_error_rad", "rad", "heading channel's last error (0 when no sample was used)"),
+    _f("yaw_error_rad", "rad", "heading error the last sample implies (0 unless used, or "
+       "rejected and not on the body)"),
     _f("loop_k1", "1/s", "the loop's running gain at the last step with an accelerometer sample, "
        "without the bias-learning raise: the configured k1, lowered by the velocity swing "
        "(bias.loop_gain), at least 2 sqrt(k2)"),

@@ -565,6 +565,10 @@ def heading(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: Any) -> 
            > MAG_CANDIDATE_NORM_TOLERANCE * s.mag_cand_norm)
     )
     keep = disturbed & o.not_(cand_moved)
+    # a candidate that moved after the body turned by more than its tolerance moved with the
+    # body: the field is on the sensor (a magnet), it does not say the heading is wrong
+    turned_away = s.rate_lp * s.mag_cand_timer_s > 2.0 * MAG_TURN_TOLERANCE_RAD
+    s.mag_on_body = disturbed & (s.mag_on_body | (cand_moved & turned_away))
     s.mag_cand_timer_s = o.where(keep, s.mag_cand_timer_s + dt_s, 0.0)
     s.mcx, s.mcy, s.mcz = (o.where(keep, s.mcx, mmx), o.where(keep, s.mcy, mmy),
                            o.where(keep, s.mcz, mmz))
@@ -599,7 +603,9 @@ def heading(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: Any) -> 
     limit = o.where(quick, MAG_QUICK_LIMIT_RAD, p.mag_saturation_limit_rad)
 
     # 'yaw' mode (and the first heading fix of either mode): rotate about the world vertical
-    s.yaw_error_rad = o.where(usable, yaw_error, 0.0)
+    # the heading error the sample implies: used, or rejected but not seen to move with the body
+    # (a field that may be the truth and the heading wrong: covariance.py reports it)
+    s.yaw_error_rad = o.where(usable | (disturbed & o.not_(s.mag_on_body)), yaw_error, 0.0)
     yaw_c = o.minimum(o.maximum(yaw_error, -limit), limit)
     yaw_mode = o.not_(p.mag_full) | first
     angle = o.where(first, yaw_error, o.where(yaw_mode, gain * yaw_c, 0.0))
