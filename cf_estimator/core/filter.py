@@ -119,7 +119,7 @@ class FilterStatus:
     accel_used: bool
     mag_status: str  #: none | used | rejected | disabled
     heading_initialized: bool
-    yaw_error_rad: float  #: last heading error seen by the magnetometer channel
+    yaw_error_rad: float  #: heading error the last sample implies (used; rejected, not on body)
     recovery_count: int
     mag_yaw_rate_correction_rad_s: float  #: integral of the heading channel, world vertical
     #: the bias was last measured in a still phase at power-on without a magnetometer: a steady
