@@ -196,7 +196,7 @@ class OrientationCovariance:
         ms += kdt / (1.0 + kdt) * (cx * cx + cy * cy - ms)
         self._cx, self._cy, self._ms = cx, cy, ms
         e_t = error_norm_rad if phase in _SETTLING else 0.0
-        drift = gyro_drift_var(sigma_b, self._clip_s)
+        drift = gyro_drift_var(sigma_b, self._clip_s) if self._clip_s > 0.0 else 0.0
         noise = noise_a2 * self._inv_6g2 * dt_s  # σ_a²/g²·dt [rad²·s]
         tilt = min(self.tilt0 + e_t * e_t + drift + 0.5 * (ms + noise * k1),
                    max(_PI2, self.tilt0))
@@ -209,7 +209,7 @@ class OrientationCovariance:
                 self._yaw_err = abs(yaw_error_rad)
             elif mag_rejected:
                 self._yaw_err = max(abs(self._yaw_lp), abs(yaw_error_rad))
-            yd = gyro_drift_var(sigma_b, mag_age_s or 0.0)
+            yd = gyro_drift_var(sigma_b, mag_age_s) if mag_age_s else 0.0
             yaw = min(self.yaw0 + self._yaw_err**2 + yd,
                       max(_PI2, self.yaw_unref, self.yaw0))
         else:
