@@ -103,6 +103,37 @@ def test_the_diagnostics_warn_while_the_heading_is_on_the_gyro():
     report = pipe.diagnostics()
     assert report.level == WARN and "heading on the gyro alone" in report.message
     assert dict(report.values)["heading_source"] == "gyro"
+    # still, nothing tells a magnet beside it from a wrong heading: not 'on_body'
+    assert dict(report.values)["mag_disturbance"] == "field"
+    assert "moves with the sensor" not in report.message
+
+
+def test_the_diagnostics_say_a_magnet_moves_with_the_sensor():
+    """A magnet on a turning sensor, through the pipeline on real sensor_msgs: the WARN names
+    the likely cause (something magnetic on the vehicle) and ``mag_disturbance`` is
+    'on_body'; once it is gone and the field is used again, 'none'."""
+    from test_pipeline import T0_NS, imu_msg, mag_msg
+
+    from cf_estimator.pipeline.diagnostics import OK, WARN
+    from cf_estimator.pipeline.pipeline import ImuPipeline
+
+    t, gyro, accel, mag, _q, on = _rotating_with_magnet(0, 0.5)
+    pipe = ImuPipeline()
+    seen = {}
+    for k in range(t.size):
+        t_ns = T0_NS + int(round(t[k] * 1e9))
+        pipe.on_mag(mag_msg(t_ns, tuple(mag[k])))
+        pipe.on_imu(imu_msg(t_ns, tuple(gyro[k]), tuple(accel[k])))
+        if k in (int(15.0 * RATE_HZ), int(50.0 * RATE_HZ), int(99.0 * RATE_HZ)):
+            report = pipe.diagnostics()
+            seen[round(t[k])] = (report.level, report.message,
+                                 dict(report.values)["mag_disturbance"])
+    assert seen[15][2] == "none" and seen[15][0] == OK
+    level, message, disturbance = seen[50]
+    assert on[int(50.0 * RATE_HZ)]
+    assert level == WARN and disturbance == "on_body", seen[50]
+    assert "moves with the sensor" in message
+    assert seen[99][2] == "none"
 
 
 def test_a_jump_of_the_field_direction_alone_is_rejected():

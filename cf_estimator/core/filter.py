@@ -131,6 +131,9 @@ class FilterStatus:
     #: is disturbed: off the reference, turned when the body did not, or not yet settled back;
     #: the heading integrates the gyro alone), 'none' (no heading reference: 6-D or no sample)
     heading_source: str = "none"
+    #: the disturbed field moves with the sensor as it turns (a magnet or a current on the
+    #: vehicle): it does not contradict the heading (state ``mag_on_body``)
+    mag_on_body: bool = False
 
 
 #: Columns of :meth:`ComplementaryFilter.run_rows`'s ``extra_out``: raw error e (3, rad, sensor),
@@ -468,6 +471,7 @@ class ComplementaryFilter:
             heading_recovering=bool(s.mag_recovering),
             heading_source=("none" if not s.heading_initialized else
                             "gyro" if s.mag_disturbed else "magnetometer"),
+            mag_on_body=bool(s.mag_on_body),
         )
 
     def state_snapshot(self) -> Any:

@@ -155,8 +155,11 @@ def compose_report(
                 f"{counters['mag_invalid']}, rejected {counters['mag_rejected']}): yaw drifts"
             )
         if initialized and status.heading_source == "gyro":
-            warns.append("heading on the gyro alone: the magnetic field is disturbed (off the "
-                         "reference or turning when the body does not)")
+            warns.append(
+                "heading on the gyro alone: the magnetic field moves with the sensor as it turns "
+                "(a magnet or a current-carrying wire on the vehicle?)" if status.mag_on_body else
+                "heading on the gyro alone: the magnetic field is disturbed (off the reference "
+                "or turning when the body does not)")
         seen = d_mag["mag_used"] + d_mag["mag_rejected"]
         if seen and d_mag["mag_rejected"] > MAG_REJECTED_WARN_FRACTION * seen:
             warns.append(
@@ -216,6 +219,8 @@ def compose_report(
          str(bool(initialized and status.heading_rate_unverified)).lower()),
         ("heading_recovering", str(bool(initialized and status.heading_recovering)).lower()),
         ("heading_source", status.heading_source if initialized else "none"),
+        ("mag_disturbance", "none" if not (initialized and status.heading_source == "gyro")
+         else "on_body" if status.mag_on_body else "field"),
         ("recovery_count", str(status.recovery_count if initialized else 0)),
     ]
     r = rpy_rad if rpy_rad is not None else (None, None, None)
