@@ -116,7 +116,9 @@ def gyro_drift_var(sigma_b: float, t: float) -> float:
 class OrientationCovariance:
     """Per-message covariance model (see the module docstring); ``reset`` with the filter.
 
-    ``k1`` [1/s]: the accelerometer channel's gain (FilterParams.k1); ``gravity_m_s2``: ‖g‖.
+    ``k1`` [1/s]: the accelerometer channel's gain (FilterParams.k1); ``gravity_m_s2``: ‖g‖;
+    ``r1`` [1/s]: the magnetometer channel's gain (FilterParams.r1), whose memory the heading
+    error's running mean takes (:attr:`yaw_memory_s`).
     """
 
     __slots__ = ("_clip_s", "_yaw_err", "_ms", "_cx", "_cy", "_yaw_lp", "_yaw_gap", "tilt0",
@@ -126,11 +128,11 @@ class OrientationCovariance:
                  bias_prior_sigma_rad_s: float, k1: float = 0.35,
                  gravity_m_s2: float = 9.80665, r1: float = 0.07) -> None:
         self.tilt0 = tilt0_rad2
-        self.r1 = r1
         self.yaw0 = yaw0_rad2
         self.yaw_unref = yaw_unreferenced_rad2
         self.bias_prior = bias_prior_sigma_rad_s
         self.k1 = k1
+        self.r1 = r1
         self._inv_6g2 = 1.0 / (6.0 * gravity_m_s2 * gravity_m_s2)
         self.reset()
 
