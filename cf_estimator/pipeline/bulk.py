@@ -498,11 +498,12 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
         has = ~np.isnan(mag[:, 0])
         status = extra[:, Extra.MAG_STATUS]
         used_arr = has & (status == MAG_USED)
+        rejected_arr = has & (status == MAG_REJECTED)
         p.tally.mag_used += int(np.count_nonzero(used_arr))
-        p.tally.mag_rejected += int(np.count_nonzero(has & (status == MAG_REJECTED)))
+        p.tally.mag_rejected += int(np.count_nonzero(rejected_arr))
         p.tally.mag_disabled += int(np.count_nonzero(has & (status == MAG_DISABLED)))
         used = used_arr.astype(np.float64)
-        rejected = (has & (status == MAG_REJECTED)).astype(np.float64)
+        rejected = rejected_arr.astype(np.float64)
     else:
         used_arr = None
         used = rejected = np.zeros(n)
