@@ -17,7 +17,12 @@ import pytest
 from ros_test_helpers import Header, Imu, MagneticField, Quaternion, Time, Vector3
 
 from cf_estimator import metrics
-from cf_estimator.bench.consistency import consistency, family_consistency
+from cf_estimator.bench.consistency import (
+    Floors,
+    consistency,
+    family_consistency,
+    flight_samples,
+)
 from cf_estimator.core.batch import estimate
 from cf_estimator.core.bias import BIAS_RANDOM_WALK_RAD_S_SQRT_S
 from cf_estimator.core.covariance import (
@@ -292,3 +297,42 @@ def test_replay_summary_scores_the_covariance_against_the_ground_truth(tmp_path)
         c = cov[name]
         assert c["samples"] > 1000, (name, c)
         assert 0.0 <= c["beyond_2sigma_pct"] <= 100.0 and c["mean_ratio"] > 0.0, (name, c)
+
+
+def test_the_consistency_figures_take_the_node_s_floors() -> None:
+    """`bench cross --params` judges the covariance a node with that file would publish: its
+    floors reach the model (the tilt variance cov[0] + cov[4] moves by twice the per-axis floor's
+    change, sample for sample), and a parameter file's floors become the figures' (Floors.of)."""
+    _need("phantom4")
+    path = next(p for p in sorted((DATA / "phantom4").iterdir()) if p.is_dir())
+    fp = FilterParams()
+    e0, v0 = flight_samples(path, fp)
+    e1, v1 = flight_samples(path, fp, Floors(tilt0_rad2=TILT_FLOOR_RAD2 + 1e-4))
+    np.testing.assert_array_equal(e0, e1)  # the estimate does not depend on the floors
+    np.testing.assert_allclose(v1 - v0, 2e-4, rtol=1e-9, atol=1e-15)
+    assert consistency(e1, v1)["mean_ratio"] < consistency(e0, v0)["mean_ratio"]
+    pp = PipelineParams(orientation_covariance_rad2=2e-4, yaw_covariance_rad2=5e-4)
+    assert Floors.of(pp) == Floors(2e-4, 5e-4, pp.unreferenced_yaw_covariance_rad2)
+    assert Floors() == Floors.of(PipelineParams())  # the shipped floors are the node's defaults
+
+
+def test_bench_cross_params_file_sets_the_floors(tmp_path, monkeypatch, capsys) -> None:
+    """The CLI hands the parameter file's covariance floors to the table (and the filter's
+    parameters beside them): the consistency rows judge what that node would publish."""
+    from cf_estimator.bench import cross
+    from cf_estimator.cli.main import main
+
+    seen = {}
+
+    def fake_run_cross(data, params, families, jobs=1, progress=None, floors=None):
+        seen.update(params=params, floors=floors, families=families)
+        return cross.CrossResult()
+
+    monkeypatch.setattr(cross, "run_cross", fake_run_cross)
+    yaml = tmp_path / "p.yaml"
+    yaml.write_text("cf_estimator:\n  ros__parameters:\n    yaw_covariance_rad2: 0.0002\n"
+                    "    k1: 0.3\n", encoding="utf-8")
+    assert main(["bench", "cross", "--families", "compass", "--params", str(yaml)]) == 0
+    assert seen["floors"] == Floors(yaw0_rad2=2e-4)
+    assert seen["params"].k1 == 0.3 and list(seen["families"]) == ["compass"]
+    capsys.readouterr()

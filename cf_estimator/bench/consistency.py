@@ -11,7 +11,8 @@ Pooled over a family's samples:
 - ``mean_ratio``: mean(e²/σ²), 1 when consistent (below: σ too large, above: too small).
 
 The covariance is :meth:`cf_estimator.core.batch.EstimateResult.orientation_covariance` (the
-node's model, shipped floors), the same per message as the node's (tested).
+node's model, with the node's floors: :class:`Floors`, the shipped ones unless a parameter file
+says otherwise), the same per message as the node's (tested).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from cf_estimator import metrics
+from cf_estimator.core.covariance import TILT_FLOOR_RAD2, UNREFERENCED_YAW_RAD2, YAW_FLOOR_RAD2
 from cf_estimator.core.params import FilterParams
 
 #: Samples are scored from this long after the first one [s] (as the benchmarks' RMS).
@@ -32,6 +34,32 @@ SETTLE_S = 10.0
 SIGMAS = 2.0
 #: BROAD's groups of trials with a magnet near the sensor (the heading's hard case).
 MAGNET_GROUPS = frozenset({"stationary_magnet", "attached_magnet"})
+#: BROAD's heading pools beside all trials: (key, name, the groups a trial must be in one of) —
+#: the undisturbed trials (the yaw floor's fit family) and the magnet trials.
+HEADING_POOLS = (("heading_undisturbed", "undisturbed", frozenset({"undisturbed"})),
+                 ("heading_magnet", "magnet", MAGNET_GROUPS))
+
+
+@dataclasses.dataclass(frozen=True)
+class Floors:
+    """The covariance model's configured floors [rad²]: the node's ``orientation_covariance_rad2``,
+    ``yaw_covariance_rad2`` and ``unreferenced_yaw_covariance_rad2`` (PipelineParams)."""
+
+    tilt0_rad2: float = TILT_FLOOR_RAD2
+    yaw0_rad2: float = YAW_FLOOR_RAD2
+    unreferenced_yaw_rad2: float = UNREFERENCED_YAW_RAD2
+
+    @classmethod
+    def of(cls, pipeline_params: object) -> Floors:
+        """The floors a PipelineParams holds."""
+        pp = pipeline_params
+        return cls(pp.orientation_covariance_rad2, pp.yaw_covariance_rad2,  # type: ignore[attr-defined]
+                   pp.unreferenced_yaw_covariance_rad2)  # type: ignore[attr-defined]
+
+    def covariance(self, result: object) -> np.ndarray:
+        """(N, 9) ``orientation_covariance`` of an EstimateResult with these floors [rad²]."""
+        return result.orientation_covariance(  # type: ignore[attr-defined]
+            self.tilt0_rad2, self.yaw0_rad2, self.unreferenced_yaw_rad2)
 
 
 def consistency(err_rad: np.ndarray, var_rad2: np.ndarray) -> dict[str, float]:
@@ -52,7 +80,8 @@ def consistency(err_rad: np.ndarray, var_rad2: np.ndarray) -> dict[str, float]:
             "mean_ratio": float(np.mean(z))}
 
 
-def flight_samples(path: str | Path, params: FilterParams) -> tuple[np.ndarray, np.ndarray]:
+def flight_samples(path: str | Path, params: FilterParams, floors: Floors = Floors()
+                   ) -> tuple[np.ndarray, np.ndarray]:
     """(e [rad], σ² [rad²]) of the tilt, after SETTLE_S, of one EuRoC-layout flight, 6-D."""
     from cf_estimator.bench import euroc
     from cf_estimator.core.batch import estimate
@@ -60,12 +89,12 @@ def flight_samples(path: str | Path, params: FilterParams) -> tuple[np.ndarray, 
     f = euroc.load_flight(path)
     p = dataclasses.replace(params, use_mag=False)
     r = estimate(f.gyro_rad_s, f.accel_m_s2, None, timestamps_s=f.t_s, params=p)
-    c = r.orientation_covariance()
+    c = floors.covariance(r)
     keep = f.t_s >= SETTLE_S
     return metrics.tilt_error_rad(r.quaternion, f.q_ref)[keep], (c[:, 0] + c[:, 4])[keep]
 
 
-def broad_samples(path: str | Path, info: dict, params: FilterParams
+def broad_samples(path: str | Path, info: dict, params: FilterParams, floors: Floors = Floors()
                   ) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
     """((tilt e, σ²) 6-D, (heading e, σ²) 9-D) of one BROAD trial over its movement samples
     after SETTLE_S."""
@@ -78,7 +107,7 @@ def broad_samples(path: str | Path, info: dict, params: FilterParams
     for mag in (None, tr.mag_ut):
         p = dataclasses.replace(params, use_mag=mag is not None)
         r = estimate(tr.gyro_rad_s, tr.accel_m_s2, mag, rate_hz=tr.rate_hz, params=p)
-        c = r.orientation_covariance()
+        c = floors.covariance(r)
         _total, heading, incl = metrics.error_angles(metrics.error_quaternion(r.quaternion,
                                                                               tr.quat_ref))
         if mag is None:
@@ -88,11 +117,11 @@ def broad_samples(path: str | Path, info: dict, params: FilterParams
     return out[0], out[1]
 
 
-def _flight_task(args: tuple[str, FilterParams]) -> tuple[np.ndarray, np.ndarray]:
+def _flight_task(args: tuple[str, FilterParams, Floors]) -> tuple[np.ndarray, np.ndarray]:
     return flight_samples(*args)
 
 
-def _broad_task(args: tuple[str, dict, FilterParams]) -> tuple:
+def _broad_task(args: tuple[str, dict, FilterParams, Floors]) -> tuple:
     return broad_samples(*args)
 
 
@@ -101,10 +130,10 @@ def _pool(parts: Sequence[tuple[np.ndarray, np.ndarray]]) -> dict[str, float]:
                        np.concatenate([p[1] for p in parts]))
 
 
-def family_consistency(folder: str | Path, family: str, params: FilterParams, jobs: int = 1
-                       ) -> dict[str, dict[str, float]]:
-    """``{"tilt": figures}`` (plus ``"heading"`` for BROAD, 9-D, and ``"heading_magnet"``
-    over its MAGNET_GROUPS' trials alone, with their number as ``"trials"``) of one family's
+def family_consistency(folder: str | Path, family: str, params: FilterParams, jobs: int = 1,
+                       floors: Floors = Floors()) -> dict[str, dict[str, float]]:
+    """``{"tilt": figures}`` (plus ``"heading"`` for BROAD, 9-D, and each of its
+    HEADING_POOLS over those trials alone, with their number as ``"trials"``) of one family's
     folder (``broad`` or an EuRoC-layout family), samples pooled over its recordings."""
     from cf_estimator.bench.parallel import run_tasks
 
@@ -114,14 +143,16 @@ def family_consistency(folder: str | Path, family: str, params: FilterParams, jo
 
         info = broad.read_trial_info(root)
         trials = broad.list_trials(root)
-        found = run_tasks(_broad_task, [(str(p), info, params) for p in trials], jobs)
+        found = run_tasks(_broad_task, [(str(p), info, params, floors) for p in trials], jobs)
         out = {"tilt": _pool([f[0] for f in found]), "heading": _pool([f[1] for f in found])}
-        magnet = [f[1] for p, f in zip(trials, found, strict=True)
-                  if MAGNET_GROUPS & set(broad.trial_groups(p.stem, info))]
-        if magnet:
-            out["heading_magnet"] = {**_pool(magnet), "trials": float(len(magnet))}
+        for key, _name, groups in HEADING_POOLS:
+            pool = [f[1] for p, f in zip(trials, found, strict=True)
+                    if groups & set(broad.trial_groups(p.stem, info))]
+            if pool:
+                out[key] = {**_pool(pool), "trials": float(len(pool))}
         return out
     from cf_estimator.bench import euroc
 
-    found = run_tasks(_flight_task, [(str(p), params) for p in euroc.find_flights(root)], jobs)
+    found = run_tasks(_flight_task, [(str(p), params, floors)
+                                     for p in euroc.find_flights(root)], jobs)
     return {"tilt": _pool(found)}

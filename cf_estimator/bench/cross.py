@@ -52,6 +52,7 @@ from typing import TYPE_CHECKING
 from cf_estimator.core.params import FilterParams
 
 if TYPE_CHECKING:
+    from cf_estimator.bench.consistency import Floors
     from cf_estimator.bench.euroc_eval import VelocityInput
 
 COLUMNS = ("cf_estimator", "cf_estimator_offline", "vqf", "vqf_offline")
@@ -186,7 +187,7 @@ def _broad_rows(root: Path, params: FilterParams, peers: Sequence[str], jobs: in
     return rows
 
 
-def _compass_case(args: tuple[float, int, FilterParams, tuple[str, ...]]
+def _compass_case(args: tuple[float, int, FilterParams, tuple[str, ...], Floors]
                   ) -> tuple[float, dict[str, tuple]]:
     """(fraction, {column: (peak, rms)}) of the heading error while the magnet is on."""
     import numpy as np
@@ -195,7 +196,7 @@ def _compass_case(args: tuple[float, int, FilterParams, tuple[str, ...]]
     from cf_estimator.core.batch import estimate
     from cf_estimator.scenarios.compass import heading_error_deg, magnet_on_turning_sensor
 
-    fraction, seed, params, peers = args
+    fraction, seed, params, peers, floors = args
     params = dataclasses.replace(params, use_mag=True)
     c = magnet_on_turning_sensor(seed, fraction)
     qs = {}
@@ -205,7 +206,7 @@ def _compass_case(args: tuple[float, int, FilterParams, tuple[str, ...]]
                      offline=offline)
         qs[col] = r.quaternion
         if not offline:  # the reported heading variance, for the consistency rows
-            var = r.orientation_covariance()[:, 8][c.magnet_on]
+            var = floors.covariance(r)[:, 8][c.magnet_on]
     if "vqf" in peers:
         qs["vqf"] = peer_mod.run_vqf(c.gyro_rad_s, c.accel_m_s2, c.mag_T, c.rate_hz)["9d"]
         qs["vqf_offline"] = peer_mod.run_vqf_offline(c.gyro_rad_s, c.accel_m_s2, c.mag_T,
@@ -219,12 +220,14 @@ def _compass_case(args: tuple[float, int, FilterParams, tuple[str, ...]]
     return fraction, out
 
 
-def _compass_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> list[Row]:
+def _compass_rows(params: FilterParams, peers: Sequence[str], jobs: int,
+                  floors: Floors) -> list[Row]:
     import numpy as np
 
     from cf_estimator.bench.parallel import run_tasks
 
-    work = [(f, s, params, tuple(peers)) for f in COMPASS_FRACTIONS for s in COMPASS_SEEDS]
+    work = [(f, s, params, tuple(peers), floors) for f in COMPASS_FRACTIONS
+            for s in COMPASS_SEEDS]
     found = run_tasks(_compass_case, work, jobs)
     rows = []
     for fraction in COMPASS_FRACTIONS:
@@ -364,14 +367,14 @@ def _scenario_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> lis
 
 
 def _consistency_rows(folder: Path, family: str, label: str, params: FilterParams,
-                      jobs: int) -> list[Row]:
-    from cf_estimator.bench.consistency import family_consistency
+                      jobs: int, floors: Floors) -> list[Row]:
+    from cf_estimator.bench.consistency import HEADING_POOLS, family_consistency
 
-    found = family_consistency(folder, family, params, jobs)
+    found = family_consistency(folder, family, params, jobs, floors)
     rows = []
-    magnet = found.get("heading_magnet", {}).get("trials", 0.0)
     for what, head in (("tilt", f"{label}: tilt"), ("heading", f"{label} 9-D: heading"),
-                       ("heading_magnet", f"BROAD magnet ({magnet:.0f}) 9-D: heading")):
+                       *((key, f"BROAD {name} ({found.get(key, {}).get('trials', 0):.0f}) "
+                               "9-D: heading") for key, name, _groups in HEADING_POOLS)):
         if what not in found:
             continue
         c = found[what]
@@ -384,9 +387,15 @@ def _consistency_rows(folder: Path, family: str, label: str, params: FilterParam
 
 
 def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = FAMILIES,
-              jobs: int = 1, progress: Callable[[str], None] | None = None) -> CrossResult:
-    """The table over the families below ``data`` (``euroc/``, ``phantom4/``, ``broad/``)."""
+              jobs: int = 1, progress: Callable[[str], None] | None = None,
+              floors: Floors | None = None) -> CrossResult:
+    """The table over the families below ``data`` (``euroc/``, ``phantom4/``, ``broad/``);
+    ``floors``: the covariance model's, for the consistency rows (default: the shipped
+    ones)."""
+    from cf_estimator.bench.consistency import Floors
     from cf_estimator.bench.euroc_eval import select_peers
+
+    floors = floors if floors is not None else Floors()
 
     root = Path(data)
     result = CrossResult()
@@ -400,7 +409,7 @@ def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = 
             result.rows += _scenario_rows(params, peers, jobs)
             continue
         if family == "compass":
-            result.rows += _compass_rows(params, peers, jobs)
+            result.rows += _compass_rows(params, peers, jobs, floors)
             continue
         if family == "multirotor":
             result.rows += _multirotor_rows(params, peers, jobs)
@@ -417,16 +426,17 @@ def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = 
         if family == "euroc":
             result.rows += _euroc_rows(folder, params, peers, jobs, "euroc", "EuRoC MH",
                                        midair=True)
-            result.rows += _consistency_rows(folder, family, "EuRoC MH", params, jobs)
+            result.rows += _consistency_rows(folder, family, "EuRoC MH", params, jobs, floors)
         elif family in ("phantom4", "phantom4_horizontal"):
             label = "phantom4" if family == "phantom4" else "phantom4 horizontal"
             result.rows += _euroc_rows(folder, params, peers, jobs, family, label,
                                        midair=False)
-            result.rows += _consistency_rows(folder, family, label, params, jobs)
+            result.rows += _consistency_rows(folder, family, label, params, jobs, floors)
         elif family == "broad":
             # BROAD's evaluation runs VQF's offline mode with VQF itself
             result.rows += _broad_rows(folder, params, [p for p in peers if p == "vqf"], jobs)
-            result.rows += _consistency_rows(folder, family, "BROAD all", params, jobs)
+            result.rows += _consistency_rows(folder, family, "BROAD all", params, jobs,
+                                             floors)
         else:
             raise ValueError(f"unknown family {family!r}; valid: {', '.join(FAMILIES)}")
     return result

@@ -62,7 +62,7 @@ class PipelineParams:
     )
     yaw_covariance_rad2: float = param(
         YAW_FLOOR_RAD2, "rad^2", "Floor of the variance reported for yaw while the heading is "
-        "referenced by the magnetometer, about (1.1 deg)^2 (fitted on BROAD's undisturbed "
+        "referenced by the magnetometer, about (1.0 deg)^2 (fitted on BROAD's undisturbed "
         "trials); the last measured heading error and the gyro drift since the last used "
         "sample add to it.",
         minimum=0.0, maximum=100.0, minimum_exclusive=True, group="output",

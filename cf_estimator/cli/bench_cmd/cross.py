@@ -7,13 +7,8 @@ from pathlib import Path
 from typing import Any
 
 from cf_estimator.cli.base import CliError
-from cf_estimator.cli.bench_cmd.common import (
-    check_outputs,
-    csv_list,
-    load_filter_params,
-    write_json,
-)
-from cf_estimator.cli.common import note
+from cf_estimator.cli.bench_cmd.common import check_outputs, csv_list, write_json
+from cf_estimator.cli.common import load_params, note
 
 
 def add_parser(sub: Any) -> None:
@@ -39,7 +34,8 @@ def add_parser(sub: Any) -> None:
     cr.add_argument("--families", default=",".join(_cross_families()), metavar="LIST",
                     help="comma-separated subset of %(default)s")
     cr.add_argument("--params", metavar="YAML", help="ROS 2 parameter file for our filter "
-                    "(default: the shipped defaults)")
+                    "(default: the shipped defaults); its covariance floors "
+                    "(orientation_covariance_rad2, yaw_covariance_rad2) set the consistency rows'")
     cr.add_argument("--json", metavar="OUT", help="write the rows as JSON")
     cr.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
     cr.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
@@ -67,9 +63,12 @@ def run(args: Any) -> int:
         raise CliError("--jobs must be >= 1", 2)
     if not Path(args.data).is_dir() and not set(families) <= set(cross.SIMULATED):
         raise CliError(f"--data: {args.data} is not a directory", 2)
-    params = load_filter_params(args.params)
+    from cf_estimator.bench.consistency import Floors
+
+    params, pipeline_params = load_params(args.params)
     result = cross.run_cross(args.data, params, families, jobs=args.jobs,
-                             progress=lambda f: note(f"bench cross: {f} ..."))
+                             progress=lambda f: note(f"bench cross: {f} ..."),
+                             floors=Floors.of(pipeline_params))
     print(f"Cross-dataset table ({args.data}); cf_estimator parameters: "
           f"{args.params or 'shipped defaults'}")
     for line in result.notes:
