@@ -331,7 +331,9 @@ class FilterParams:
         "Velocity aiding: the world-frame acceleration is the velocity difference over the "
         "newest accepted velocity samples spanning at least this long (noise: about "
         "sqrt(2)*velocity_noise/window), matched by the mean specific force over the same "
-        "stamps.",
+        "stamps. A longer window averages the noise but delays the in-motion alignment (a few "
+        "windows) and with it the take-hold: Phantom 4 horizontal aided 0.86 / 1.03 / 4.2 deg "
+        "at 1 / 2 / 3 s (BENCHMARKS.md).",
         minimum=0.0,
         maximum=30.0,
         minimum_exclusive=True,
