@@ -21,12 +21,17 @@ import dataclasses
 import math
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from cf_estimator import metrics
 from cf_estimator.core.covariance import TILT_FLOOR_RAD2, UNREFERENCED_YAW_RAD2, YAW_FLOOR_RAD2
 from cf_estimator.core.params import FilterParams
+
+if TYPE_CHECKING:
+    from cf_estimator.core.batch import EstimateResult
+    from cf_estimator.pipeline.params import PipelineParams
 
 #: Samples are scored from this long after the first one [s] (as the benchmarks' RMS).
 SETTLE_S = 10.0
@@ -50,16 +55,15 @@ class Floors:
     unreferenced_yaw_rad2: float = UNREFERENCED_YAW_RAD2
 
     @classmethod
-    def of(cls, pipeline_params: object) -> Floors:
-        """The floors a PipelineParams holds."""
-        pp = pipeline_params
-        return cls(pp.orientation_covariance_rad2, pp.yaw_covariance_rad2,  # type: ignore[attr-defined]
-                   pp.unreferenced_yaw_covariance_rad2)  # type: ignore[attr-defined]
+    def of(cls, pp: PipelineParams) -> Floors:
+        """The floors a node with these parameters publishes."""
+        return cls(pp.orientation_covariance_rad2, pp.yaw_covariance_rad2,
+                   pp.unreferenced_yaw_covariance_rad2)
 
-    def covariance(self, result: object) -> np.ndarray:
-        """(N, 9) ``orientation_covariance`` of an EstimateResult with these floors [rad²]."""
-        return result.orientation_covariance(  # type: ignore[attr-defined]
-            self.tilt0_rad2, self.yaw0_rad2, self.unreferenced_yaw_rad2)
+    def covariance(self, result: EstimateResult) -> np.ndarray:
+        """(N, 9) ``orientation_covariance`` of a run with these floors [rad²]."""
+        return result.orientation_covariance(self.tilt0_rad2, self.yaw0_rad2,
+                                             self.unreferenced_yaw_rad2)
 
 
 def consistency(err_rad: np.ndarray, var_rad2: np.ndarray) -> dict[str, float]:

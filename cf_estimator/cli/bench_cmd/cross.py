@@ -34,8 +34,8 @@ def add_parser(sub: Any) -> None:
     cr.add_argument("--families", default=",".join(_cross_families()), metavar="LIST",
                     help="comma-separated subset of %(default)s")
     cr.add_argument("--params", metavar="YAML", help="ROS 2 parameter file for our filter "
-                    "(default: the shipped defaults); its covariance floors "
-                    "(orientation_covariance_rad2, yaw_covariance_rad2) set the consistency rows'")
+                    "(default: the shipped defaults); the consistency rows take its covariance "
+                    "floors (orientation_covariance_rad2, yaw_covariance_rad2)")
     cr.add_argument("--json", metavar="OUT", help="write the rows as JSON")
     cr.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
     cr.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
