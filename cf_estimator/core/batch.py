@@ -146,8 +146,8 @@ def covariance_rows(extra: np.ndarray, t_s: np.ndarray, q: np.ndarray, params: F
             last = ts[k]
         sb = sigma[k]
         rows.append(step(dts[k], clipped[k], None if sb != sb else sb, phase[k], en[k], lx[k],
-                         ly[k], na2[k], heading, yaw_err[k] if used or rejected else 0.0,
-                         used, None if last is None else ts[k] - last, loop_k1[k], rejected))
+                         ly[k], na2[k], heading, yaw_err[k], used,
+                         None if last is None else ts[k] - last, loop_k1[k], rejected))
     out[start:] = rows
     return out
 

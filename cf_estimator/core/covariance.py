@@ -171,9 +171,8 @@ class OrientationCovariance:
                          math.sqrt(bv) if bv >= 0.0 else None, s.phase,  # type: ignore[attr-defined]
                          s.error_norm, s.lx, s.ly, s.noise_a2,  # type: ignore[attr-defined]
                          bool(s.heading_initialized),  # type: ignore[attr-defined]
-                         s.yaw_error_rad if mag_used or mag_rejected  # type: ignore[attr-defined]
-                         else 0.0,
-                         mag_used, mag_age_s, s.loop_k1,  # type: ignore[attr-defined]
+                         s.yaw_error_rad, mag_used, mag_age_s,  # type: ignore[attr-defined]
+                         s.loop_k1,  # type: ignore[attr-defined]
                          mag_rejected)
 
     def step(self, dt_s: float, clipped: bool, bias_sigma_rad_s: float | None, phase: float,
@@ -186,8 +185,9 @@ class OrientationCovariance:
         estimate yet, the prior is used),
         ``lx_rad``, ``ly_rad`` the aperiodic unit's world-frame state, ``noise_a2``
         [(m/s²)²] the accelerometer noise of the stillness blocks, ``yaw_error_rad`` read only
-        when ``mag_used``, ``loop_k1`` [1/s] the loop's running gain (≤ 0: none yet, the
-        configured k1), ``mag_rejected`` the step rejected a magnetometer sample (disturbed)."""
+        when ``mag_used`` or ``mag_rejected``, ``loop_k1`` [1/s] the loop's running gain (≤ 0:
+        none yet, the configured k1), ``mag_rejected`` the step rejected a magnetometer sample
+        (disturbed)."""
         self._clip_s = self._clip_s + dt_s if clipped else 0.0
         sigma_b = bias_sigma_rad_s if bias_sigma_rad_s is not None else self.bias_prior
         k1 = loop_k1 if loop_k1 > 0.0 else self.k1
