@@ -297,6 +297,27 @@ def test_replay_summary_scores_the_covariance_against_the_ground_truth(tmp_path)
         c = cov[name]
         assert c["samples"] > 1000, (name, c)
         assert 0.0 <= c["beyond_2sigma_pct"] <= 100.0 and c["mean_ratio"] > 0.0, (name, c)
+        # beyond twice the per-axis σ, the smaller radius: never fewer samples
+        assert c["beyond_2sigma_pct"] <= c["beyond_2sigma_axis_pct"] <= 100.0, (name, c)
+
+
+def test_a_consistent_2d_gaussian_gives_the_documented_shares() -> None:
+    """The two shares' meanings (bench/consistency.py): a tilt error whose two axes are
+    N(0, s²) each, reported as σ² = 2s² (cov[0] + cov[4]): mean(e²/σ²) 1, e⁻⁴ ≈ 1.8 % beyond 2σ
+    and e⁻² ≈ 13.5 % beyond twice the per-axis σ (issue 27's 14 %); an overconfident σ (half
+    the variance) moves all three up."""
+    rng = np.random.default_rng(7)
+    s = np.radians(rng.uniform(0.5, 3.0, 400_000))  # per-axis σ [rad], varying per sample
+    e = np.hypot(rng.normal(0.0, s), rng.normal(0.0, s))
+    c = consistency(e, 2.0 * s * s)
+    assert c["mean_ratio"] == pytest.approx(1.0, abs=0.01)
+    assert c["beyond_2sigma_pct"] == pytest.approx(100.0 * math.exp(-4.0), abs=0.1)
+    assert c["beyond_2sigma_axis_pct"] == pytest.approx(100.0 * math.exp(-2.0), abs=0.2)
+    over = consistency(e, s * s)
+    assert over["mean_ratio"] == pytest.approx(2.0, abs=0.02)
+    assert over["beyond_2sigma_pct"] == pytest.approx(100.0 * math.exp(-2.0), abs=0.2)
+    assert over["beyond_2sigma_axis_pct"] == pytest.approx(100.0 * math.exp(-1.0), abs=0.3)
+    assert math.isnan(consistency(e[:0], s[:0])["beyond_2sigma_axis_pct"])
 
 
 def test_the_consistency_figures_take_the_node_s_floors() -> None:

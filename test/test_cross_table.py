@@ -35,6 +35,13 @@ looser bound would pretend); they stay open in BENCHMARKS.md:
   drag leaves a steady sensor-fixed error), tight figure-8s 0.25 °/s; their inclination RMS at
   most VQF online's is met on all four (asserted; BENCHMARKS.md "The tight turn"), and so is a
   learned bias no further off than VQF online's (asserted: VQF 0.81 / 2.04 / 2.04 / 1.92 °/s);
+- issue 27: the tilt's share beyond 2σ within 5–25 % on every family. Read against the σ whose
+  consistent mean(e²/σ²) is 1 (σ² = cov[0] + cov[4]; a consistent Gaussian: 1.8 %): EuRoC
+  5.6 % (met), phantom4 3.4 %, horizontal 0.3 %, BROAD 3.0 %. Read as the issue's "a consistent
+  2-D Gaussian: 14 %" defines it, beyond twice the per-axis σ (rows "per axis"; consistent
+  13.5 %): phantom4 12.0 % and BROAD 7.9 % (met, asserted), EuRoC 26.4 % and horizontal 4.6 %.
+  No σ makes a consistent Gaussian land in both of the issue's ranges at once
+  (bench/consistency.py);
 - issue 27: the simulated compass cases' heading mean(e²/σ²) in [0.5, 2] — 0.22 while the
   magnet is on (conservative: a perfect simulated sensor against the yaw floor fitted on a real
   one; 0.83 with a floor for it, BENCHMARKS.md "The heading while the field is disturbed");
@@ -381,7 +388,10 @@ def test_covariance_consistency_rows(table):
     the heading's error, 0.497 at the floor 4e-4)), the beyond-2σ share within the issue's
     25 %. The simulated compass cases stay conservative while a magnet is on (0.22: their
     field and gyro are perfect, the yaw floor is fitted on a real sensor; never
-    overconfident), but no longer report the disturbed innovation (0.11 before)."""
+    overconfident), but no longer report the disturbed innovation (0.11 before). The tilt's
+    share beyond twice its per-axis σ (the issue's 14 % reading) within the issue's 5–25 % on
+    phantom4 and BROAD (EuRoC 26.4 %, horizontal 4.6 %: module docstring), and on every family
+    at least the share beyond 2σ of the whole (twice the per-axis σ is the smaller radius)."""
     rows, _ = table
     for label in ("EuRoC MH: tilt", "phantom4: tilt", "phantom4 horizontal: tilt",
                   "BROAD all: tilt", "BROAD all 9-D: heading",
@@ -390,6 +400,12 @@ def test_covariance_consistency_rows(table):
         beyond = _row(rows, f"{label} beyond 2σ")["cf_estimator"]
         assert 0.5 <= ratio <= 2.0, (label, ratio)
         assert beyond <= 25.0, (label, beyond)
+    for label in ("EuRoC MH: tilt", "phantom4: tilt", "phantom4 horizontal: tilt",
+                  "BROAD all: tilt"):
+        axis = _row(rows, f"{label}, per axis: beyond 2σ")["cf_estimator"]
+        assert axis >= _row(rows, f"{label} beyond 2σ")["cf_estimator"], label
+        if not label.startswith(("EuRoC", "phantom4 horizontal")):
+            assert 5.0 <= axis <= 25.0, (label, axis)
     for f in ("0.3", "0.5", "1"):  # the compass: conservative while a magnet is on
         ratio = _row(rows, f"magnet {f}x on a turning sensor: heading mean")["cf_estimator"]
         assert 0.15 <= ratio <= 2.0, (f, ratio)

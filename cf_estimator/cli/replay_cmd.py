@@ -191,15 +191,18 @@ def _fmt(value: Any, spec: str, missing: str = "n/a") -> str:
 def covariance_line(cov: dict[str, Any]) -> str | None:
     """``covariance`` line of the summary: the reported σ against the reference's errors after
     settle_s (share beyond 2σ, mean(e²/σ²); a consistent Gaussian: tilt 1.8 %, heading 4.6 %,
-    mean 1), or None when nothing was scored."""
+    mean 1; for the tilt also the share beyond twice its per-axis σ, consistent 13.5 %), or None
+    when nothing was scored."""
     parts = []
     for name, sigma2, consistent in (("tilt", "cov[0]+cov[4]", "1.8"),
                                      ("heading", "cov[8]", "4.6")):
         c = cov.get(name)
         if c:
             share = _fmt(c.get("beyond_2sigma_pct"), ".1f")
+            axis = (f", per axis {_fmt(c.get('beyond_2sigma_axis_pct'), '.1f')} % (consistent "
+                    "13.5 %)" if name == "tilt" else "")
             parts.append(f"{name} (σ² = {sigma2}) beyond 2σ {share} % (consistent "
-                         f"{consistent} %), mean(e²/σ²) "
+                         f"{consistent} %){axis}, mean(e²/σ²) "
                          f"{_fmt(c.get('mean_ratio'), '.2f')} (consistent 1)")
     if not parts:
         return None
