@@ -41,6 +41,9 @@ if TYPE_CHECKING:
 SETTLE_S = 10.0
 #: e > this many σ counts as beyond.
 SIGMAS = 2.0
+#: A consistent Gaussian's share beyond 2σ, as printed: tilt (2-D, σ² = cov[0] + cov[4]) e⁻⁴,
+#: heading (1-D) 4.6 %, and the tilt's share beyond twice its per-axis σ e⁻².
+CONSISTENT_BEYOND = {"tilt": "1.8 %", "heading": "4.6 %", "tilt per axis": "13.5 %"}
 #: BROAD's groups of trials with a magnet near the sensor (the heading's hard case).
 MAGNET_GROUPS = frozenset({"stationary_magnet", "attached_magnet"})
 #: BROAD's heading pools beside all trials: (key, name, the groups a trial must be in one of) —

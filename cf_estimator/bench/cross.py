@@ -77,10 +77,6 @@ MULTIROTOR_CASES: tuple[tuple[str, str, float | None, dict[str, float]], ...] = 
 )
 MULTIROTOR_SEEDS = (0, 1, 2)
 SCENARIOS = ("impacts", "vibration", "acceleration")
-#: A consistent Gaussian's share beyond 2σ (tilt 2-D with σ² = cov[0] + cov[4]; heading 1-D).
-CONSISTENT_BEYOND = {"tilt": "1.8 %", "heading": "4.6 %"}
-#: ... and the tilt's share beyond twice the per-axis σ, √((cov[0] + cov[4])/2): e⁻².
-CONSISTENT_BEYOND_AXIS = "13.5 %"
 
 
 def _euroc_gnss() -> VelocityInput:
@@ -370,7 +366,11 @@ def _scenario_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> lis
 
 def _consistency_rows(folder: Path, family: str, label: str, params: FilterParams,
                       jobs: int, floors: Floors) -> list[Row]:
-    from cf_estimator.bench.consistency import HEADING_POOLS, family_consistency
+    from cf_estimator.bench.consistency import (
+        CONSISTENT_BEYOND,
+        HEADING_POOLS,
+        family_consistency,
+    )
 
     found = family_consistency(folder, family, params, jobs, floors)
     rows = []
@@ -385,7 +385,7 @@ def _consistency_rows(folder: Path, family: str, label: str, params: FilterParam
                         {"cf_estimator": c["beyond_2sigma_pct"]}))
         if what == "tilt":  # 2-D: also beyond twice one axis's σ (issue 27's 14 %)
             rows.append(Row(family, f"{head}, per axis: beyond 2σ (consistent "
-                            f"{CONSISTENT_BEYOND_AXIS})", "%",
+                            f"{CONSISTENT_BEYOND['tilt per axis']})", "%",
                             {"cf_estimator": c["beyond_2sigma_axis_pct"]}))
         rows.append(Row(family, f"{head} mean(e²/σ²) (consistent 1)", "1",
                         {"cf_estimator": c["mean_ratio"]}))

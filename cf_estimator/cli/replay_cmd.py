@@ -193,16 +193,17 @@ def covariance_line(cov: dict[str, Any]) -> str | None:
     settle_s (share beyond 2σ, mean(e²/σ²); a consistent Gaussian: tilt 1.8 %, heading 4.6 %,
     mean 1; for the tilt also the share beyond twice its per-axis σ, consistent 13.5 %), or None
     when nothing was scored."""
+    from cf_estimator.bench.consistency import CONSISTENT_BEYOND
+
     parts = []
-    for name, sigma2, consistent in (("tilt", "cov[0]+cov[4]", "1.8"),
-                                     ("heading", "cov[8]", "4.6")):
+    for name, sigma2 in (("tilt", "cov[0]+cov[4]"), ("heading", "cov[8]")):
         c = cov.get(name)
         if c:
             share = _fmt(c.get("beyond_2sigma_pct"), ".1f")
             axis = (f", per axis {_fmt(c.get('beyond_2sigma_axis_pct'), '.1f')} % (consistent "
-                    "13.5 %)" if name == "tilt" else "")
+                    f"{CONSISTENT_BEYOND['tilt per axis']})" if name == "tilt" else "")
             parts.append(f"{name} (σ² = {sigma2}) beyond 2σ {share} % (consistent "
-                         f"{consistent} %){axis}, mean(e²/σ²) "
+                         f"{CONSISTENT_BEYOND[name]}){axis}, mean(e²/σ²) "
                          f"{_fmt(c.get('mean_ratio'), '.2f')} (consistent 1)")
     if not parts:
         return None
