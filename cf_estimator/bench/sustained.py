@@ -17,7 +17,9 @@ Velocity aiding removes ``e_acc`` altogether: with the velocity known, ``a_h`` i
 taken out of the specific force (what is left is the velocity noise, σ_v·√2/(g·T)).
 
 :func:`analyse` computes these floors from each recording's reference velocity (world ENU,
-m/s) and scores ours online, ours velocity-aided and VQF online on the same samples; the
+m/s), fits the one term by which an IMU alone sees the velocity — the rotor drag across the
+thrust axis (:func:`rotor_drag`) — and scores ours online, ours velocity-aided and VQF online
+on the same samples; the
 numbers are ``cf-estimator bench sustained``'s (BENCHMARKS.md, "Sustained acceleration"), the
 figure :func:`plot`'s (docs/img/sustained_acceleration.png).
 """
@@ -34,8 +36,10 @@ import numpy as np
 from cf_estimator import metrics
 from cf_estimator.bench.euroc import Flight
 from cf_estimator.bench.euroc_eval import SETTLE_S, VelocityInput, aided_algorithms
+from cf_estimator.core import quaternion as quat
 from cf_estimator.core.batch import estimate
 from cf_estimator.core.params import FilterParams
+from cf_estimator.scenarios.motion import DRAG_PER_S
 
 #: Memories T [s] of the floor table (0.5 s: about the accelerometer's own disagreement).
 MEMORIES_S = (0.5, 1.0, 2.0, 5.0, 10.0)
@@ -48,6 +52,9 @@ SPLIT_S = 20.0
 #: after 10 s on the Phantom 4 (BENCHMARKS.md, issue 22).
 BIAS_RESIDUAL_DEG_S = 0.5
 GRAVITY_M_S2 = 9.80665
+#: Averaging [s] of the specific force in the rotor-drag fit: rotor vibration out, the
+#: vehicle's velocity changes (seconds) kept.
+DRAG_AVERAGING_S = 1.0
 
 
 def mean_acceleration_tilt_deg(flight: Flight, memory_s: float) -> np.ndarray:
@@ -80,6 +87,74 @@ def reference_bias_rad_s(flight: Flight) -> np.ndarray:
     return np.median(flight.gyro_rad_s[:-1][ok] - rate[ok], axis=0)
 
 
+@dataclass(frozen=True)
+class RotorDrag:
+    """The rotor-drag model fitted to one recording (:func:`rotor_drag`)."""
+
+    k_per_s: float  #: K [1/s]: the specific force across the thrust axis is −K·v (+ const)
+    explained: float  #: share [1] of that force's variance the model explains (R²)
+    #: RMS per axis [m/s] of the model's residual over K: the error of the velocity it implies
+    velocity_error_m_s: float
+    #: RMS per axis [m/s] of the velocity across the thrust axis about its mean: its swing
+    velocity_swing_m_s: float
+
+
+def _moving_mean(x: np.ndarray, n: int) -> np.ndarray:
+    """Centred moving mean over ``n`` rows of ``x`` (N, 3); NaN where the window is cut or
+    holds a non-finite row."""
+    finite = np.all(np.isfinite(x), axis=1)
+    c = np.concatenate((np.zeros((1, x.shape[1])), np.cumsum(np.where(finite[:, None], x, 0.0),
+                                                             axis=0)))
+    count = np.concatenate(([0], np.cumsum(finite)))
+    out = np.full_like(x, np.nan)
+    half = n // 2
+    whole = (count[n:] - count[:-n]) == n
+    out[half:x.shape[0] - n + half + 1] = np.where(whole[:, None], (c[n:] - c[:-n]) / n, np.nan)
+    return out
+
+
+def rotor_drag(flight: Flight) -> RotorDrag:
+    """Fit f_⊥ = −K·v_⊥ + c on a recording with a reference attitude and velocity.
+
+    A multirotor's rotors push along its thrust axis, and its accelerometer reads that thrust
+    plus the rotor (and body) drag, about −K·v across the axis for the air-relative velocity
+    v [m/s, sensor frame]: the one term by which an IMU alone sees the vehicle's velocity,
+    hence its acceleration and its tilt. Fitted here: the specific force averaged over
+    DRAG_AVERAGING_S (vibration out), the reference's velocity averaged alike and turned into the
+    sensor frame by the reference's attitude, both across the recording's mean thrust axis
+    (the mean specific force's direction) and about their means (the constant c: a steady
+    wind × K, the accelerometer's bias, the mounting), K by least squares (isotropic across
+    the axis)."""
+    if flight.velocity_t_s is None or flight.velocity_m_s is None:
+        raise ValueError(f"{flight.name}: no reference velocity")
+    t, tv, vw = flight.t_s, flight.velocity_t_s, flight.velocity_m_s
+    n_mean = max(1, round(flight.rate_hz * DRAG_AVERAGING_S))
+    force = _moving_mean(flight.accel_m_s2, n_mean)
+    v_world = np.stack([np.interp(t, tv, vw[:, i]) for i in range(3)], axis=1)
+    v_world[(t < tv[0]) | (t > tv[-1])] = np.nan
+    # averaged as the force is, then into the sensor frame (NaN without a reference)
+    v_all = quat.rotate(quat.conjugate(flight.q_ref), _moving_mean(v_world, n_mean))
+    ok = np.all(np.isfinite(force), axis=1) & np.all(np.isfinite(v_all), axis=1)
+    if np.count_nonzero(ok) < 3:
+        raise ValueError(f"{flight.name}: too few samples with a reference for the drag fit")
+    f, v = force[ok], v_all[ok]
+    axis = np.mean(f, axis=0)
+    axis /= np.linalg.norm(axis)
+    f_across = f - np.outer(f @ axis, axis)
+    v_across = v - np.outer(v @ axis, axis)
+    f_across -= f_across.mean(axis=0)
+    v_across -= v_across.mean(axis=0)
+    vv = float(np.sum(v_across * v_across))
+    k = -float(np.sum(f_across * v_across)) / vv if vv > 0.0 else math.nan
+    residual = f_across + k * v_across
+    ff = float(np.sum(f_across * f_across))
+    n = f_across.shape[0]
+    return RotorDrag(k, 1.0 - float(np.sum(residual * residual)) / ff if ff > 0.0 else math.nan,
+                     math.sqrt(float(np.sum(residual * residual)) / (2 * n)) / k
+                     if k > 0.0 else math.inf,
+                     math.sqrt(vv / (2 * n)))
+
+
 def learned_bias_error_deg_s(flight: Flight, bias_rad_s: np.ndarray, at_s: float = SETTLE_S
                              ) -> float:
     """|b − b_ref| [deg/s] at ``at_s`` [s] of a bias series ``bias_rad_s`` (N, 3) [rad/s] on
@@ -107,6 +182,8 @@ class FamilyFloors:
     #: |b − b_ref| of VQF online's own bias estimate at SETTLE_S and at the last sample [deg/s]
     #: (NaN without VQF)
     vqf_bias_error_deg_s: tuple[float, float] = (math.nan, math.nan)
+    #: the rotor-drag fit (:func:`rotor_drag`), each figure the median over recordings
+    rotor_drag: RotorDrag | None = None
 
 
 def _rms(x: np.ndarray, mask: np.ndarray) -> float:
@@ -172,8 +249,10 @@ def analyse(family: str, flights: Sequence[Flight], params: FilterParams,
     split: dict[str, tuple[list[float], list[float]]] = {k: ([], []) for k in runs}
     accel, bias_ref, bias_err, bias_err_end = [], [], [], []
     vqf_err: list[tuple[float, float]] = []
+    drags: list[RotorDrag] = []
     p = dataclasses.replace(params, use_mag=False)
     for f in flights:
+        drags.append(rotor_drag(f))
         # ours online once: its attitude is a measured row, its bias the learned-bias rows
         ours = estimate(f.gyro_rad_s, f.accel_m_s2, None, timestamps_s=f.t_s, params=p)
         bias_ref.append(math.degrees(float(np.linalg.norm(reference_bias_rad_s(f)))))
@@ -208,7 +287,9 @@ def analyse(family: str, flights: Sequence[Flight], params: FilterParams,
                         float(np.mean(bias_err_end)),
                         (float(np.mean([e[0] for e in vqf_err])),
                          float(np.mean([e[1] for e in vqf_err]))) if vqf_err
-                        else (math.nan, math.nan))
+                        else (math.nan, math.nan),
+                        RotorDrag(*(float(np.median([getattr(d, k.name) for d in drags]))
+                                    for k in dataclasses.fields(RotorDrag))))
 
 
 def score(flight: Flight, q: np.ndarray, window: tuple[float, float] = (SETTLE_S, math.inf)
@@ -258,6 +339,16 @@ def format_table(rows: Sequence[FamilyFloors]) -> str:
     label = "ours online: learned-bias error at the end [deg/s]"
     lines.append(f"  {label:58s}"
                  + "".join(f"{r.bias_error_end_deg_s:>{width + 2}.2f}" for r in rows))
+    drag_rows = (
+        (f"rotor drag: across the thrust, f = -K*v: K [1/s] (sim {DRAG_PER_S:g})", "k_per_s"),
+        ("rotor drag: share of that force explained (R^2)", "explained"),
+        ("rotor drag: error of the velocity it implies [m/s]", "velocity_error_m_s"),
+        ("velocity across the thrust axis: its swing [m/s]", "velocity_swing_m_s"),
+    )
+    if all(r.rotor_drag is not None for r in rows):
+        for label, name in drag_rows:
+            lines.append(f"  {label:58s}" + "".join(
+                f"{getattr(r.rotor_drag, name):>{width + 2}.2f}" for r in rows))
     if any(math.isfinite(r.vqf_bias_error_deg_s[0]) for r in rows):
         for j, when in enumerate((f"{SETTLE_S:g} s", "the end")):
             label = f"vqf online: learned-bias error at {when} [deg/s]"

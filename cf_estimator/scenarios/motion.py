@@ -29,6 +29,11 @@ from cf_estimator.core.quaternion import to_euler as euler_zyx_from_quat
 from cf_estimator.scenarios.integration import FloatArray, integrate_body_rates
 
 GRAVITY_M_S2 = 9.80665
+#: The multirotor flights' linear drag [1/s] (specific force −k·v across the thrust axis). The
+#: real multirotors fit about 0.2 /s (``bench sustained``, rows "rotor drag"); the simulated
+#: rows of ``bench cross`` are the same within their noise at 0.2 (BENCHMARKS.md, "Sustained
+#: acceleration").
+DRAG_PER_S = 0.35
 """Standard gravity [m/s²]."""
 
 IDENTITY_QUAT: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
@@ -428,7 +433,7 @@ def multirotor_flight(
     rotors_on_s: float = 1.0,
     idle_speed: float = 0.7,
     cruise_speed_m_s: float = 6.0,
-    drag_per_s: float = 0.35,
+    drag_per_s: float = DRAG_PER_S,
     max_accel_m_s2: float = 2.5,
     max_yaw_rate_rad_s: float = 0.5,
     centripetal_max_m_s2: float = 3.0,
@@ -558,7 +563,7 @@ def multirotor_zigzag(
     *,
     leg_speed_m_s: float = 6.0,
     accel_m_s2: float = 4.0,
-    drag_per_s: float = 0.35,
+    drag_per_s: float = DRAG_PER_S,
     max_yaw_rate_rad_s: float = 0.3,
     gravity: float = GRAVITY_M_S2,
 ) -> MultirotorFlight:
@@ -610,7 +615,7 @@ def multirotor_circles(
     turn_rate_rad_s: float = 0.6,
     figure_eight: bool = True,
     reversal_s: float = 1.0,
-    drag_per_s: float = 0.35,
+    drag_per_s: float = DRAG_PER_S,
     gravity: float = GRAVITY_M_S2,
 ) -> MultirotorFlight:
     """Sustained coordinated turns of a multirotor already cruising at ``speed_m_s`` [m/s] at

@@ -27,7 +27,9 @@ def add_parser(sub: Any) -> None:
             "a memory T cannot avoid, atan(|v_h(t) - v_h(t-T)|/(g T)), and the gyro drift over "
             "T with a 0.5 deg/s bias residual, beside the measured inclination error of ours "
             "online, ours velocity-aided and VQF online (RMS after 10 s, mean over recordings; "
-            "cf_estimator.bench.sustained). --plot draws it (docs/img/sustained_acceleration.png)."
+            "cf_estimator.bench.sustained), and the rotor drag the accelerometer reads across "
+            "the thrust axis (K of f = -K*v, and how well it shows the velocity). --plot draws "
+            "it (docs/img/sustained_acceleration.png)."
         ),
     )
     su.add_argument("--data", default="../shared/data", metavar="DIR",
