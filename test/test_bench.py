@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -58,7 +59,7 @@ def test_rmse_uses_movement_and_ignores_nan_and_sign():
 
 
 # -- synthetic BROAD directory -----------------------------------------------------------------
-def _write_trial(path, n=600, rate=100.0, seed=0, bad=False):
+def _write_trial(path, n=600, rate=100.0, seed=0, bad=False, positions=True):
     rng = np.random.default_rng(seed)
     t = np.arange(n) / rate
     yaw = 0.3 * np.sin(0.5 * t)
@@ -78,7 +79,8 @@ def _write_trial(path, n=600, rate=100.0, seed=0, bad=False):
         if not bad:
             f["imu_mag"] = mag
         f["opt_quat"] = q
-        f["opt_pos"] = np.zeros((n, 3))
+        if positions:
+            f["opt_pos"] = np.zeros((n, 3))
         f["movement"] = t > 1.0
         f.attrs["sampling_rate"] = rate
     return q
@@ -110,6 +112,28 @@ def test_loader_reads_layout_and_groups(broad_dir):
     assert broad.list_trials(broad_dir, ["24"])[0].stem == "24_disturbed_tiny_B"
     with pytest.raises(broad.BroadDataError):
         broad.list_trials(broad_dir, ["99"])
+
+
+def test_optical_velocity_is_each_intervals_mean_velocity(broad_dir):
+    tr = broad.load_trial(broad.list_trials(broad_dir)[0])
+    assert tr.position_m is not None and tr.position_m.shape == (600, 3)
+    t = np.arange(tr.n_samples) / tr.rate_hz
+    pos = np.stack([0.5 * t * t, np.sin(t), np.full_like(t, 2.0)], axis=1)  # m
+    pos[300:303] = np.nan  # the optical system lost the body: no sample touching it
+    t_v, v = broad.optical_velocity(dataclasses.replace(tr, position_m=pos), rate_hz=10.0)
+    steps = np.diff(t_v)  # 10 Hz, but for the two intervals touching the NaN stretch
+    np.testing.assert_allclose(steps[steps < 0.15], 0.1)
+    np.testing.assert_allclose(steps[steps >= 0.15], [0.3])
+    assert not np.any((t_v > 2.9) & (t_v < 3.1))
+    # the position difference across 0.1 s centred on the stamp: exact for x (a constant
+    # acceleration), the interval's mean for y, zero for z
+    np.testing.assert_allclose(v[:, 0], t_v, atol=1e-12)
+    np.testing.assert_allclose(v[:, 1], (np.sin(t_v + 0.05) - np.sin(t_v - 0.05)) / 0.1,
+                               atol=1e-12)
+    assert np.all(v[:, 2] == 0.0)
+    with pytest.raises(ValueError, match="no optical positions"):
+        broad.optical_velocity(dataclasses.replace(tr, position_m=None))
+    assert tr.decimated(4).position_m.shape == (150, 3)
 
 
 def test_loader_without_trials_json_and_outside_links(tmp_path):
@@ -185,6 +209,23 @@ def test_cli_bench_broad_smoke(broad_dir, tmp_path, capsys):
     assert main(["bench", "broad", "--data", str(broad_dir), "--plot", str(png), "--jobs", "1",
                  "--quiet", "--peers", "none"]) == 0
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
+
+
+def test_cli_bench_broad_velocity_adds_ours_aided(broad_dir, tmp_path, capsys):
+    js = tmp_path / "aided.json"
+    assert main(["bench", "broad", "--data", str(broad_dir), "--json", str(js), "--jobs", "1",
+                 "--quiet", "--trials", "01", "--peers", "none", "--velocity"]) == 0
+    assert "cf_estimator_aided" in capsys.readouterr().out
+    doc = json.loads(js.read_text())
+    entry = doc["trials"]["01_undisturbed_tiny_A"]
+    assert {"cf_estimator_aided_9d", "cf_estimator_aided_6d"} <= set(entry)
+    # the sensor turns in place (the positions stand still): aided as well as unaided
+    assert entry["cf_estimator_aided_9d"]["total_rmse_deg"] < 2.0
+    assert doc["meta"]["velocity"]
+    _write_trial(tmp_path / "07_undisturbed_no_positions.hdf5", positions=False)
+    assert main(["bench", "broad", "--data", str(tmp_path / "07_undisturbed_no_positions.hdf5"),
+                 "--jobs", "1", "--quiet", "--peers", "none", "--velocity"]) == 1
+    assert "no optical positions (opt_pos)" in capsys.readouterr().err
 
 
 def test_cli_bench_broad_errors(tmp_path, capsys):

@@ -6,7 +6,9 @@ Estimation", Data 6(7), 2021) stores one HDF5 file per trial:
 - ``imu_gyr`` (N, 3) rad/s, ``imu_acc`` (N, 3) m/s², ``imu_mag`` (N, 3) µT — IMU sensor frame;
 - ``opt_quat`` (N, 4) optical reference orientation, w x y z, sensor-to-earth, earth = ENU
   (NaN rows where the optical system lost the body);
-- ``movement`` (N,) bool: the samples to score; attribute ``sampling_rate`` [Hz].
+- ``movement`` (N,) bool: the samples to score; attribute ``sampling_rate`` [Hz];
+- ``opt_pos`` (N, 3) m: the optical body's position, earth = ENU (NaN rows as for opt_quat);
+  read when present, for velocity aiding (:func:`optical_velocity`).
 
 A ``trials.json`` next to the files (optional) lists every trial's groups.
 
@@ -59,6 +61,8 @@ class Trial:
     rate_hz: float
     groups: tuple[str, ...] = ()
     path: Path | None = None
+    #: optical position (N, 3) [m], earth frame ENU (None: not in the file)
+    position_m: np.ndarray | None = None
 
     @property
     def n_samples(self) -> int:
@@ -67,8 +71,8 @@ class Trial:
 
     def decimated(self, factor: int) -> Trial:
         """Every ``factor``-th sample; gyro averaged over each block (keeps the integrated angle
-        to first order), accelerometer and magnetometer averaged, reference and movement taken
-        at the block's last sample. For screening only (``factor`` 1 returns self)."""
+        to first order), accelerometer and magnetometer averaged, reference, movement and position
+        taken at the block's last sample. For screening only (``factor`` 1 returns self)."""
         if factor <= 1:
             return self
         n = (self.n_samples // factor) * factor
@@ -81,6 +85,7 @@ class Trial:
             self.name, block_mean(self.gyro_rad_s), block_mean(self.accel_m_s2),
             block_mean(self.mag_ut), self.quat_ref[last].copy(), self.movement[last].copy(),
             self.rate_hz / factor, self.groups, self.path,
+            None if self.position_m is None else self.position_m[last].copy(),
         )
 
 
@@ -187,6 +192,7 @@ def load_trial(path: str | os.PathLike, info: Mapping | None = None) -> Trial:
             qref = np.asarray(f["opt_quat"][()], dtype=float)
             movement = np.asarray(f["movement"][()]).reshape(-1).astype(bool)
             rate = float(np.asarray(f.attrs["sampling_rate"]).reshape(-1)[0])
+            pos = np.asarray(f["opt_pos"][()], dtype=float) if "opt_pos" in f else None
     except OSError as exc:
         raise BroadDataError(f"{p.name}: not a readable HDF5 file ({exc})") from None
     n = gyro.shape[0]
@@ -194,11 +200,32 @@ def load_trial(path: str | os.PathLike, info: Mapping | None = None) -> Trial:
                              ("opt_quat", qref, 4)):
         if arr.ndim != 2 or arr.shape != (n, cols):
             raise BroadDataError(f"{p.name}: {label} has shape {arr.shape}, expected ({n}, {cols})")
+    if pos is not None and pos.shape != (n, 3):
+        raise BroadDataError(f"{p.name}: opt_pos has shape {pos.shape}, expected ({n}, 3)")
     if movement.shape != (n,):
         raise BroadDataError(f"{p.name}: movement has {movement.shape[0]} rows for {n} samples")
     if not (math.isfinite(rate) and rate > 0):
         raise BroadDataError(f"{p.name}: sampling_rate must be positive, got {rate!r}")
-    return Trial(p.stem, gyro, acc, mag, qref, movement, rate, trial_groups(p.stem, info or {}), p)
+    return Trial(p.stem, gyro, acc, mag, qref, movement, rate, trial_groups(p.stem, info or {}), p,
+                 pos)
+
+
+def optical_velocity(trial: Trial, rate_hz: float = 10.0) -> tuple[np.ndarray, np.ndarray]:
+    """A velocity sensor made of the optical positions, for velocity aiding: samples at
+    ``rate_hz`` [Hz], each the mean velocity over its own interval (the position difference
+    across 1/rate_hz centred on its stamp, as a 10 Hz receiver reports it), world ENU [m/s],
+    stamps [s] on the IMU's time base (sample i at i/rate). Intervals touching a NaN position
+    give no sample. → (t_s (M,), v_m_s (M, 3)); ValueError without positions."""
+    if trial.position_m is None:
+        raise ValueError(f"{trial.name}: no optical positions (opt_pos)")
+    if not rate_hz > 0.0:
+        raise ValueError(f"rate_hz must be positive, got {rate_hz!r}")
+    half = max(1, round(trial.rate_hz / rate_hz / 2.0))
+    step = 2 * half
+    idx = np.arange(half, trial.n_samples - half, step)
+    before, after = trial.position_m[idx - half], trial.position_m[idx + half]
+    ok = np.all(np.isfinite(before), axis=1) & np.all(np.isfinite(after), axis=1)
+    return idx[ok] / trial.rate_hz, (after[ok] - before[ok]) * (trial.rate_hz / step)
 
 
 # -- evaluation results ------------------------------------------------------------------------

@@ -4,7 +4,8 @@ Algorithm names: ``cf_estimator_9d``/``cf_estimator_6d`` (our filter with the gi
 9-D forces ``use_mag`` on, 6-D off), ``cf_estimator_offline_9d``/``_6d`` (the same parameters
 through the offline estimator, :mod:`cf_estimator.core.offline`) and ``<peer>_9d``/``<peer>_6d``
 for the peers of :mod:`cf_estimator.bench.peers` at their defaults; a peer with an offline mode
-(VQF) also gives ``<peer>_offline_9d``/``_6d``.
+(VQF) also gives ``<peer>_offline_9d``/``_6d``; with ``velocity``, ``cf_estimator_aided_9d``/``_6d``
+(ours aided by the trial's optical velocity, :func:`cf_estimator.bench.broad.optical_velocity`).
 """
 
 from __future__ import annotations
@@ -24,26 +25,32 @@ from cf_estimator.core.params import FilterParams
 
 OURS = "cf_estimator"
 OURS_OFFLINE = "cf_estimator_offline"
+OURS_AIDED = "cf_estimator_aided"
 DIMS = ("9d", "6d")
 
 
 def run_ours(trial: broad.Trial, params: FilterParams, dims: Sequence[str] = DIMS,
-             offline: bool = False) -> dict[str, np.ndarray]:
+             offline: bool = False, velocity: bool = False) -> dict[str, np.ndarray]:
     """Our filter over a trial: ``{"9d": q, "6d": q}`` (q_ENU_from_sensor, NaN before init);
-    ``offline``: the offline estimator."""
+    ``offline``: the offline estimator; ``velocity``: aided by the trial's optical velocity
+    (:func:`~cf_estimator.bench.broad.optical_velocity`, 10 Hz)."""
+    aid = broad.optical_velocity(trial) if velocity else None
     out = {}
     for d in dims:
         p = dataclasses.replace(params, use_mag=(d == "9d"))
         mag = trial.mag_ut if d == "9d" else None
         out[d] = estimate(trial.gyro_rad_s, trial.accel_m_s2, mag, rate_hz=trial.rate_hz,
-                          params=p, offline=offline).quaternion
+                          params=p, offline=offline, velocity=aid).quaternion
     return out
 
 
 def evaluate_trial(path: str | os.PathLike, info: Mapping, params: FilterParams,
-                   peers: Sequence[str] = (), dims: Sequence[str] = DIMS
+                   peers: Sequence[str] = (), dims: Sequence[str] = DIMS,
+                   velocity: bool = False
                    ) -> tuple[str, tuple[str, ...], dict[str, dict[str, float]]]:
-    """(trial name, groups, {algorithm: metrics}) for one trial file."""
+    """(trial name, groups, {algorithm: metrics}) for one trial file; ``velocity``: ours
+    velocity-aided as well (``cf_estimator_aided``; a trial without optical positions:
+    BroadDataError)."""
     from cf_estimator.bench import peers as peer_mod
 
     trial = broad.load_trial(path, info)
@@ -59,6 +66,12 @@ def evaluate_trial(path: str | os.PathLike, info: Mapping, params: FilterParams,
         score(OURS, d, q)
     for d, q in run_ours(trial, params, dims, offline=True).items():
         score(OURS_OFFLINE, d, q)
+    if velocity:
+        if trial.position_m is None:
+            raise broad.BroadDataError(f"{trial.name}: no optical positions (opt_pos) for "
+                                       "--velocity")
+        for d, q in run_ours(trial, params, dims, velocity=True).items():
+            score(OURS_AIDED, d, q)
     runners = peer_mod.runners()
     for p in peers:
         for d, q in runners[p](trial.gyro_rad_s, trial.accel_m_s2, trial.mag_ut, trial.rate_hz,
@@ -80,12 +93,14 @@ def _worker(args: tuple) -> tuple:
 
 def run_broad(paths: Sequence[Path], info: Mapping, params: FilterParams,
               peers: Sequence[str] = (), jobs: Any = 1,
-              progress: Callable[[str, int, int], None] | None = None) -> broad.BenchResult:
+              progress: Callable[[str, int, int], None] | None = None,
+              velocity: bool = False) -> broad.BenchResult:
     """Evaluate every trial (in ``jobs`` processes, or on a cluster engine: trials go to the
-    workers by path); results keep the order of ``paths``."""
+    workers by path); results keep the order of ``paths``; ``velocity``: see
+    :func:`evaluate_trial`."""
     from cf_estimator.bench.parallel import run_tasks
 
-    tasks = [(str(p), dict(info), params, tuple(peers)) for p in paths]
+    tasks = [(str(p), dict(info), params, tuple(peers), DIMS, velocity) for p in paths]
     done: dict[str, tuple] = {}
     count = [0]
 

@@ -63,13 +63,17 @@ module builds that aided specific force for the unchanged filter step, outside i
   aided EuRoC mid-air rows (12 s–end, starts 20 / 40 / 60 s) went 1.13 / 1.27 / 0.86° →
   0.89 / 0.87 / 0.86°.
 - **An attitude error revealed while aided is taken hold of.** Aided horizontally, the
-  accelerometer's disagreement is what the aiding leaves (the velocity's noise and latency:
-  hundredths of a radian); one beyond ``BIAS_LEARNING_MAX_ERROR_RAD`` (0.35 rad, the error
-  no bias explains) in the aperiodic unit's state — a gyro fault, an over-range — is an
-  attitude error: the filter takes hold again, as when aiding began, instead of learning
-  part of it as gyro bias. A 34° step (``bench euroc --velocity --gyro-fault 15 --settle
-  20``), aided: phantom4 3.56° → 1.64°; horizontal zig-zags (``--gyro-fault 10 --settle 15``)
-  4.00° → 1.99°. Without the fault nothing changes (``bench cross``: the same JSON).
+  gravity a velocity window measures is off the filter's vertical by the tilt error, less
+  what the aiding leaves (the velocity's noise and latency: hundredths of a radian); beyond
+  ``BIAS_LEARNING_MAX_ERROR_RAD`` (0.35 rad, the error no bias explains) — a gyro fault, an
+  over-range — it is an attitude error: the filter takes hold again, as when aiding began,
+  instead of learning part of it as gyro bias. A 34° step (``bench euroc --velocity
+  --gyro-fault 15 --settle 20``), aided: phantom4 3.56° → 1.28°; horizontal zig-zags
+  (``--gyro-fault 10 --settle 15``) 4.00° → 1.22°. Without the fault nothing changes
+  (``bench cross``: the same JSON). The window's means, not the aperiodic unit's per-sample
+  state: a hand shaking the sensor at 8 g passed that state for an attitude error, and each
+  take-hold trusted the shake (BROAD's fast translation aided by its optical positions: up
+  to 178° off; BENCHMARKS.md "After a gyro fault").
 - **Fallback.** Without a fresh window (no velocity, a stamp older than ``velocity_timeout_s``,
   a dropout) the raw accelerometer sample is returned untouched: the filter's
   outputs are then bit-identical to the unaided filter's.
@@ -246,6 +250,7 @@ class VelocityAiding:
         self._m: tuple[float, float, float] | None = None  # gravity measurement in P [m/s²]
         self._m_t = -math.inf
         self._m_axes = "none"  # world axes whose acceleration _m has taken out: 'z' | 'xy'
+        self._window_error = 0.0  # angle [rad] of the last 'xy' _m from the filter's vertical
         self._heading.reset()
         self._hd = HeadingOffset(0.0, math.inf, False)
         self._active = self._started = self._first = self._ever = False
@@ -518,6 +523,12 @@ class VelocityAiding:
             keep = max(0.0, 1.0 - noise2 / h2) if h2 > 0.0 else 0.0
             awx, awy = keep * (c * ax - sn * ay), keep * (sn * ax + c * ay)
             gx, gy = self._across_heading_error(fwx - awx, fwy - awy, awx, awy, filter_state)
+            # its angle from the filter's vertical (the attitude-error check, apply_aiding);
+            # none while the alignment's realignment is pending: it takes the tilt at once,
+            # and the next window is measured against the realigned filter
+            up = fwz if self._params.world_frame == "enu" else -fwz
+            self._window_error = (0.0 if self._realign is not None
+                                  else math.atan2(math.hypot(gx, gy), up))
             # gravity measurement (specific force minus acceleration), world → P
             self._m = _rot(ww, -wx, -wy, -wz, gx, gy, fwz)
             self._m_t = t
@@ -662,6 +673,13 @@ class VelocityAiding:
             aligned_t_s=self._realigned_t, moving_now=self.moving_now,
             attitude_errors=self._attitude_errors)
 
+    @property
+    def window_error_rad(self) -> float:
+        """Angle [rad] between the filter's vertical and the gravity the last velocity window
+        measured, horizontally aided (its specific force and acceleration are means over the
+        window: what the filter is told, without the sample-to-sample content); 0 before."""
+        return self._window_error
+
     def note_attitude_error(self) -> None:
         """Count one take-hold on an attitude error revealed while aided (apply_aiding)."""
         self._attitude_errors += 1
@@ -695,10 +713,10 @@ def apply_aiding(f: Any, aiding: VelocityAiding) -> None:
     f.set_aided(aiding.active)
     s = f.step_state
     if (aiding.active and aiding.axes == "xy" and s.time_s > s.quick_until_s
-            and math.hypot(s.lx, s.ly) > BIAS_LEARNING_MAX_ERROR_RAD):
-        # aided, the unit's horizontal state [rad, world] is the tilt error itself (what the
-        # aiding leaves is hundredths of a rad): one beyond what a bias explains is an
-        # attitude error (a gyro fault): take hold, learning nothing from it
+            and aiding.window_error_rad > BIAS_LEARNING_MAX_ERROR_RAD):
+        # aided, the window's gravity is off the filter's vertical by the tilt error itself
+        # (what the aiding leaves is hundredths of a rad): one beyond what a bias explains is
+        # an attitude error (a gyro fault): take hold, learning nothing from it
         f.take_hold(AIDING_TAKE_HOLD_S)
         aiding.note_attitude_error()
     f.correct_heading(aiding.take_heading_correction())

@@ -21,9 +21,9 @@ RESET_TEXT = {
 }
 #: What each event means, for the log line.
 EVENT_TEXT = {
-    "attitude_error": "velocity-aided, the tilt was off the accelerometer by more than an "
-                      "attitude error's worth (a gyro fault or over-range): the filter took "
-                      "hold again, learning no gyro bias from it",
+    "attitude_error": "velocity-aided, the tilt was off the gravity the velocity window "
+                      "measured by more than an attitude error's worth (a gyro fault or "
+                      "over-range): the filter took hold again, learning no gyro bias from it",
 }
 
 

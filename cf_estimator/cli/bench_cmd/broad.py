@@ -41,6 +41,9 @@ def add_parser(sub: Any) -> None:
     add_params_options(b, "for our filter")
     b.add_argument("--trials", metavar="LIST", help="comma-separated trial names, prefixes "
                    "(e.g. 07) or patterns (e.g. '*magnet*'); default: all files")
+    b.add_argument("--velocity", action="store_true",
+                   help="also ours velocity-aided (cf_estimator_aided), by a 10 Hz velocity "
+                   "made of the trial's optical positions (opt_pos)")
     b.add_argument("--json", metavar="OUT", help="write per-trial and per-group results as JSON")
     b.add_argument("--plot", metavar="PNG", help="bar chart per trial: 9-D total and 6-D "
                    "inclination RMSE of every algorithm")
@@ -84,12 +87,14 @@ def run(args: Any) -> int:
         with make_engine(args.cluster, args.jobs) as engine:
             engine.check_paths([str(Path(p).absolute()) for p in paths])
             result = evaluate_all([Path(p).absolute() for p in paths] if args.cluster else paths,
-                                  info, params, peers, jobs=engine, progress=progress)
+                                  info, params, peers, jobs=engine, progress=progress,
+                                  velocity=args.velocity)
     except broad.BroadDataError as exc:
         raise CliError(str(exc)) from None
     except ClusterError as exc:
         raise CliError(str(exc), 2) from None
     algos = ", ".join(["cf_estimator", "cf_estimator_offline"]
+                      + (["cf_estimator_aided"] if args.velocity else [])
                       + [q for p in peers for q in ((p, "vqf_offline") if p == "vqf" else (p,))])
     print(f"BROAD: {len(paths)} trial(s) from {args.data}; RMSE [deg] over movement samples, "
           f"mean over trials; {algos}")
@@ -107,6 +112,7 @@ def run(args: Any) -> int:
         doc = result.to_json()
         doc["meta"] = {
             "data": str(args.data), "peers": peers, "params_file": args.params,
+            "velocity": "optical positions, 10 Hz" if args.velocity else None,
             "cf_estimator_params": as_dict(params),
             "metrics": "BROAD: q_err = q_est * inv(q_ref); RMSE over movement samples [deg]",
         }
