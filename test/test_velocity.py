@@ -611,6 +611,47 @@ def test_a_violent_handheld_shake_is_no_attitude_error():
     assert np.nanmax(inclination) < 2.5 and np.sqrt(np.nanmean(inclination**2)) < 1.0
 
 
+def test_the_compass_prior_and_the_fit_weigh_by_their_variances():
+    from cf_estimator.core.alignment import HeadingOffset
+    from cf_estimator.core.velocity import with_compass
+
+    # before the fit is known: the prior alone, known while below the required σ
+    assert with_compass(HeadingOffset(0.4, 0.05, False), 0.1, 0.3) == HeadingOffset(0.0, 0.1,
+                                                                                     True)
+    assert not with_compass(HeadingOffset(0.0, math.inf, False), 0.5, 0.3).known
+    # known: inverse-variance weights; equal σ's meet halfway, with σ/√2
+    both = with_compass(HeadingOffset(0.2, 0.1, True), 0.1, 0.3)
+    assert both.offset_rad == pytest.approx(0.1) and both.sigma_rad == pytest.approx(0.1 / 2**0.5)
+    assert both.known
+    sharp = with_compass(HeadingOffset(0.2, 0.01, True), 0.1, 0.3)
+    assert sharp.offset_rad == pytest.approx(0.2 / 1.01) and sharp.sigma_rad < 0.01
+
+
+def test_a_compass_gives_the_heading_offset_from_the_first_window(uav):
+    """9-D, 'auto': while the magnetometer references the heading, the heading offset starts
+    at 0 ± velocity_compass_sigma_rad and the horizontal aiding begins with the first velocity
+    window, not once the accelerations have shown the offset; the uav flight's tilt peaks lower
+    after 10 s. Without a magnetometer the parameter changes nothing (bit-equal)."""
+    vd = measure_velocity(uav.truth, VelocityModel(10.0, 0.1, 0.1), np.random.default_rng(0))
+    imu = uav.imu
+
+    def run(sigma, mag=True):
+        p = FilterParams(use_mag=mag, velocity_compass_sigma_rad=sigma)
+        return estimate(imu.gyro_rad_s, imu.accel_m_s2, imu.mag_T if mag else None,
+                        timestamps_s=imu.t_s, params=p, velocity=(vd.t_s, vd.v_world_m_s),
+                        velocity_latency_s=vd.arrival_s[0] - vd.t_s[0])
+
+    compass, fit_only = run(0.1), run(0.0)
+    c, f = compass.velocity_status, fit_only.velocity_status
+    assert c.heading_known and f.heading_known
+    assert c.horizontal_samples > f.horizontal_samples
+    assert c.heading_sigma_rad < f.heading_sigma_rad  # the two combined
+    assert abs(c.heading_offset_rad) < 0.05  # the simulated compass has no declination
+    assert _tilt_arcmin(uav, compass).max() < _tilt_arcmin(uav, fit_only).max()
+    np.testing.assert_array_equal(run(0.1, mag=False).quaternion,
+                                  run(0.0, mag=False).quaternion)
+
+
 def test_an_aided_accelerometer_is_followed_without_the_slow_lag():
     err_aided, _ = _tilt_after(3.0, aided=True)
     err_unaided, _ = _tilt_after(3.0)

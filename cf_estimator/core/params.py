@@ -404,6 +404,21 @@ class FilterParams:
         group="velocity aiding",
     )
 
+    velocity_compass_sigma_rad: float = param(
+        0.1,
+        "rad",
+        "Velocity aiding ('auto') with a magnetometer: standard deviation of the offset "
+        "between the compass's heading and the velocity's frame (the compass's error, and any "
+        "declination magnetic_declination_rad does not hold). While the magnetometer "
+        "references the heading, the offset starts at 0 with this uncertainty (aiding "
+        "horizontally from the first velocity window when it is below "
+        "velocity_heading_sigma_rad) and the accelerations refine it; 0 = the accelerations "
+        "alone, as without a compass.",
+        minimum=0.0,
+        maximum=3.2,
+        group="velocity aiding",
+    )
+
     def __post_init__(self) -> None:
         validate_fields(self)
         if self.k2 > 0.0 and self.aperiodic_time_constant_s * self.k2 >= self.k1:
