@@ -627,6 +627,27 @@ def test_the_compass_prior_and_the_fit_weigh_by_their_variances():
     assert sharp.offset_rad == pytest.approx(0.2 / 1.01) and sharp.sigma_rad < 0.01
 
 
+def test_the_aiding_reads_whether_the_compass_references_the_heading():
+    from cf_estimator.core.filter import ComplementaryFilter
+    from cf_estimator.core.velocity import filter_estimates
+
+    still = ((0.0, 0.0, 0.0), (0.0, 0.0, 9.81), 0.01)
+    field = (20e-6, 0.0, -40e-6)  # T
+    six = ComplementaryFilter(FilterParams(use_mag=False))
+    nine = ComplementaryFilter(FilterParams())
+    for _ in range(50):
+        six.update(*still)
+        nine.update(*still, mag=field)
+    assert filter_estimates(six)[5] == 0.0  # no magnetometer
+    assert filter_estimates(nine)[5] == 1.0
+    # the field turns by 90 deg while the sensor stands still: disturbed, the heading on the
+    # gyro alone, and the compass no longer vouches for it
+    for _ in range(50):
+        nine.update(*still, mag=(0.0, 20e-6, -40e-6))
+    assert nine.status().heading_source == "gyro"
+    assert filter_estimates(nine)[5] == 0.0
+
+
 def test_a_compass_gives_the_heading_offset_from_the_first_window(uav):
     """9-D, 'auto': while the magnetometer references the heading, the heading offset starts
     at 0 ± velocity_compass_sigma_rad and the horizontal aiding begins with the first velocity
