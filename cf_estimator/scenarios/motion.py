@@ -29,12 +29,12 @@ from cf_estimator.core.quaternion import to_euler as euler_zyx_from_quat
 from cf_estimator.scenarios.integration import FloatArray, integrate_body_rates
 
 GRAVITY_M_S2 = 9.80665
+"""Standard gravity [m/s²]."""
 #: The multirotor flights' linear drag [1/s] (specific force −k·v across the thrust axis). The
 #: real multirotors fit about 0.2 /s (``bench sustained``, rows "rotor drag"); the simulated
 #: rows of ``bench cross`` are the same within their noise at 0.2 (BENCHMARKS.md, "Sustained
 #: acceleration").
 DRAG_PER_S = 0.35
-"""Standard gravity [m/s²]."""
 
 IDENTITY_QUAT: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
 
