@@ -160,6 +160,8 @@ BASELINE: dict[str, tuple[float, float | None]] = {
     "EuRoC MH, aided, mid-air start 40 s: 12 s-end": (0.8663, 0.7598),
     "EuRoC MH, aided, mid-air start 60 s: 12 s-end": (0.8567, 0.7637),
     "thesis acceleration, aided: peak (limit 90')": (42.9004, None),
+    "BROAD all (18), aided by its optical positions: 9-D total": (1.9776, None),
+    "BROAD all (18), aided by its optical positions: 6-D inclination": (0.7031, None),
 }
 
 
@@ -343,7 +345,8 @@ def test_target_broad_9d_at_most_2_deg(table):
 
 def test_target_no_broad_group_more_than_10_percent_behind_vqf_online(table):
     rows, _ = table
-    groups = [k for k in rows if k.startswith("BROAD") and not consistency(k)]
+    groups = [k for k in rows if k.startswith("BROAD") and not consistency(k)
+              and "aided" not in k]  # VQF takes no velocity
     assert len(groups) == 28
     behind = {k: _ours(rows, k) / _ours(rows, k, "vqf") for k in groups}
     assert max(behind.values()) <= 1.10, behind
@@ -430,6 +433,18 @@ def test_target_aided_median_time_to_hold_at_most_5_s_on_the_phantom_flights(tab
     rows, _ = table
     for family in ("phantom4", "phantom4 horizontal"):
         assert _ours(rows, f"{family}, aided: median time to < 2 deg") <= 5.0, family
+
+
+def test_aided_broad_is_no_worse_than_unaided(table):
+    """BROAD's handheld trials aided by their optical positions (up to 8 g): the aiding may not
+    help a hand's short accelerations, but it must not hurt — with the attitude-error check on
+    the aperiodic unit's per-sample state the shakes passed for gyro faults (4.51° against
+    0.69°; BENCHMARKS.md "After a gyro fault")."""
+    rows, _ = table
+    assert (_ours(rows, "BROAD all (18), aided by its optical positions: 9-D total")
+            <= _ours(rows, "BROAD all (18): 9-D total") + 0.1)
+    assert (_ours(rows, "BROAD all (18), aided by its optical positions: 6-D inclination")
+            <= _ours(rows, "BROAD all (18): 6-D inclination") + 0.1)
 
 
 def test_target_aided_euroc_mid_air_at_most_1_2_deg_at_every_start(table):

@@ -32,8 +32,11 @@ offline (its own offline mode). Rows (inclination [deg] unless marked):
   (10 Hz, 0.1 m/s, 100 ms late, as ``bench euroc --velocity-rate 10 --velocity-noise 0.1
   --velocity-latency 0.1``) from the ground and from the mid-air starts
   (12 s-end), and the median time from the first velocity sample until the inclination error
-  stays below 2° (:func:`~cf_estimator.bench.euroc_eval.time_to_hold_s`), and the thesis
-  acceleration manoeuvre with a simulated GNSS velocity (peak [arcmin]).
+  stays below 2° (:func:`~cf_estimator.bench.euroc_eval.time_to_hold_s`), the thesis
+  acceleration manoeuvre with a simulated GNSS velocity (peak [arcmin]), and BROAD's 18 trials
+  aided by a 10 Hz velocity made of their optical positions
+  (:func:`~cf_estimator.bench.broad.optical_velocity`; handheld motion up to 8 g, 9-D total
+  and 6-D inclination, online only: the one aided family with a compass).
 
 Families whose data directory is missing are left out (a note says so). The defaults are chosen
 so that no row gets worse (BENCHMARKS.md "How the shipped defaults were chosen").
@@ -349,7 +352,34 @@ def _aided_rows(root: Path, params: FilterParams, jobs: int) -> tuple[list[Row],
     peak = {r["algorithm"]: r["peak_arcmin"] for r in found}
     rows.append(Row("aided", "thesis acceleration, aided: peak (limit 90')", "arcmin",
                     {"cf_estimator": peak.get("cf_estimator_aided", math.nan)}))
+    folder = root / "broad"
+    if not folder.is_dir():
+        notes.append(f"aided: {folder} not found, its rows left out")
+        return rows, notes
+    from cf_estimator.bench import broad
+    from cf_estimator.bench.parallel import run_tasks
+
+    scores = run_tasks(_broad_aided, [(p, params) for p in broad.list_trials(folder)], jobs)
+    for i, what in enumerate(("9-D total", "6-D inclination")):
+        values = [s[i] for s in scores]
+        rows.append(Row("aided", f"BROAD all ({len(values)}), aided by its optical positions: "
+                        f"{what}", "deg", {"cf_estimator": sum(values) / len(values)},
+                        {"cf_estimator": standard_error(values)}))
     return rows, notes
+
+
+def _broad_aided(args: tuple[Path, FilterParams]) -> tuple[float, float]:
+    """One BROAD trial aided by its optical velocity: (9-D total, 6-D inclination) RMSE [deg]
+    over its movement samples."""
+    from cf_estimator import metrics
+    from cf_estimator.bench import broad
+    from cf_estimator.bench.evaluate import run_ours
+
+    path, params = args
+    trial = broad.load_trial(path)
+    q = run_ours(trial, params, velocity=True)
+    return (metrics.rmse_deg(q["9d"], trial.quat_ref, trial.movement)["total_rmse_deg"],
+            metrics.rmse_deg(q["6d"], trial.quat_ref, trial.movement)["inclination_rmse_deg"])
 
 
 def _scenario_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> list[Row]:
