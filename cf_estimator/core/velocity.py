@@ -76,12 +76,15 @@ module builds that aided specific force for the unchanged filter step, outside i
   ``BIAS_LEARNING_MAX_ERROR_RAD`` (0.35 rad, the error no bias explains) — a gyro fault, an
   over-range — it is an attitude error: the filter takes hold again, as when aiding began,
   instead of learning part of it as gyro bias. A 34° step (``bench euroc --velocity
-  --gyro-fault 15 --settle 20``), aided: phantom4 3.56° → 1.28°; horizontal zig-zags
+  --gyro-fault 15 --settle 20``), aided: phantom4 3.56° → 1.30°; horizontal zig-zags
   (``--gyro-fault 10 --settle 15``) 4.00° → 1.22°. Without the fault nothing changes
   (``bench cross``: the same JSON). The window's means, not the aperiodic unit's per-sample
   state: a hand shaking the sensor at 8 g passed that state for an attitude error, and each
   take-hold trusted the shake (BROAD's fast translation aided by its optical positions: up
-  to 178° off; BENCHMARKS.md "After a gyro fault").
+  to 178° off; BENCHMARKS.md "After a gyro fault"). A window whose gravity is not g's size
+  (beyond the same share of g) judges nothing: an attitude error turns it, a window whose
+  velocity and IMU disagree (a shake against the velocity's own bandwidth, in 0.5 s windows:
+  false take-holds and 166° off) does not.
 - **Fallback.** Without a fresh window (no velocity, a stamp older than ``velocity_timeout_s``,
   a dropout) the raw accelerometer sample is returned untouched: the filter's
   outputs are then bit-identical to the unaided filter's.
@@ -556,9 +559,16 @@ class VelocityAiding:
             # its angle from the filter's vertical (the attitude-error check, apply_aiding);
             # none while the alignment's realignment is pending: it takes the tilt at once,
             # and the next window is measured against the realigned filter
+            # and none from a window whose gravity is not g's size: a turned attitude keeps
+            # the size, a window whose velocity and IMU disagree (a hard shake seen by a
+            # velocity of its own bandwidth) does not, and judges nothing
             up = fwz if self._params.world_frame == "enu" else -fwz
-            self._window_error = (0.0 if self._realign is not None
-                                  else math.atan2(math.hypot(gx, gy), up))
+            size = math.sqrt(gx * gx + gy * gy + fwz * fwz)
+            g_ref = self._params.gravity_m_s2
+            self._window_error = (
+                0.0 if (self._realign is not None
+                        or abs(size - g_ref) > BIAS_LEARNING_MAX_ERROR_RAD * g_ref)
+                else math.atan2(math.hypot(gx, gy), up))
             # gravity measurement (specific force minus acceleration), world → P
             self._m = _rot(ww, -wx, -wy, -wz, gx, gy, fwz)
             self._m_t = t
