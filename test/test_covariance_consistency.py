@@ -120,27 +120,50 @@ def test_estimate_reports_the_pipelines_covariance_per_message_9d() -> None:
     assert np.max(r.heading_sigma_rad) > 2.0 * np.min(r.heading_sigma_rad)
 
 
-def test_consistent_on_the_calibration_family_and_never_overconfident_on_another() -> None:
-    """The tilt floor was fitted on the phantom4 vertical campaign; the horizontal campaign
-    (sustained horizontal acceleration, errors 3-8 deg) is a check: there the floor alone gave
-    mean(e²/σ²) ≈ 19 (issue 27's "2-5x too small"), and the disagreement's own mean square as
-    the acceleration term 0.14 (the swing the loop did not follow). With the correction the loop
-    made as that term (and the floor refitted with it), mean 0.50 and 0.2 % beyond 2σ
-    (consistent: 1 and 1.8 %)."""
+def test_the_tilt_floor_is_the_fit_at_rest() -> None:
+    """The floor stands for what the filter cannot see (accelerometer bias, mounting): the tilt
+    error left when nothing moves. TILT_FLOOR_RAD2 is the maximum-likelihood floor of EuRoC's
+    samples at rest (bench.consistency.fit_tilt_floor, the model's other terms included): a
+    filter change that moves the error at rest makes it stale, and this test says so."""
+    _need("euroc")
+    from cf_estimator.bench import euroc
+    from cf_estimator.bench.consistency import fit_tilt_floor, rest_samples
+
+    found = [rest_samples(p, FilterParams()) for p in euroc.find_flights(DATA / "euroc")]
+    e = np.concatenate([f[0] for f in found])
+    assert np.isfinite(e).sum() > 3000  # the three flights rest before take-off
+    fit = fit_tilt_floor(e, np.concatenate([f[1] for f in found]))
+    assert fit == pytest.approx(TILT_FLOOR_RAD2, rel=0.05), fit
+    # the fit finds a floor it is given: errors drawn with per-axis variance 3e-5 + var
+    rng = np.random.default_rng(3)
+    var = rng.uniform(0.0, 1e-4, 200_000)
+    s = np.sqrt(3e-5 + var)
+    drawn = np.hypot(rng.normal(0.0, s), rng.normal(0.0, s))
+    assert fit_tilt_floor(drawn, var) == pytest.approx(3e-5, rel=0.03)
+
+
+def test_consistent_on_the_phantom_campaigns_it_was_not_fitted_on() -> None:
+    """The tilt floor was fitted at rest on EuRoC; both Phantom campaigns are checks, in flight
+    from an in-air start (the horizontal one with sustained horizontal acceleration, errors 3–8
+    deg). There the floor alone gave mean(e²/σ²) ≈ 19 (issue 27's "2-5x too small"), the
+    disagreement's own mean square as the acceleration term 0.14 (the swing the loop did not
+    follow), the correction the loop made 0.55 with 4.6 % beyond twice the per-axis σ (the
+    corrections that compensated a bias not learned yet, after the in-air start, counted as
+    tilt error); with those counted as the disagreement they leave, 0.88 and 12.4 % (consistent:
+    1 and 13.5 %); the vertical campaign 1.18 and 18.4 %."""
     _need("phantom4", "phantom4_horizontal")
     fp = FilterParams()
     vertical = family_consistency(DATA / "phantom4", "phantom4", fp)["tilt"]
-    assert 0.5 <= vertical["mean_ratio"] <= 2.0, vertical
-    assert vertical["beyond_2sigma_pct"] <= 25.0, vertical
     horizontal = family_consistency(DATA / "phantom4_horizontal", "phantom4_horizontal",
                                     fp)["tilt"]
-    assert 0.4 <= horizontal["mean_ratio"] <= 2.0, horizontal
-    assert horizontal["beyond_2sigma_pct"] <= 4.6, horizontal
+    for c in (vertical, horizontal):
+        assert 0.5 <= c["mean_ratio"] <= 2.0, c
+        assert 5.0 <= c["beyond_2sigma_axis_pct"] <= 25.0, c
     # the sigma follows the error: the horizontal campaign's median sigma is above the vertical
-    # one's by about the ratio of their RMS errors (2.1 against 2.1)
+    # one's by about the ratio of their RMS errors
     sigmas = horizontal["median_sigma_deg"] / vertical["median_sigma_deg"]
     errors = horizontal["rms_deg"] / vertical["rms_deg"]
-    assert sigmas > 1.5 and errors / 1.5 < sigmas < 1.5 * errors, (sigmas, errors)
+    assert sigmas > 1.3 and errors / 1.5 < sigmas < 1.5 * errors, (sigmas, errors)
 
 
 def test_velocity_aiding_shrinks_the_tilt_sigma_without_overconfidence() -> None:
@@ -181,7 +204,10 @@ def test_vibration_grows_the_tilt_variance_and_keeps_it_an_upper_bound() -> None
         late = slice(2000, None)
         reported.append(float(np.mean(r.tilt_sigma_rad[late] ** 2)))
         actual.append(float(np.mean(metrics.tilt_error_rad(r.quaternion, level)[late] ** 2)))
-    assert reported[1] > 2.0 * reported[0]  # vibration is reported
+    # vibration is reported: ten times the noise, a hundred times its power, and the variance
+    # above the floor grows by more than 20 times
+    floor = 2.0 * TILT_FLOOR_RAD2
+    assert reported[1] - floor > 20.0 * (reported[0] - floor) > 0.0
     for rep, act in zip(reported, actual, strict=True):
         assert act <= rep <= 10.0 * max(act, 2.0 * TILT_FLOOR_RAD2), (rep, act)
 
@@ -201,26 +227,41 @@ def test_rest_brings_the_tilt_variance_back_to_the_floor() -> None:
 def test_model_terms_have_their_documented_sizes() -> None:
     """The formula of the module docstring, term by term (per axis = S/2)."""
     m = OrientationCovariance(1e-4, 4e-4, 10.0, 0.1, k1=0.35, gravity_m_s2=9.8)
-    # a steady horizontal disagreement of 0.1 rad (a held acceleration the loop follows): the
-    # correction k1 * integral settles at k1 * 0.1 * CORRECTION_WINDOW_S, its square is M
+    # a steady horizontal disagreement of 0.1 rad, (0.06, 0.08): no acceleration the loop
+    # follows (that disagreement dies away as the loop catches up) but a rate it compensates
+    # through its proportional path, a bias not learned yet: the tilt error it leaves is the
+    # disagreement itself, L = 0.1², not the correction it keeps making (k1·0.1·10 s = 0.35 rad
+    # once the window is full, which the model reported before)
     for _ in range(20000):
         c = m.step(0.01, False, 0.001, 2, 0.1, 0.06, 0.08, 0.0, False, 0.0, False, None)
-    held = (0.35 * 0.1 * CORRECTION_WINDOW_S) ** 2
-    assert c[0] == pytest.approx(1e-4 + 0.5 * held, rel=2e-3)
-    # the loop's running gain (loop_k1, lowered by a velocity swing) is the gain of M: half the
-    # gain, a quarter of the held term
-    m.reset()
-    for _ in range(20000):
-        c = m.step(0.01, False, 0.001, 2, 0.1, 0.06, 0.08, 0.0, False, 0.0, False, None, 0.175)
-    assert c[0] == pytest.approx(1e-4 + 0.5 * held / 4.0, rel=2e-3)
-    # a zig-zag: the disagreement swings +-0.3 rad every 2 s; its corrections cancel, and M stays
-    # far below the swing's own mean square (0.09) that the model used to report
+    assert c[0] == pytest.approx(1e-4 + 0.5 * 0.1**2, rel=1e-3)
+    # an acceleration the loop follows at its running gain k (loop_k1, lowered by a velocity
+    # swing): the disagreement jumps to A and dies away as exp(−k·t) while the tilt takes on
+    # the acceleration; the correction made for the disagreement's transient part, A·k·t·e^(−k·t)
+    # in the continuous limit, and the steady part the same (M lags: it is c's mean square over
+    # 1/k): S = M + L peaks at 1.3–1.4·(A/e)² about 1/k in — less than the A² the tilt is off
+    # by at the end of a leg held that long (a vehicle whose velocity is bounded holds no leg
+    # much longer; BENCHMARKS.md "Covariance"), gone once it is over
+    for k in (0.35, 0.175):
+        m.reset()
+        s2 = []
+        for i in range(3000):
+            lx = 0.1 * math.exp(-k * i * 0.01)
+            s2.append(2.0 * (m.step(0.01, False, 0.001, 2, 0.1, lx, 0.0, 0.0, False, 0.0, False,
+                                    None, k)[0] - 1e-4))
+        peak = int(np.argmax(s2))
+        assert 0.9 / k < peak * 0.01 < 1.2 / k, (k, peak)
+        assert 1.2 * (0.1 / math.e) ** 2 < s2[peak] < 1.5 * (0.1 / math.e) ** 2, (k, s2[peak])
+        assert s2[-1] < 0.1 * s2[peak]
+    # a zig-zag: the disagreement swings +-0.3 rad every 2 s; the corrections cancel, and the
+    # variance stays far below the swing's own mean square (0.09) that the first model
+    # reported: the loop's tilt error swings by k1·0.3·2 s / 2 ≈ 0.1 rad
     m.reset()
     ms = []
     for k in range(20000):
         lx = 0.3 if (k // 200) % 2 == 0 else -0.3
         ms.append(m.step(0.01, False, 0.001, 2, 0.3, lx, 0.0, 0.0, False, 0.0, False, None)[0])
-    assert 1e-4 < max(ms[10000:]) < 1e-4 + 0.5 * 0.01
+    assert 1e-4 + 0.5 * 0.05**2 < max(ms[10000:]) < 1e-4 + 0.5 * 0.15**2
     assert c[8] == 10.0  # heading not referenced
     # vibration: noise_a2 = 6 sigma_a^2 (sample-to-sample differences, three axes)
     m.reset()

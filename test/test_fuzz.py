@@ -723,8 +723,8 @@ def test_valid_parameter_changes_apply_at_the_next_sample_without_reset(changes,
         assert out.orientation_xyzw == (x, y, z, w)
     # the covariance model (docs/ros_interface.md, core/covariance.py) with the new floors and
     # gains: tilt = floor + the error norm squared while settling + half the mean square of the
-    # accelerometer channel's correction (the model's state) and of the vibration term
-    # (+ the clipped drift while clipped)
+    # accelerometer channel's correction, the square of the disagreement's steady part (the
+    # model's state) and the vibration term (+ the clipped drift while clipped)
     cov = out.orientation_covariance
     status = pipe.filter.status()
     settling = status.phase in ("startup", "recovering")
@@ -734,7 +734,8 @@ def test_valid_parameter_changes_apply_at_the_next_sample_without_reset(changes,
     tilt = floor + (status.error_norm_rad**2 if settling else 0.0)
     if dt is not None:
         noise = pipe.filter._state.noise_a2 / (6.0 * fp_new.gravity_m_s2**2) * dt  # noqa: SLF001
-        tilt += 0.5 * (model._ms + noise * fp_new.k1)  # noqa: SLF001
+        steady = model._sx * model._sx + model._sy * model._sy  # noqa: SLF001
+        tilt += 0.5 * (model._ms + steady + noise * fp_new.k1)  # noqa: SLF001
     tilt = min(tilt, max(math.pi**2, floor))
     assert cov[0] == cov[4]
     if status.clipped or dt is None:

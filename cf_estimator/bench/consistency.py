@@ -130,6 +130,46 @@ def broad_samples(path: str | Path, info: dict, params: FilterParams, floors: Fl
     return out[0], out[1]
 
 
+def rest_samples(path: str | Path, params: FilterParams) -> tuple[np.ndarray, np.ndarray]:
+    """(e [rad], the tilt variance without the floor [rad², per axis]) of one EuRoC-layout flight,
+    6-D, over the samples the filter reports at rest while running (phase running, past its
+    start-up): what is left of the tilt error when nothing moves."""
+    from cf_estimator.bench import euroc
+    from cf_estimator.core.batch import estimate
+    from cf_estimator.core.filter import Extra
+    from cf_estimator.core.step import PHASE_RUNNING
+
+    f = euroc.load_flight(path)
+    r = estimate(f.gyro_rad_s, f.accel_m_s2, None, timestamps_s=f.t_s,
+                 params=dataclasses.replace(params, use_mag=False))
+    assert r.extra is not None
+    c = Floors(tilt0_rad2=0.0).covariance(r)
+    keep = (r.extra[:, Extra.AT_REST] != 0.0) & (r.extra[:, Extra.PHASE] == PHASE_RUNNING)
+    return metrics.tilt_error_rad(r.quaternion, f.q_ref)[keep], c[keep, 0]
+
+
+def fit_tilt_floor(err_rad: np.ndarray, var_rad2: np.ndarray) -> float:
+    """The per-axis floor v0 [rad²] that maximises the likelihood of 2-D tilt errors ``e`` [rad]
+    whose per-axis variance is ``v0 + var`` (``var`` [rad²]: the model's other terms): the
+    density e/s²·exp(−e²/(2s²)) with s² = v0 + var, maximised over log v0 in [1e-8, 1] rad²."""
+    from scipy.optimize import minimize_scalar
+
+    e = np.asarray(err_rad, dtype=float)
+    v = np.asarray(var_rad2, dtype=float)
+    ok = np.isfinite(e) & np.isfinite(v)
+    e2, v = e[ok] ** 2, v[ok]
+    if e2.size == 0:
+        raise ValueError("no samples to fit the floor on")
+
+    def nll(log_v0: float) -> float:
+        s2 = math.exp(log_v0) + v
+        return float(np.mean(np.log(s2) + e2 / (2.0 * s2)))
+
+    best = minimize_scalar(nll, bounds=(math.log(1e-8), 0.0), method="bounded",
+                           options={"xatol": 1e-4})
+    return math.exp(float(best.x))
+
+
 def _flight_task(args: tuple[str, FilterParams, Floors]) -> tuple[np.ndarray, np.ndarray]:
     return flight_samples(*args)
 

@@ -1129,18 +1129,20 @@ static double gyro_drift_var(double sigma_b, double t)
  *                 error_norm, lx, ly, noise_a2, yaw_error, mag_used, mag_age|None, loop_k1,
  *                 mag_rejected, tilt_out, yaw_out) -> state
  * consts = (k1, bias_prior, inv_6g2, tilt0, yaw0, yaw_unref, tilt_cap, yaw_cap, yaw_memory),
- * state = (clip_s, ms, yaw_err, cx, cy, yaw_lp, yaw_gap) before and after the rows; clipped,
+ * state = (clip_s, ms, yaw_err, cx, cy, sx, sy, yaw_lp, yaw_gap) before and after the rows
+ * (sx, sy: the disagreement's steady part); clipped,
  * mag_used and mag_rejected: non-zero = true; bias_sigma NaN: the prior; mag_age None: never
  * (the Python's None). */
 static PyObject *covariance_rows(PyObject *Py_UNUSED(module), PyObject *args)
 {
     double k1_cfg, prior, inv_6g2, tilt0, yaw0, yaw_unref, tilt_cap, yaw_cap, yaw_memory;
-    double clip_s, ms, yaw_err, cx, cy, yaw_lp, yaw_gap;
+    double clip_s, ms, yaw_err, cx, cy, sx, sy, yaw_lp, yaw_gap;
     int heading;
     PyObject *o[15];
-    if (!PyArg_ParseTuple(args, "(ddddddddd)(ddddddd)pOOOOOOOOOOOOOOO:covariance_rows", &k1_cfg,
+    if (!PyArg_ParseTuple(args, "(ddddddddd)(ddddddddd)pOOOOOOOOOOOOOOO:covariance_rows", &k1_cfg,
                           &prior, &inv_6g2, &tilt0, &yaw0, &yaw_unref, &tilt_cap, &yaw_cap,
-                          &yaw_memory, &clip_s, &ms, &yaw_err, &cx, &cy, &yaw_lp, &yaw_gap,
+                          &yaw_memory, &clip_s, &ms, &yaw_err, &cx, &cy, &sx, &sy, &yaw_lp,
+                          &yaw_gap,
                           &heading, &o[0], &o[1], &o[2], &o[3], &o[4], &o[5], &o[6], &o[7],
                           &o[8], &o[9], &o[10], &o[11], &o[12], &o[13], &o[14]))
         return NULL;
@@ -1167,17 +1169,21 @@ static PyObject *covariance_rows(PyObject *Py_UNUSED(module), PyObject *args)
         const double kr = AT(c[11], i);
         const double k1 = kr > 0.0 ? kr : k1_cfg;
         const double kdt = k1 * dt;
+        const double mem = kdt / (1.0 + kdt);
         const double leak = dt / (CORRECTION_WINDOW_S + dt);
-        const double ncx = cx + kdt * AT(c[5], i) - leak * cx;
-        const double ncy = cy + kdt * AT(c[6], i) - leak * cy;
+        const double lx = AT(c[5], i), ly = AT(c[6], i);
+        sx = sx + mem * (lx - sx);
+        sy = sy + mem * (ly - sy);
+        const double ncx = cx + kdt * (lx - sx) - leak * cx;
+        const double ncy = cy + kdt * (ly - sy) - leak * cy;
         cx = ncx;
         cy = ncy;
-        ms += kdt / (1.0 + kdt) * (cx * cx + cy * cy - ms);
+        ms += mem * (cx * cx + cy * cy - ms);
         const double ph = AT(c[3], i);
         const double e_t = (ph == PHASE_STARTUP || ph == PHASE_RECOVERING) ? AT(c[4], i) : 0.0;
         const double drift = gyro_drift_var(sigma_b, clip_s);
         const double noise = AT(c[7], i) * inv_6g2 * dt;
-        const double tilt = tilt0 + e_t * e_t + drift + 0.5 * (ms + noise * k1);
+        const double tilt = tilt0 + e_t * e_t + drift + 0.5 * (ms + sx * sx + sy * sy + noise * k1);
         WAT(c[13], i) = tilt_cap < tilt ? tilt_cap : tilt; /* Python's min(tilt, cap) */
         yaw_gap += dt;
         if (heading) {
@@ -1209,7 +1215,8 @@ static PyObject *covariance_rows(PyObject *Py_UNUSED(module), PyObject *args)
     if (overflow)
         PyErr_SetString(PyExc_OverflowError, "(34, 'Numerical result out of range')");
     else
-        result = Py_BuildValue("(ddddddd)", clip_s, ms, yaw_err, cx, cy, yaw_lp, yaw_gap);
+        result = Py_BuildValue("(ddddddddd)", clip_s, ms, yaw_err, cx, cy, sx, sy, yaw_lp,
+                               yaw_gap);
 done:
     for (int j = 0; j < 15; j++)
         if (c[j].b.obj) PyBuffer_Release(&c[j].b);

@@ -10,7 +10,7 @@ Tilt: the variance of the inclination error, ``S = cov[0] + cov[4]`` [rad²] (a 
 expected e² of the angle between the estimated and the true "up"); reported as ``S/2`` on each of
 the world x and y axes::
 
-    S = 2·(v0 + e_t² + D(t_clip)) + M + V
+    S = 2·(v0 + e_t² + D(t_clip)) + M + L + V
 
 - ``v0`` [rad²] = ``orientation_covariance_rad2``: what the filter cannot see (accelerometer
   bias, mounting), per axis.
@@ -27,20 +27,30 @@ the world x and y axes::
   taken on as q·t — as its integral, q·t³/3 (counting it as (σ_b·t)² took the walk's latest
   size for the whole time, three times its share).
 - ``M`` [rad²] = the mean square, over the loop's own memory ``1/k1`` [s], of ``|c|``: the tilt
-  correction the accelerometer channel has made over the last CORRECTION_WINDOW_S,
-  ``c = k1·∫l_h·dt`` high-passed over that window [rad], k1 the loop's running gain (``loop_k1``
-  of the state: the configured k1, lowered where the vehicle's velocity swings, bias.loop_gain;
-  not the bias-learning raise, whose corrections are the bias's error; ``l_h``: the aperiodic
-  unit's state in the world frame, horizontal, the low-passed disagreement between the
-  accelerometer and the estimate it corrects the tilt by). While the vehicle accelerates by
-  ``a_h`` the accelerometer points off the vertical by ``|a_h|/g``; a loop that cannot tell that
-  from a tilt follows it, and the tilt error it takes on is exactly the correction it made:
-  ``k1·∫`` of the disagreement (a leg held for long: ``|a_h|/g`` in full; a zig-zag: its legs
-  cancel in ``c`` as they do in the tilt error — the disagreement itself, ``|l_h|``, is the
-  swing the loop did *not* follow and over-counts it by ω/k1 at a zig-zag's ω; BENCHMARKS.md
-  "Covariance"). Older corrections are taken as averaged out. When velocity aiding takes the
-  vehicle's acceleration out, or at rest, the disagreement is the real (small) tilt error and
-  the corrections remove it: ``M`` shrinks by itself.
+  correction the accelerometer channel has made over the last CORRECTION_WINDOW_S for the
+  disagreement's *transient* part, ``c = k1·∫(l_h − l̄)·dt`` high-passed over that window [rad],
+  k1 the loop's running gain (``loop_k1`` of the state: the configured k1, lowered where the
+  vehicle's velocity swings, bias.loop_gain; not the bias-learning raise, whose corrections are
+  the bias's error; ``l_h``: the aperiodic unit's state in the world frame, horizontal, the
+  low-passed disagreement between the accelerometer and the estimate it corrects the tilt by;
+  ``l̄``: its steady part, ``l_h`` low-passed over the loop's memory ``1/k1``). While the
+  vehicle accelerates by ``a_h`` the accelerometer points off the vertical by ``|a_h|/g``; a
+  loop that cannot tell that from a tilt follows it, and the tilt error it takes on is exactly
+  the correction it made: ``k1·∫`` of the disagreement, which dies away as the loop catches up
+  (a leg held for long: ``|a_h|/g`` in full; a zig-zag: its legs cancel in ``c`` as they do in
+  the tilt error — the disagreement itself, ``|l_h|``, is the swing the loop did *not* follow
+  and over-counts it by ω/k1 at a zig-zag's ω; BENCHMARKS.md "Covariance"). Older corrections
+  are taken as averaged out. When velocity aiding takes the vehicle's acceleration out, or at
+  rest, the disagreement is the real (small) tilt error and the corrections remove it: ``M``
+  shrinks by itself.
+- ``L`` [rad²] = ``|l̄|²``: a disagreement that outlasts the loop's memory is no acceleration
+  the loop follows (an acceleration's disagreement dies away as the loop catches up, and a
+  vehicle cannot accelerate one way for long) but a rate it compensates through its
+  proportional path — the gyro bias's error not learned yet, typically after a start in the
+  air. The tilt error that leaves is that disagreement itself (the accelerometer measuring
+  gravity, the disagreement *is* the tilt error), not the correction it keeps making: counted
+  in ``c``, it would grow to ``k1·|l̄|·CORRECTION_WINDOW_S`` (1.4–3.5× the lag at the loop's
+  gains, and 7° after the Phantom's in-air starts whose tilt was 2–5° off).
 - ``V`` [rad²] = ``σ_a²/g² · dt · k1`` with ``σ_a² = noise_a2/6`` [(m/s²)²] the accelerometer's
   white noise per axis (vibration; ``noise_a2`` = the stillness blocks' mean squared
   sample-to-sample difference summed over the axes) and ``dt`` [s] the sample interval: the
@@ -66,9 +76,10 @@ variance with the gyro drift D). Not referenced (``use_mag`` false, or no usable
 ``unreferenced_yaw_covariance_rad2``.
 
 Constants: ``v0`` and ``y0`` are the only fitted ones (maximum likelihood of the errors under the
-model's Gaussian: tilt on the phantom4 vertical campaign, 6-D; yaw on BROAD's undisturbed trials,
-9-D; BENCHMARKS.md "Covariance"); ``M``'s gain k1 (the loop's running gain), its window
-CORRECTION_WINDOW_S, its memory ``1/k1`` and ``V`` follow from the loop. Each variance is
+model's Gaussian: tilt on EuRoC's samples at rest on the ground, 6-D — the floor is what is left
+when nothing moves —; yaw on BROAD's undisturbed trials, 9-D; BENCHMARKS.md "Covariance");
+``M``'s gain k1 (the loop's running gain), its window CORRECTION_WINDOW_S, its memory and
+``l̄``'s, ``1/k1``, and ``V`` follow from the loop. Each variance is
 capped at π² (an angle error is at most π), or at its floor (yaw: also the unreferenced
 variance) if larger. Plain floats: it runs per message; :meth:`OrientationCovariance.rows` runs
 it over arrays, in the compiled kernel when asked (``_kernel.c`` ``covariance_rows``: the same
@@ -89,10 +100,11 @@ from cf_estimator.core.step import PHASE_RECOVERING, PHASE_STARTUP
 _PI2 = math.pi * math.pi
 _SETTLING = (PHASE_STARTUP, PHASE_RECOVERING)
 
-#: Default ``v0`` [rad²] per tilt axis (``orientation_covariance_rad2``): fitted on the phantom4
-#: vertical campaign (maximum likelihood 6.4e-5 with the correction term M; 1.0e-4 with the
-#: disagreement term before it; see the module docstring).
-TILT_FLOOR_RAD2 = 6.4e-5
+#: Default ``v0`` [rad²] per tilt axis (``orientation_covariance_rad2``): what is left when nothing
+#: moves — fitted by maximum likelihood on EuRoC's samples at rest on the ground (its three
+#: flights before take-off, 6-D), checked on every family in motion (BENCHMARKS.md
+#: "Covariance"; 6.4e-5 before, fitted on the phantom4 vertical campaign in flight).
+TILT_FLOOR_RAD2 = 1.0e-4
 #: Window [s] of the correction term ``M``: corrections older than this are taken as averaged
 #: out (a manoeuvre's legs; the pseudo-velocity's window when ``v0`` was fitted).
 CORRECTION_WINDOW_S = 10.0
@@ -122,7 +134,8 @@ class OrientationCovariance:
     error's running mean takes (:attr:`yaw_memory_s`).
     """
 
-    __slots__ = ("_clip_s", "_yaw_err", "_ms", "_cx", "_cy", "_yaw_lp", "_yaw_gap", "tilt0",
+    __slots__ = ("_clip_s", "_yaw_err", "_ms", "_cx", "_cy", "_sx", "_sy", "_yaw_lp", "_yaw_gap",
+                 "tilt0",
                  "yaw0", "yaw_unref", "bias_prior", "k1", "r1", "_inv_6g2")
 
     def __init__(self, tilt0_rad2: float, yaw0_rad2: float, yaw_unreferenced_rad2: float,
@@ -148,13 +161,15 @@ class OrientationCovariance:
         self._inv_6g2 = 1.0 / (6.0 * gravity_m_s2 * gravity_m_s2)
 
     def reset(self) -> None:
-        """Forget the clip duration, the correction and its mean square, and the heading error
-        (last and running mean; a filter reset)."""
+        """Forget the clip duration, the disagreement's steady part, the correction and its mean
+        square, and the heading error (last and running mean; a filter reset)."""
         self._clip_s = 0.0
         self._yaw_err = 0.0
         self._ms = 0.0
         self._cx = 0.0
         self._cy = 0.0
+        self._sx = 0.0
+        self._sy = 0.0
         self._yaw_lp = 0.0
         self._yaw_gap = 0.0
 
@@ -192,16 +207,19 @@ class OrientationCovariance:
         sigma_b = bias_sigma_rad_s if bias_sigma_rad_s is not None else self.bias_prior
         k1 = loop_k1 if loop_k1 > 0.0 else self.k1
         kdt = k1 * dt_s
+        mem = kdt / (1.0 + kdt)  # a low-pass over the loop's memory 1/k1
         leak = dt_s / (CORRECTION_WINDOW_S + dt_s)
-        cx = self._cx + kdt * lx_rad - leak * self._cx  # the correction made [rad]
-        cy = self._cy + kdt * ly_rad - leak * self._cy
+        sx = self._sx + mem * (lx_rad - self._sx)  # the disagreement's steady part [rad]
+        sy = self._sy + mem * (ly_rad - self._sy)
+        cx = self._cx + kdt * (lx_rad - sx) - leak * self._cx  # the correction made [rad]
+        cy = self._cy + kdt * (ly_rad - sy) - leak * self._cy
         ms = self._ms
-        ms += kdt / (1.0 + kdt) * (cx * cx + cy * cy - ms)
-        self._cx, self._cy, self._ms = cx, cy, ms
+        ms += mem * (cx * cx + cy * cy - ms)
+        self._cx, self._cy, self._sx, self._sy, self._ms = cx, cy, sx, sy, ms
         e_t = error_norm_rad if phase in _SETTLING else 0.0
         drift = gyro_drift_var(sigma_b, self._clip_s) if self._clip_s > 0.0 else 0.0
         noise = noise_a2 * self._inv_6g2 * dt_s  # σ_a²/g²·dt [rad²·s]
-        tilt = min(self.tilt0 + e_t * e_t + drift + 0.5 * (ms + noise * k1),
+        tilt = min(self.tilt0 + e_t * e_t + drift + 0.5 * (ms + sx * sx + sy * sy + noise * k1),
                    max(_PI2, self.tilt0))
         self._yaw_gap += dt_s
         if heading_initialized:
@@ -230,6 +248,7 @@ class OrientationCovariance:
         (tilt, yaw) variances per row [rad²] (the bulk pipeline: one call per run instead of one
         per row). ``bias_sigma_rad_s`` NaN: no estimate yet (the prior is used)."""
         clip_s, ms, yaw_err, cx, cy = self._clip_s, self._ms, self._yaw_err, self._cx, self._cy
+        sx, sy = self._sx, self._sy
         yaw_lp, yaw_gap, yaw_memory = self._yaw_lp, self._yaw_gap, self.yaw_memory_s
         k1_cfg, prior, inv_6g2 = self.k1, self.bias_prior, self._inv_6g2
         tilt0, yaw0, yaw_unref = self.tilt0, self.yaw0, self.yaw_unref
@@ -245,14 +264,16 @@ class OrientationCovariance:
             sigma_b = sb if sb == sb else prior
             k1 = kr if kr > 0.0 else k1_cfg
             kdt = k1 * dt
+            mem = kdt / (1.0 + kdt)
             leak = dt / (CORRECTION_WINDOW_S + dt)
-            cx, cy = cx + kdt * lx - leak * cx, cy + kdt * ly - leak * cy
-            ms += kdt / (1.0 + kdt) * (cx * cx + cy * cy - ms)
+            sx, sy = sx + mem * (lx - sx), sy + mem * (ly - sy)
+            cx, cy = cx + kdt * (lx - sx) - leak * cx, cy + kdt * (ly - sy) - leak * cy
+            ms += mem * (cx * cx + cy * cy - ms)
             e_t = en if ph in settling else 0.0
             drift = gyro_drift_var(sigma_b, clip_s)
             noise = na2 * inv_6g2 * dt
-            tilts.append(min(tilt0 + e_t * e_t + drift + 0.5 * (ms + noise * k1),
-                             tilt_cap))
+            tilts.append(min(tilt0 + e_t * e_t + drift
+                             + 0.5 * (ms + sx * sx + sy * sy + noise * k1), tilt_cap))
             yaw_gap += dt
             if heading_initialized:
                 if used:
@@ -266,7 +287,7 @@ class OrientationCovariance:
             else:
                 yaws.append(yaw_unref)
         self._clip_s, self._ms, self._yaw_err, self._cx, self._cy = clip_s, ms, yaw_err, cx, cy
-        self._yaw_lp, self._yaw_gap = yaw_lp, yaw_gap
+        self._sx, self._sy, self._yaw_lp, self._yaw_gap = sx, sy, yaw_lp, yaw_gap
         return tilts, yaws
 
     def rows(self, dt_s: np.ndarray, clipped: np.ndarray, bias_sigma_rad_s: np.ndarray,
@@ -286,10 +307,10 @@ class OrientationCovariance:
             consts = (self.k1, self.bias_prior, self._inv_6g2, self.tilt0, self.yaw0,
                       self.yaw_unref, max(_PI2, self.tilt0),
                       max(_PI2, self.yaw_unref, self.yaw0), self.yaw_memory_s)
-            state = (self._clip_s, self._ms, self._yaw_err, self._cx, self._cy, self._yaw_lp,
-                     self._yaw_gap)
-            (self._clip_s, self._ms, self._yaw_err, self._cx, self._cy, self._yaw_lp,
-             self._yaw_gap) = compiled_kernel.covariance_rows(
+            state = (self._clip_s, self._ms, self._yaw_err, self._cx, self._cy, self._sx,
+                     self._sy, self._yaw_lp, self._yaw_gap)
+            (self._clip_s, self._ms, self._yaw_err, self._cx, self._cy, self._sx, self._sy,
+             self._yaw_lp, self._yaw_gap) = compiled_kernel.covariance_rows(
                 consts, state, bool(heading_initialized), dt_s, clipped, bias_sigma_rad_s,
                 phase, error_norm_rad, lx_rad, ly_rad, noise_a2, yaw_error_rad, mag_used,
                 mag_age_s, loop_k1, mag_rejected, tilt, yaw)

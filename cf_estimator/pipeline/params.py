@@ -55,9 +55,10 @@ class PipelineParams:
         "(diagonal of orientation_covariance, rotation about the world x/y axes): what the "
         "filter cannot see (accelerometer bias, mounting). Start-up, recovery, clipped "
         "stretches, the tilt corrections the accelerometer channel made (accelerations it "
-        "followed) and vibration add "
-        "to it (docs/ros_interface.md, Covariance); the default is fitted on the phantom4 "
-        "vertical campaign.",
+        "followed), a disagreement it keeps compensating (a bias not learned yet) and "
+        "vibration add to it (docs/ros_interface.md, Covariance); the default is fitted on "
+        "EuRoC's samples at rest (a UAV's consumer-grade MEMS; a lab-grade IMU with an "
+        "aligned reference is nearer 1e-5).",
         minimum=0.0, maximum=100.0, minimum_exclusive=True, group="output",
     )
     yaw_covariance_rad2: float = param(
