@@ -57,8 +57,8 @@ class PipelineParams:
         "stretches, the tilt corrections the accelerometer channel made (accelerations it "
         "followed), a disagreement it keeps compensating (a bias not learned yet) and "
         "vibration add to it (docs/ros_interface.md, Covariance); the default is fitted on "
-        "EuRoC's samples at rest (a UAV's consumer-grade MEMS; a lab-grade IMU with an "
-        "aligned reference is nearer 1e-5).",
+        "EuRoC's samples at rest (a MEMS IMU on a UAV and its motion-capture reference; a "
+        "lab-grade IMU with an aligned reference is nearer 1e-5).",
         minimum=0.0, maximum=100.0, minimum_exclusive=True, group="output",
     )
     yaw_covariance_rad2: float = param(
