@@ -16,8 +16,8 @@ offline (its own offline mode). Rows (inclination [deg] unless marked):
   (:mod:`cf_estimator.bench.consistency`; a consistent Gaussian: tilt 1.8 %, heading 4.6 %,
   mean 1), and for the tilt the share beyond twice its per-axis σ (13.5 %: issue 27's 14 %);
 - compass (simulated, 9-D): a magnet of 0.3, 0.5 and 1x the Earth field fixed to a turning
-  sensor for 60 s (:mod:`cf_estimator.scenarios.compass`): heading error [deg] while it is on,
-  peak and RMS, mean over COMPASS_SEEDS;
+  sensor for 60 s (:mod:`cf_estimator.scenarios.compass`, a calibrated magnetometer's
+  residue): heading error [deg] while it is on, peak and RMS, mean over COMPASS_SEEDS;
 - multirotor (simulated, 6-D, :mod:`cf_estimator.scenarios`): the sustained-acceleration
   cases of issue 22, in the air from the first sample — horizontal zig-zags like the Phantom's
   (``zigzag``, 120 Hz, the DOTs' bias size) and figure-8s on a de-biased gyro (``circles``, at
