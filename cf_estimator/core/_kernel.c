@@ -1130,9 +1130,8 @@ static double gyro_drift_var(double sigma_b, double t)
  *                 mag_rejected, tilt_out, yaw_out) -> state
  * consts = (k1, bias_prior, inv_6g2, tilt0, yaw0, yaw_unref, tilt_cap, yaw_cap, yaw_memory),
  * state = (clip_s, ms, yaw_err, cx, cy, sx, sy, yaw_lp, yaw_gap) before and after the rows
- * (sx, sy: the disagreement's steady part); clipped,
- * mag_used and mag_rejected: non-zero = true; bias_sigma NaN: the prior; mag_age None: never
- * (the Python's None). */
+ * (sx, sy: the disagreement's steady part); clipped, mag_used and mag_rejected: non-zero =
+ * true; bias_sigma NaN: the prior; mag_age None: never (the Python's None). */
 static PyObject *covariance_rows(PyObject *Py_UNUSED(module), PyObject *args)
 {
     double k1_cfg, prior, inv_6g2, tilt0, yaw0, yaw_unref, tilt_cap, yaw_cap, yaw_memory;
@@ -1142,8 +1141,7 @@ static PyObject *covariance_rows(PyObject *Py_UNUSED(module), PyObject *args)
     if (!PyArg_ParseTuple(args, "(ddddddddd)(ddddddddd)pOOOOOOOOOOOOOOO:covariance_rows", &k1_cfg,
                           &prior, &inv_6g2, &tilt0, &yaw0, &yaw_unref, &tilt_cap, &yaw_cap,
                           &yaw_memory, &clip_s, &ms, &yaw_err, &cx, &cy, &sx, &sy, &yaw_lp,
-                          &yaw_gap,
-                          &heading, &o[0], &o[1], &o[2], &o[3], &o[4], &o[5], &o[6], &o[7],
+                          &yaw_gap, &heading, &o[0], &o[1], &o[2], &o[3], &o[4], &o[5], &o[6], &o[7],
                           &o[8], &o[9], &o[10], &o[11], &o[12], &o[13], &o[14]))
         return NULL;
     static const char *names[15] = {"dt", "clipped", "bias_sigma", "phase", "error_norm", "lx",
@@ -1183,7 +1181,8 @@ static PyObject *covariance_rows(PyObject *Py_UNUSED(module), PyObject *args)
         const double e_t = (ph == PHASE_STARTUP || ph == PHASE_RECOVERING) ? AT(c[4], i) : 0.0;
         const double drift = gyro_drift_var(sigma_b, clip_s);
         const double noise = AT(c[7], i) * inv_6g2 * dt;
-        const double tilt = tilt0 + e_t * e_t + drift + 0.5 * (ms + sx * sx + sy * sy + noise * k1);
+        const double tilt =
+            tilt0 + e_t * e_t + drift + 0.5 * (ms + sx * sx + sy * sy + noise * k1);
         WAT(c[13], i) = tilt_cap < tilt ? tilt_cap : tilt; /* Python's min(tilt, cap) */
         yaw_gap += dt;
         if (heading) {

@@ -37,12 +37,14 @@ the world x and y axes::
   vehicle accelerates by ``a_h`` the accelerometer points off the vertical by ``|a_h|/g``; a
   loop that cannot tell that from a tilt follows it, and the tilt error it takes on is exactly
   the correction it made: ``k1·∫`` of the disagreement, which dies away as the loop catches up
-  (a leg held for long: ``|a_h|/g`` in full; a zig-zag: its legs cancel in ``c`` as they do in
-  the tilt error — the disagreement itself, ``|l_h|``, is the swing the loop did *not* follow
-  and over-counts it by ω/k1 at a zig-zag's ω; BENCHMARKS.md "Covariance"). Older corrections
-  are taken as averaged out. When velocity aiding takes the vehicle's acceleration out, or at
-  rest, the disagreement is the real (small) tilt error and the corrections remove it: ``M``
-  shrinks by itself.
+  (a zig-zag: its legs cancel in ``c`` as they do in the tilt error — the disagreement itself,
+  ``|l_h|``, is the swing the loop did *not* follow and over-counts it by ω/k1 at a zig-zag's
+  ω; BENCHMARKS.md "Covariance"). A leg held in one world direction for longer than ``1/k1``
+  is counted short: its transient and steady parts are both ``A·k1·t·e^(−k1·t)`` for a lean
+  ``A``, and ``M + L`` peaks at 1.3–1.4·(A/e)² while the tilt goes on to ``A`` (a vehicle whose
+  velocity is bounded holds no leg long). Older corrections are taken as averaged out. When
+  velocity aiding takes the vehicle's acceleration out, or at rest, the disagreement is the
+  real (small) tilt error and the corrections remove it: ``M`` shrinks by itself.
 - ``L`` [rad²] = ``|l̄|²``: a disagreement that outlasts the loop's memory is no acceleration
   the loop follows (an acceleration's disagreement dies away as the loop catches up, and a
   vehicle cannot accelerate one way for long) but a rate it compensates through its
@@ -106,7 +108,7 @@ _SETTLING = (PHASE_STARTUP, PHASE_RECOVERING)
 #: "Covariance"; 6.4e-5 before, fitted on the phantom4 vertical campaign in flight).
 TILT_FLOOR_RAD2 = 1.0e-4
 #: Window [s] of the correction term ``M``: corrections older than this are taken as averaged
-#: out (a manoeuvre's legs; the pseudo-velocity's window when ``v0`` was fitted).
+#: out (a manoeuvre's legs; the swing observer's pseudo-velocity window when ``M`` was built).
 CORRECTION_WINDOW_S = 10.0
 #: Default ``y0`` [rad²] (``yaw_covariance_rad2``): fitted on BROAD's undisturbed trials, 9-D:
 #: the likelihood is flat from 3e-4 to 5e-4 (maximum 3.8e-4), and within that range the
@@ -135,8 +137,7 @@ class OrientationCovariance:
     """
 
     __slots__ = ("_clip_s", "_yaw_err", "_ms", "_cx", "_cy", "_sx", "_sy", "_yaw_lp", "_yaw_gap",
-                 "tilt0",
-                 "yaw0", "yaw_unref", "bias_prior", "k1", "r1", "_inv_6g2")
+                 "tilt0", "yaw0", "yaw_unref", "bias_prior", "k1", "r1", "_inv_6g2")
 
     def __init__(self, tilt0_rad2: float, yaw0_rad2: float, yaw_unreferenced_rad2: float,
                  bias_prior_sigma_rad_s: float, k1: float = 0.35,
