@@ -31,8 +31,9 @@ looser bound would pretend); they stay open in BENCHMARKS.md:
   above 6°: asserted);
 - issue 22: the simulated multirotor cases (rows "simulated ..."): learned-bias error < 0.05 °/s
   on each — zig-zags 0.50 °/s (the vertical component a level 6-D flight cannot observe),
-  figure-8s 1.56 °/s (1 kHz and 100 Hz; about the pitch axis, where forward flight's rotor
-  drag leaves a steady sensor-fixed error), tight figure-8s 0.25 °/s; their inclination RMS at
+  figure-8s 1.56 °/s (1 kHz and 100 Hz; about the pitch axis: the turn's bank, fixed on the
+  body for each loop, which the turning body makes look like a pitch-rate bias; not the rotor
+  drag, BENCHMARKS.md "The tight turn"), tight figure-8s 0.25 °/s; their inclination RMS at
   most VQF online's is met on all four (asserted; BENCHMARKS.md "The tight turn"), and so is a
   learned bias no further off than VQF online's (asserted: VQF 0.81 / 2.04 / 2.04 / 1.92 °/s);
 - issue 27: the tilt's share beyond 2σ within 5–25 % on every family, read against the σ
