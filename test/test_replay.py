@@ -386,6 +386,39 @@ def test_replay_offline_splits_at_resets(tmp_path):
     assert np.all(np.isfinite(r.series.q_wxyz))
 
 
+def test_the_error_plot_draws_the_published_tilt_sigma(tmp_path, monkeypatch):
+    """Issue 27 in the replay's plots: with a ground-truth reference, error.png draws the
+    published covariance's tilt σ, √(cov[0] + cov[4]), beside the inclination error, sample for
+    sample the series' own variance; an offline replay does not (its error is the offline
+    pass's, the σ the online filter's)."""
+    from cf_estimator.bag import plots
+    from cf_estimator.cli.main import main
+
+    bag = tmp_path / "flight"
+    assert main(["simulate", "--scenario", "flight", "--duration", "20", "-o", str(bag)]) == 0
+    drawn: dict[str, dict[str, np.ndarray]] = {}
+
+    def keep(fig, path):
+        drawn[path.name] = {ln.get_label(): ln.get_ydata() for ln in fig.axes[0].get_lines()}
+        plots._pyplot().close(fig)
+        return path
+
+    monkeypatch.setattr(plots, "_save", keep)
+    label = "reported tilt σ, √(cov[0]+cov[4])"
+    for offline in (False, True):
+        drawn.clear()
+        r = replay_bag(bag, None, options=ReplayOptions(
+            reference_topic="/ground_truth/orientation", offline=offline, progress=False))
+        plots.plot_replay(r, tmp_path / "plots")
+        lines = drawn["error.png"]
+        assert "inclination" in lines
+        if offline:
+            assert label not in lines
+            continue
+        np.testing.assert_allclose(lines[label], np.degrees(np.sqrt(r.series.tilt_var_rad2)))
+        assert np.nanmin(lines[label]) > 0.0
+
+
 def test_replay_offline_plots_the_online_filter_beside_the_offline_estimate(bags, replayed,
                                                                             tmp_path):
     from cf_estimator.bag.plots import plot_replay

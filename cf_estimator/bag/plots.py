@@ -123,6 +123,11 @@ def plot_replay(
         tr = scored["t_s"] - t0
         for key, color in (("total", "k"), ("inclination", "C0"), ("heading", "C1")):
             axes[0].plot(tr, np.degrees(scored[key]), lw=0.8, color=color, label=key)
+        if not offline and not autopilot and s.tilt_var_rad2.size == t.size:
+            # the published covariance's tilt σ: an honest one is the inclination error's RMS
+            # (issue 27; the summary's "covariance" line scores it)
+            axes[0].plot(t, np.degrees(np.sqrt(s.tilt_var_rad2)), lw=0.8, color="C0", ls="--",
+                         label="reported tilt σ, √(cov[0]+cov[4])")
         axes[0].set_ylabel("error [deg]")
         axes[0].legend(loc="upper right", fontsize=8)
         for i, name in enumerate(names):
