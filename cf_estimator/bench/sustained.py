@@ -147,11 +147,11 @@ def rotor_drag(flight: Flight) -> RotorDrag:
     vv = float(np.sum(v_across * v_across))
     k = -float(np.sum(f_across * v_across)) / vv if vv > 0.0 else math.nan
     residual = f_across + k * v_across
+    rr = float(np.sum(residual * residual))
     ff = float(np.sum(f_across * f_across))
     n = f_across.shape[0]
-    return RotorDrag(k, 1.0 - float(np.sum(residual * residual)) / ff if ff > 0.0 else math.nan,
-                     math.sqrt(float(np.sum(residual * residual)) / (2 * n)) / k
-                     if k > 0.0 else math.inf,
+    return RotorDrag(k, 1.0 - rr / ff if ff > 0.0 else math.nan,
+                     math.sqrt(rr / (2 * n)) / k if k > 0.0 else math.inf,
                      math.sqrt(vv / (2 * n)))
 
 
