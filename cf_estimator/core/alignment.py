@@ -58,7 +58,8 @@ MIN_SIGNAL_TO_NOISE = 1.5
 #: Prior standard deviation [rad] of X's correction about each axis (the fit's regulariser: the
 #: rotation about the vertical is not observed without horizontal accelerations).
 ROTATION_PRIOR_SIGMA_RAD = math.pi
-#: Floor of the fitted noise variances [m²/s⁴] (a perfect simulated velocity).
+#: Floor of the fitted noise variances [m²/s⁴] (a perfect simulated velocity), under the one
+#: the configured velocity noise sets (:meth:`InMotionAlignment._scatter`).
 MIN_NOISE2_M2_S4 = 1e-6
 #: Prior standard deviation [rad/s] of the gyro's bias about the vertical, at most: a MEMS
 #: gyro's typical bias (about 1 °/s). Gravity observes the other two axes within seconds; this
@@ -112,7 +113,8 @@ class InMotionAlignment:
                  noise2_m2_s4: float = 0.0, bias_prior_sigma_rad_s: float = 0.1) -> None:
         """``required_sigma_rad``: σ(δ) [rad] below which the fit is known; ``memory_s`` [s]:
         fading time constant of the windows' weights; ``noise2_m2_s4``: variance [m²/s⁴] (both
-        horizontal axes) of the velocity's acceleration noise (see MIN_SIGNAL_TO_NOISE);
+        horizontal axes) of the velocity's acceleration noise (see MIN_SIGNAL_TO_NOISE; half of
+        it per axis is the floor of the residuals' scatter, :meth:`_scatter`);
         ``bias_prior_sigma_rad_s``: prior σ [rad/s] of b about the filter's b̂ at the start
         when the filter has no variance of its own yet."""
         self.required_sigma_rad = float(required_sigma_rad)
@@ -207,15 +209,26 @@ class InMotionAlignment:
 
     def _scatter(self) -> tuple[float, float]:
         """Residual variances [m²/s⁴] at X̂: horizontal (per axis) and vertical (1 before the
-        fit has MIN_WINDOWS: nothing to judge yet)."""
+        fit has MIN_WINDOWS: nothing to judge yet), never below the per-axis differentiation
+        noise of the configured velocity noise (``noise2_m2_s4``/2; at least MIN_NOISE2_M2_S4).
+
+        The floor: a velocity cleaner than configured (a noiseless simulation, motion capture)
+        leaves a scatter of what the model leaves out alone, and a fit weighed by it trusts its
+        first few windows far beyond what they hold. With the heading known, the thesis
+        manoeuvre aided by a noiseless velocity took −0.56 °/s about the vertical (true 0.005)
+        when the fit became known half a second into the acceleration, and the heading then
+        drifted across the 5 m/s²: peak 64.2′ against 32.5′ at 0.1 m/s; with the floor 18.0′
+        (BENCHMARKS.md, "Thesis manoeuvre aided"). A velocity as noisy as configured scatters
+        above the floor."""
         w = self._weights
         n = float(w.sum())
         if n < MIN_WINDOWS:
             return 1.0, 1.0
         r = self._residuals()[0]
         dof = n - 2.0
-        return (max(float(w @ (r[:, 0] ** 2 + r[:, 1] ** 2)) / (2.0 * dof), MIN_NOISE2_M2_S4),
-                max(float(w @ r[:, 2] ** 2) / dof, MIN_NOISE2_M2_S4))
+        floor = max(0.5 * self.noise2_m2_s4, MIN_NOISE2_M2_S4)
+        return (max(float(w @ (r[:, 0] ** 2 + r[:, 1] ** 2)) / (2.0 * dof), floor),
+                max(float(w @ r[:, 2] ** 2) / dof, floor))
 
     def _step(self) -> float:
         """One Gauss–Newton step on (θ, ε): X̂ ← X̂·Exp(θ), b ← b + ε; returns |θ| [rad]."""

@@ -366,7 +366,9 @@ class FilterParams:
         "Velocity aiding: noise (standard deviation per axis) of the velocity input. A "
         "horizontal acceleration within its differentiation noise is taken out only in part "
         "(none below it), so a noisy velocity adds no tilt noise in steady flight "
-        "(0 = always take it out in full).",
+        "(0 = always take it out in full). The in-motion alignment weighs its windows by "
+        "their scatter, never by less than this noise: a cleaner velocity is not trusted "
+        "further.",
         minimum=0.0,
         maximum=10.0,
         group="velocity aiding",
