@@ -312,7 +312,7 @@ def test_a_noiseless_velocity_does_not_teach_the_fit_a_vertical_rate_from_one_on
     heading known: the fit becomes known half a second into the acceleration; its residual
     scatter is floored at the configured noise's, so its bias about the vertical stays near
     the truth (with a floor of 1e-6 m²/s⁴ alone: −0.56 °/s, and the heading drifted across the
-    5 m/s² to a 64′ peak) and the peak stays near the noisy velocity's."""
+    5 m/s² to a 64′ peak) and the peak stays below 25′ (32.5′ with the 0.1 m/s velocity)."""
     sc = make_scenario("acceleration", seed=0)
     vd = measure_velocity(sc.truth, VelocityModel(10.0, 0.0, 0.1), np.random.default_rng([0, 17]))
     q_true = sc.truth.q_world_from_body

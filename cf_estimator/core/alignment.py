@@ -219,7 +219,7 @@ class InMotionAlignment:
         when the fit became known half a second into the acceleration, and the heading then
         drifted across the 5 m/s²: peak 64.2′ against 32.5′ at 0.1 m/s; with the floor 18.0′
         (BENCHMARKS.md, "Thesis manoeuvre aided"). A velocity as noisy as configured scatters
-        above the floor."""
+        about as much as the floor, which then changes little."""
         w = self._weights
         n = float(w.sum())
         if n < MIN_WINDOWS:
