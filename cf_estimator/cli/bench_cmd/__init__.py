@@ -1,5 +1,5 @@
-"""``cf-estimator bench broad|euroc|scenarios|speed|cross|sustained|fleet``: accuracy and speed
-versus the peers.
+"""``cf-estimator bench broad|euroc|scenarios|speed|cross|sustained|fleet|ablate``: accuracy and
+speed versus the peers, and the ablation of our own mechanisms.
 
 ``bench broad --data DIR`` scores our filter (and ``--peers``) on BROAD trial files: per-group
 tables of total/heading/inclination RMSE [deg] over the movement samples, 9-D and 6-D, and
@@ -14,18 +14,29 @@ from __future__ import annotations
 
 from typing import Any
 
-from cf_estimator.cli.bench_cmd import broad, cross, euroc, fleet, scenarios, speed, sustained
+from cf_estimator.cli.bench_cmd import (
+    ablate,
+    broad,
+    cross,
+    euroc,
+    fleet,
+    scenarios,
+    speed,
+    sustained,
+)
 
 
 def register(subparsers: Any) -> None:
     """Add ``bench`` and its sub-commands."""
     p = subparsers.add_parser(
-        "bench", help="accuracy and speed benchmarks vs peers (bench broad, euroc, scenarios, "
+        "bench", help="accuracy and speed benchmarks vs peers, and ablations (bench broad, euroc, "
+        "scenarios, ablate, "
         "speed, cross, sustained, fleet)",
         description="Benchmarks of the filter against VQF, x-io Fusion and Madgwick.",
     )
     sub = p.add_subparsers(dest="bench_command", required=True, metavar="BENCHMARK")
     broad.add_parser(sub)
+    ablate.add_parser(sub)
     euroc.add_parser(sub)
     scenarios.add_parser(sub)
     speed.add_parser(sub)
