@@ -292,6 +292,12 @@ def load_params_file(
                 f"{path}: {name}: {value} is an integer; write {float(value)!r} (ROS 2 "
                 "rejects an integer for a double parameter)"
             )
+        if (spec.kind == "float_list" and isinstance(value, list) and value
+                and all(isinstance(v, int) and not isinstance(v, bool) for v in value)):
+            raise ParameterError(
+                f"{path}: {name}: {value} is a list of integers; write "
+                f"{[float(v) for v in value]} (ROS 2 rejects integers for a double array)"
+            )
         known[name] = value
     try:
         fp, pp = build_params(known)
@@ -316,6 +322,8 @@ def format_value(spec: ParamSpec, value: Any) -> str:
         return "true" if value else "false"
     if spec.kind == "int":
         return str(int(value))
+    if spec.kind == "float_list":
+        return "[" + ", ".join(format_value(_FLOAT, v) for v in value) + "]"
     if spec.kind == "float":
         x = float(value)
         if not math.isfinite(x):
@@ -329,6 +337,9 @@ def format_value(spec: ParamSpec, value: Any) -> str:
             exponent = "+" + exponent
         return mantissa + ("e" + exponent if exponent else "")
     return "'" + str(value).replace("'", "''") + "'"
+
+
+_FLOAT = ParamSpec(name="element", kind="float", default=0.0, unit="", description="")
 
 
 def _comment(spec: ParamSpec) -> list[str]:

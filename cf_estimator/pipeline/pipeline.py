@@ -44,6 +44,7 @@ from cf_estimator.core.step import MAG_DISABLED, MAG_REJECTED, MAG_USED
 from cf_estimator.core.velocity import VelocityAiding, apply_aiding, filter_estimates
 from cf_estimator.pipeline import checks, frames
 from cf_estimator.pipeline.covariance import OrientationCovariance
+from cf_estimator.pipeline.magcal import MagCorrection
 from cf_estimator.pipeline.diagnostics import (
     DiagnosticsReport,
     WindowStats,
@@ -218,6 +219,8 @@ class ImuPipeline:
         self.rules.jump_back_ns = int(round(pp.time_jump_back_threshold_s * 1e9))
         self.rules.mag_timeout_ns = int(round(pp.mag_timeout_s * 1e9))
         self.rules.use_mag = self._fp.use_mag
+        #: hard and soft iron, applied to every magnetometer sample before anything else
+        self.mag_correction = MagCorrection(pp.mag_hard_iron_t, pp.mag_soft_iron)
         self._ned = self._fp.world_frame == "ned"
         # the published world frame, true north, yaw offset (identity: skipped, bit-identical)
         self._out_frame = frames.OutputFrame(self._fp.world_frame, pp.magnetic_declination_rad,
@@ -360,7 +363,8 @@ class ImuPipeline:
 
     # -- magnetometer -----------------------------------------------------------------------------
     def on_mag(self, msg: Any) -> None:
-        """Store the latest valid magnetometer sample (any unit; only directions are used)."""
+        """Store the latest valid magnetometer sample (any unit; only directions are used),
+        corrected by ``mag_hard_iron_t`` / ``mag_soft_iron`` first (pipeline/magcal.py)."""
         self.tally.received_mag += 1
         try:
             st = msg.header.stamp
@@ -368,6 +372,8 @@ class ImuPipeline:
             m = msg.magnetic_field
             mx, my, mz = float(m.x), float(m.y), float(m.z)
             frame = msg.header.frame_id
+            if not self.mag_correction.identity:  # calibration: the message's own axes
+                mx, my, mz = self.mag_correction.apply(mx, my, mz)
             if self.rules.flip:
                 my, mz = -my, -mz
         except Exception:  # noqa: BLE001 - malformed: counted, never raised
