@@ -101,8 +101,9 @@ def coerce(spec: ParamSpec, value: Any) -> Any:
             raise ParameterError(f"{spec.name}: expected a list of {spec.length} numbers, "
                                  f"got {value!r}")
         items = list(value)
+        number = (int, float, _np_number())
         if len(items) != spec.length or any(
-                isinstance(v, bool) or not isinstance(v, (int, float, _np_number())) for v in items):
+                isinstance(v, bool) or not isinstance(v, number) for v in items):
             raise ParameterError(f"{spec.name}: expected a list of {spec.length} numbers, "
                                  f"got {value!r}")
         return tuple(float(v) for v in items)

@@ -144,20 +144,25 @@ def fit_ellipsoid(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     eccentric (:data:`MAX_AXIS_RATIO`) to be a magnetometer's distortion."""
     scale = float(np.median(np.linalg.norm(m, axis=1))) or 1.0
     x, y, z = (m / scale).T
+    # the general quadric x'Qx + 2u'x + k = 0: the unit coefficient vector nearest the null
+    # space (no term fixed to 1: a hard iron as large as the field puts the origin on the
+    # ellipsoid, where the usual "= 1" form degenerates)
     design = np.column_stack([x * x, y * y, z * z, 2 * x * y, 2 * x * z, 2 * y * z,
-                              2 * x, 2 * y, 2 * z])
-    p, *_ = np.linalg.lstsq(design, np.ones(x.shape[0]), rcond=None)
+                              2 * x, 2 * y, 2 * z, np.ones(x.shape[0])])
+    p = np.linalg.svd(design, full_matrices=False)[2][-1]
     q = np.array([[p[0], p[3], p[4]], [p[3], p[1], p[5]], [p[4], p[5], p[2]]])
     u = p[6:9]
     try:
         c = -np.linalg.solve(q, u)
     except np.linalg.LinAlgError:
         raise CalibrationError("the samples fit no ellipsoid (a degenerate quadric)") from None
-    # (x - c)^T Q (x - c) = 1 + c^T Q c
-    gain = 1.0 + c @ q @ c
-    mat = q / gain
+    # (x - c)' Q (x - c) = c'Qc - k
+    gain = c @ q @ c - p[9]
+    mat = q / gain if gain != 0.0 else q * np.nan
+    if not np.all(np.isfinite(mat)):
+        raise CalibrationError("the samples fit no ellipsoid (a degenerate quadric)")
     w, v = np.linalg.eigh(mat)
-    if not (gain > 0.0 and np.all(w > 0.0)):
+    if not np.all(w > 0.0):
         raise CalibrationError("the samples fit no ellipsoid (the best quadric is open): a "
                                "disturbance or too little rotation")
     axes = 1.0 / np.sqrt(w)  # semi-axes

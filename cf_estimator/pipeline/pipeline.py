@@ -44,13 +44,13 @@ from cf_estimator.core.step import MAG_DISABLED, MAG_REJECTED, MAG_USED
 from cf_estimator.core.velocity import VelocityAiding, apply_aiding, filter_estimates
 from cf_estimator.pipeline import checks, frames
 from cf_estimator.pipeline.covariance import OrientationCovariance
-from cf_estimator.pipeline.magcal import MagCorrection
 from cf_estimator.pipeline.diagnostics import (
     DiagnosticsReport,
     WindowStats,
     compose_report,
     velocity_values,
 )
+from cf_estimator.pipeline.magcal import MagCorrection
 from cf_estimator.pipeline.messages import UNKNOWN_COVARIANCE, covariance9
 from cf_estimator.pipeline.params import PipelineParams
 from cf_estimator.pipeline.state import ImuTime, InputRules, MagInput, MessageCounts
