@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import DATA_ROOT
 
 from cf_estimator import estimate
 from cf_estimator.bag import io
@@ -18,7 +19,6 @@ from cf_estimator.core import quaternion as quat
 from cf_estimator.params_file import load_params_file
 from cf_estimator.pipeline import ImuPipeline, PipelineParams
 from cf_estimator.schema import ParameterError
-from conftest import DATA_ROOT
 
 FIELD_T = float(np.linalg.norm(FIELD_ENU_T))
 #: A soft iron and hard iron of the size real drones show (hard iron ~ the Earth's field).

@@ -110,8 +110,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"  coverage {cal.coverage:.0%} of the sphere; field {cal.field * 1e6:.2f} uT; "
           f"residual {cal.residual:.2%} of the field RMS ({cal.model}; the sphere alone: "
           f"{cal.sphere_residual:.2%})")
-    print(f"  mag_hard_iron_t {_vec_ut(cal.hard_iron)} ({np.linalg.norm(cal.hard_iron) / cal.field:.1%}"
-          " of the field)")
+    share = np.linalg.norm(cal.hard_iron) / cal.field
+    print(f"  mag_hard_iron_t {_vec_ut(cal.hard_iron)} ({share:.1%} of the field)")
     print(f"  mag_soft_iron {_matrix(cal.soft_iron)}")
     if auto is not None:
         print(f"  (what remains after the autopilot's calibration: a hard iron of "

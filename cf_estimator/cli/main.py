@@ -67,10 +67,11 @@ def missing_module_text(command: str, exc: ModuleNotFoundError) -> str:
 
 def _register_missing(sub: Any, name: str, exc: ModuleNotFoundError) -> None:
     """A sub-command whose module cannot be imported: listed, and a one-line error when run."""
-    text = missing_module_text(name, exc)
-    sub.add_parser(name.replace("_", "-"), help=f"(unavailable: needs {(exc.name or '?').split('.')[0]})",
+    command = name.replace("_", "-")
+    text = missing_module_text(command, exc)
+    sub.add_parser(command, help=f"(unavailable: needs {(exc.name or '?').split('.')[0]})",
                    description=text)
-    _MISSING[name.replace("_", "-")] = text
+    _MISSING[command] = text
 
 
 #: Sub-commands whose module could not be imported → their one-line error (see main()).
