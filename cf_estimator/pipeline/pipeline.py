@@ -50,6 +50,7 @@ from cf_estimator.pipeline.diagnostics import (
     compose_report,
     velocity_values,
 )
+from cf_estimator.pipeline.linear_acceleration import gravity_free
 from cf_estimator.pipeline.magcal import MagCorrection
 from cf_estimator.pipeline.messages import UNKNOWN_COVARIANCE, covariance9
 from cf_estimator.pipeline.params import PipelineParams
@@ -88,6 +89,10 @@ class PipelineOutput:
     rpy_rad: Vec3 | None
     initialized: bool
     warnings: list[str] = field(default_factory=list)
+    #: ``publish_linear_acceleration``: (a_body, cov_body, a_world, cov_world), gravity removed
+    #: [m/s², m²/s⁴ row-major] (pipeline/linear_acceleration.py); None when off or not
+    #: initialized
+    gravity_free: tuple[Vec3, tuple[float, ...], Vec3, tuple[float, ...]] | None = None
 
 
 class ImuPipeline:
@@ -622,6 +627,9 @@ class ImuPipeline:
             sec, nsec, self.output_frame_id(str(frame)), xyzw, cov, (gx, gy, gz), av_cov,
             (ax, ay, az), la_cov, rpy, initialized, warnings,
         )
+        if self._pp.publish_linear_acceleration and initialized:
+            out.gravity_free = gravity_free(xyzw, out.linear_acceleration, cov, la_cov,
+                                            self._fp.gravity_m_s2, self._fp.world_frame)
         # -- statistics (incremental) -----------------------------------------------------------
         if w.n == 0:
             w.first_ns = t_ns
