@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from test_calibrate_mag import _write_bag
 
 from cf_estimator.bag import io
 from cf_estimator.bag.replay import (
@@ -18,7 +19,6 @@ from cf_estimator.bag.replay import (
 from cf_estimator.calibration.simulate import tumble
 from cf_estimator.pipeline import PipelineParams
 from cf_estimator.pipeline.linear_acceleration import gravity_free
-from test_calibrate_mag import _write_bag
 
 G = 9.80665
 
