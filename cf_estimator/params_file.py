@@ -98,10 +98,43 @@ def node_key_matches(key: str, node_name: str = DEFAULT_NODE_NAME) -> bool:
     return re.fullmatch(regex, fqn) is not None
 
 
+#: imu_filter_madgwick's parameter names → ours (docs/migrating_from_madgwick.md).
+MADGWICK_NAMES: dict[str, str] = {
+    "gain": "k1", "zeta": "k2", "declination": "magnetic_declination_rad",
+    "yaw_offset": "yaw_offset_rad", "fixed_frame": "tf_parent_frame",
+    "orientation_stddev": "orientation_covariance_rad2", "publish_debug_topics": "publish_rpy",
+    "remove_gravity_vector": "publish_linear_acceleration",
+    "mag_bias_x": "mag_hard_iron_t", "mag_bias_y": "mag_hard_iron_t",
+    "mag_bias_z": "mag_hard_iron_t",
+}
+#: imu_filter_madgwick's hard-iron names, taken as mag_hard_iron_t (x, y, z) [T] when it is not
+#: set itself.
+MAG_BIAS_ALIASES = ("mag_bias_x", "mag_bias_y", "mag_bias_z")
+#: The node name of imu_filter_madgwick's parameter files.
+MADGWICK_SECTION = "imu_filter"
+
+
+def hard_iron_from_aliases(values: Mapping[str, Any]) -> tuple[float, float, float] | None:
+    """mag_hard_iron_t from imu_filter_madgwick's ``mag_bias_x/y/z`` (missing ones 0) when any is
+    given and ``mag_hard_iron_t`` is not; else None. ParameterError for a non-number."""
+    if "mag_hard_iron_t" in values or not any(k in values for k in MAG_BIAS_ALIASES):
+        return None
+    out = []
+    for k in MAG_BIAS_ALIASES:
+        v = values.get(k, 0.0)
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise ParameterError(f"{k}: expected a number [T], got {v!r}")
+        out.append(float(v))
+    return (out[0], out[1], out[2])
+
+
 def suggest_name(name: str) -> str | None:
-    """The nearest parameter name to a misspelt ``name`` (None when nothing is close)."""
+    """The nearest parameter name to a misspelt ``name`` (None when nothing is close); for an
+    imu_filter_madgwick name, ours."""
     known = [s.name for s in all_specs()]
     last = name.rsplit(".", 1)[-1]
+    if last in MADGWICK_NAMES:
+        return MADGWICK_NAMES[last]
     close = difflib.get_close_matches(last, known, n=1, cutoff=0.6)
     return close[0] if close else None
 
@@ -112,7 +145,7 @@ def unknown_names(names: Iterable[str]) -> list[str]:
     ROS's own parameters (``use_sim_time``, ``qos_overrides.*``, ...) are not unknown. The node
     calls this at start-up with the overrides rclpy resolved for it and warns once.
     """
-    known = {s.name for s in all_specs()}
+    known = {s.name for s in all_specs()} | set(MAG_BIAS_ALIASES)
     return sorted(
         n for n in set(names)
         if n not in known and n not in ROS_STANDARD_PARAMETERS
@@ -125,7 +158,11 @@ def describe_unknown(names: Sequence[str]) -> str:
     parts = []
     for n in names:
         near = suggest_name(n)
-        parts.append(f"'{n}'" + (f" (did you mean '{near}'?)" if near else ""))
+        if n.rsplit(".", 1)[-1] in MADGWICK_NAMES:
+            parts.append(f"'{n}' (imu_filter_madgwick's name; ours is '{near}', see "
+                         "docs/migrating_from_madgwick.md)")
+        else:
+            parts.append(f"'{n}'" + (f" (did you mean '{near}'?)" if near else ""))
     return ", ".join(parts)
 
 
@@ -210,8 +247,17 @@ def _applicable_values(
         raise ParameterError(
             f"{path}: no section applies to node '{fully_qualified_node_name(node_name)}' "
             f"(sections: {', '.join(ignored)}); use '/**:' or the node name, or --node-name"
+            + _madgwick_section_hint(ignored)
         )
     return values, warnings
+
+
+def _madgwick_section_hint(keys: Sequence[str]) -> str:
+    """A hint for imu_filter_madgwick's section name among ``keys`` (empty otherwise)."""
+    if any(k.strip("/").rsplit("/", 1)[-1] == MADGWICK_SECTION for k in keys):
+        return (f" ('{MADGWICK_SECTION}' is imu_filter_madgwick's node: rename the section and "
+                "its parameters as docs/migrating_from_madgwick.md says, e.g. gain -> k1)")
+    return ""
 
 
 def unapplied_file_warning(path: str | Path, node_name: str) -> str | None:
@@ -230,7 +276,7 @@ def unapplied_file_warning(path: str | Path, node_name: str) -> str | None:
         return None
     fqn = fully_qualified_node_name(node_name)
     short = fqn.rsplit("/", 1)[-1]
-    hint = ""
+    hint = _madgwick_section_hint(keys)
     if any(k.lstrip("/").rsplit("/", 1)[-1].endswith("_node") for k in keys):
         hint = (f" ('{keys[0]}' looks like the executable's name; the node is named "
                 f"'{short}')")
@@ -281,6 +327,17 @@ def load_params_file(
     """
     path = Path(path)
     values, warnings = check_names(path, node_name)
+    try:
+        alias = hard_iron_from_aliases(values)
+    except ParameterError as exc:
+        raise ParameterError(f"{path}: {exc}") from None
+    if alias is not None:
+        values = {k: v for k, v in values.items() if k not in MAG_BIAS_ALIASES}
+        values["mag_hard_iron_t"] = list(alias)
+        warnings = [*warnings, f"{path}: imu_filter_madgwick's mag_bias_x/y/z taken as "
+                    f"mag_hard_iron_t {list(alias)} [T] (write mag_hard_iron_t)"]
+    else:
+        values = {k: v for k, v in values.items() if k not in MAG_BIAS_ALIASES}
     specs = {s.name: s for s in all_specs()}
     known: dict[str, Any] = {}
     for name, value in values.items():
@@ -291,6 +348,12 @@ def load_params_file(
             raise ParameterError(
                 f"{path}: {name}: {value} is an integer; write {float(value)!r} (ROS 2 "
                 "rejects an integer for a double parameter)"
+            )
+        if (spec.kind == "float_list" and isinstance(value, list) and value
+                and all(isinstance(v, int) and not isinstance(v, bool) for v in value)):
+            raise ParameterError(
+                f"{path}: {name}: {value} is a list of integers; write "
+                f"{[float(v) for v in value]} (ROS 2 rejects integers for a double array)"
             )
         known[name] = value
     try:
@@ -316,6 +379,8 @@ def format_value(spec: ParamSpec, value: Any) -> str:
         return "true" if value else "false"
     if spec.kind == "int":
         return str(int(value))
+    if spec.kind == "float_list":
+        return "[" + ", ".join(format_value(_FLOAT, v) for v in value) + "]"
     if spec.kind == "float":
         x = float(value)
         if not math.isfinite(x):
@@ -329,6 +394,9 @@ def format_value(spec: ParamSpec, value: Any) -> str:
             exponent = "+" + exponent
         return mantissa + ("e" + exponent if exponent else "")
     return "'" + str(value).replace("'", "''") + "'"
+
+
+_FLOAT = ParamSpec(name="element", kind="float", default=0.0, unit="", description="")
 
 
 def _comment(spec: ParamSpec) -> list[str]:

@@ -26,7 +26,8 @@ class ParameterError(ValueError):
 class ParamSpec:
     """Schema entry of one parameter.
 
-    ``kind`` is one of ``"float"``, ``"int"``, ``"bool"``, ``"str"``. ``minimum``/``maximum``
+    ``kind`` is one of ``"float"``, ``"int"``, ``"bool"``, ``"str"``, ``"float_list"`` (a fixed
+    ``length`` of floats, a ROS double array; a tuple in Python). ``minimum``/``maximum``
     bound numbers (inclusive unless ``*_exclusive``); ``choices`` restricts strings.
     ``read_only`` marks structural parameters that the node refuses to change at run time.
     """
@@ -43,6 +44,7 @@ class ParamSpec:
     choices: tuple[str, ...] | None = None
     read_only: bool = False
     group: str = ""
+    length: int | None = None
 
     def range_text(self) -> str:
         """Human-readable range, e.g. ``(0, 10]`` or ``{enu, ned}``; empty when unbounded."""
@@ -59,6 +61,10 @@ class ParamSpec:
     def check(self, value: Any) -> Any:
         """Return ``value`` converted to this parameter's type, or raise :class:`ParameterError`."""
         value = coerce(self, value)
+        if self.kind == "float_list":
+            if not all(math.isfinite(v) for v in value):
+                raise ParameterError(f"{self.name}: every element must be finite, got {value!r}")
+            return value
         if self.kind in ("float", "int"):
             if not math.isfinite(value):
                 raise ParameterError(f"{self.name}: must be finite, got {value!r}")
@@ -90,11 +96,31 @@ def coerce(spec: ParamSpec, value: Any) -> Any:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ParameterError(f"{spec.name}: expected a number, got {value!r}")
         return float(value)
+    if kind == "float_list":
+        if isinstance(value, (str, bytes, Mapping)) or not hasattr(value, "__iter__"):
+            raise ParameterError(f"{spec.name}: expected a list of {spec.length} numbers, "
+                                 f"got {value!r}")
+        items = list(value)
+        number = (int, float, _np_number())
+        if len(items) != spec.length or any(
+                isinstance(v, bool) or not isinstance(v, number) for v in items):
+            raise ParameterError(f"{spec.name}: expected a list of {spec.length} numbers, "
+                                 f"got {value!r}")
+        return tuple(float(v) for v in items)
     if kind == "str":
         if not isinstance(value, str):
             raise ParameterError(f"{spec.name}: expected a string, got {value!r}")
         return value.lower() if spec.choices else value
     raise ParameterError(f"{spec.name}: unknown kind {kind!r}")  # pragma: no cover - schema bug
+
+
+def _np_number() -> type:
+    """NumPy's scalar base class when NumPy is there (the node runs without it), else float."""
+    try:
+        import numpy as np
+    except ImportError:  # pragma: no cover - NumPy is a dependency of the offline tools
+        return float
+    return np.number
 
 
 def param(
@@ -111,9 +137,11 @@ def param(
     group: str = "",
 ) -> Any:
     """Declare a dataclass field that is also a schema entry (see :class:`ParamSpec`)."""
-    kind = {bool: "bool", int: "int", float: "float", str: "str"}[type(default)]
+    kind = {bool: "bool", int: "int", float: "float", str: "str", tuple: "float_list"}[
+        type(default)]
     meta = dict(
         kind=kind,
+        length=len(default) if kind == "float_list" else None,
         unit=unit,
         description=description,
         minimum=minimum,

@@ -12,6 +12,7 @@ from cf_estimator.bag.files import (
     write_atomic_text,
 )
 from cf_estimator.bag.messages import (
+    accel_with_covariance_message,
     covariance9,
     diagnostics_message,
     header,
@@ -36,6 +37,7 @@ from cf_estimator.bag.reader import (
     open_bag,
 )
 from cf_estimator.bag.types import (
+    ACCEL_WITH_COVARIANCE_STAMPED_TYPE,
     DIAGNOSTIC_ARRAY_TYPE,
     IMU_TYPE,
     MAG_TYPE,
@@ -62,6 +64,8 @@ from cf_estimator.bag.writer import (
 )
 
 __all__ = [
+    "ACCEL_WITH_COVARIANCE_STAMPED_TYPE",
+    "accel_with_covariance_message",
     "BagError",
     "BagMessage",
     "DIAGNOSTIC_ARRAY_TYPE",

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from cf_estimator.bag.types import (
+    ACCEL_WITH_COVARIANCE_STAMPED_TYPE,
     DIAGNOSTIC_ARRAY_TYPE,
     IMU_TYPE,
     MAG_TYPE,
@@ -115,6 +116,23 @@ def rpy_from_output(out: Any) -> Any | None:
     return _types()[VECTOR3_STAMPED_TYPE](
         header=header(out.stamp_sec, out.stamp_nanosec, out.frame_id), vector=vector3(out.rpy_rad)
     )
+
+
+def accel_with_covariance_message(sec: int, nanosec: int, frame_id: str,
+                                  linear_m_s2: Sequence[float], cov9: Sequence[float]) -> Any:
+    """geometry_msgs/AccelWithCovarianceStamped: ``linear_m_s2`` with its 3x3 covariance; the
+    angular part zero, its variances -1 (not estimated)."""
+    import numpy as np
+
+    from cf_estimator.pipeline.linear_acceleration import accel_covariance6
+
+    t = _types()
+    accel = t["geometry_msgs/msg/Accel"](linear=vector3(linear_m_s2),
+                                         angular=vector3((0.0, 0.0, 0.0)))
+    return t[ACCEL_WITH_COVARIANCE_STAMPED_TYPE](
+        header=header(sec, nanosec, frame_id),
+        accel=t["geometry_msgs/msg/AccelWithCovariance"](
+            accel=accel, covariance=np.array(accel_covariance6(cov9), dtype=np.float64)))
 
 
 def magnetic_field_message(

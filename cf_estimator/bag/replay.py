@@ -50,6 +50,9 @@ from cf_estimator.schema import as_dict
 
 OUT_IMU_TOPIC = "/imu/data"
 OUT_RPY_TOPIC = "/imu/rpy"
+#: publish_linear_acceleration: gravity-free acceleration, body and world frame
+OUT_ACCEL_TOPIC = "/imu/linear_acceleration"
+OUT_ACCEL_WORLD_TOPIC = "/imu/linear_acceleration_world"
 OUT_DIAGNOSTICS_TOPIC = "/diagnostics"
 HEADING_ALIGNMENTS = ("auto", "none", "first", "mean")
 
@@ -337,6 +340,7 @@ class _Run:
         self.pipe = factory() if factory else ImuPipeline(self.fparams, self.pparams)
         self.period_ns = int(round(self.pparams.diagnostics_period_s * 1e9))
         self.publish_rpy = bool(self.pparams.publish_rpy)
+        self.publish_accel = bool(self.pparams.publish_linear_acceleration)
         self.out_path = Path(variant.output_path) if variant.output_path is not None else None
         self.bag: io.OutputBag | None = None
         self.t = _Col()  #: header stamp [s] per output
@@ -370,6 +374,9 @@ class _Run:
             if self.publish_rpy:
                 self.bag.add_topic(OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE)
             self.bag.add_topic(OUT_DIAGNOSTICS_TOPIC, io.DIAGNOSTIC_ARRAY_TYPE)
+            if self.publish_accel:
+                self.bag.add_topic(OUT_ACCEL_TOPIC, io.ACCEL_WITH_COVARIANCE_STAMPED_TYPE)
+                self.bag.add_topic(OUT_ACCEL_WORLD_TOPIC, io.ACCEL_WITH_COVARIANCE_STAMPED_TYPE)
             if opts.copy_inputs:
                 for t in topics:
                     self.bag.add_topic(t, types[t] or "")
@@ -474,6 +481,8 @@ class _Run:
                 bag.write_raw(OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE, log_ns,
                               cdr.vector3_stamped_cdr(out.stamp_sec, out.stamp_nanosec,
                                                       out.frame_id, out.rpy_rad))
+            if out.gravity_free is not None:
+                self._write_accel(bag, log_ns, out)
         t = out.stamp_sec + out.stamp_nanosec * 1e-9
         self.t.append(t)
         if out.initialized:
@@ -530,9 +539,34 @@ class _Run:
                         bag.write_raw(OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE, log_ns,
                                       cdr.vector3_stamped_cdr(item.stamp_sec, item.stamp_nanosec,
                                                               item.frame_id, item.rpy_rad))
+                    if self.publish_accel and item.initialized:
+                        self._write_accel(bag, log_ns, self._offline_accel(item))
                 else:
                     bag.write(topic, msgtype, log_ns, item)
         self.held = []
+
+    def _offline_accel(self, out: Any) -> Any:
+        """The gravity-free acceleration of an output whose orientation the offline pass
+        replaced (the online covariance kept)."""
+        from cf_estimator.pipeline.linear_acceleration import gravity_free
+
+        fp = self.pipe.filter_params
+        return dataclasses.replace(out, gravity_free=gravity_free(
+            out.orientation_xyzw, out.linear_acceleration, out.orientation_covariance,
+            out.linear_acceleration_covariance, fp.gravity_m_s2, fp.world_frame))
+
+    def _write_accel(self, bag: Any, log_ns: int, out: Any) -> None:
+        """imu/linear_acceleration (body axes, the output's frame id) and ..._world (frame id
+        tf_parent_frame): geometry_msgs/AccelWithCovarianceStamped, gravity removed."""
+        if out.gravity_free is None:
+            return
+        a_b, c_b, a_w, c_w = out.gravity_free
+        bag.write(OUT_ACCEL_TOPIC, io.ACCEL_WITH_COVARIANCE_STAMPED_TYPE, log_ns,
+                  io.accel_with_covariance_message(out.stamp_sec, out.stamp_nanosec,
+                                                   out.frame_id, a_b, c_b))
+        bag.write(OUT_ACCEL_WORLD_TOPIC, io.ACCEL_WITH_COVARIANCE_STAMPED_TYPE, log_ns,
+                  io.accel_with_covariance_message(out.stamp_sec, out.stamp_nanosec,
+                                                   self.pparams.tf_parent_frame, a_w, c_w))
 
     def abort(self) -> None:
         if self.bag is not None:
@@ -739,10 +773,12 @@ def replay_variants(
             # IMU and magnetometer decoded in bulk (bag/cdr.py), except when the inputs are
             # copied: those need rosbags' message objects; runs of ordinary messages through
             # the pipeline at once (pipeline/bulk.py) for one online variant (velocity
-            # aiding: message by message, the aided accelerometer is per sample)
+            # aiding: message by message, the aided accelerometer is per sample; so is the
+            # gravity-free acceleration, publish_linear_acceleration)
             decode_bulk = not copy and opts.bulk_decode
             if (decode_bulk and opts.bulk_pipeline and len(runs) == 1 and not runs[0].offline
-                    and pipeline_factory is None and topics.velocity is None):
+                    and pipeline_factory is None and topics.velocity is None
+                    and not runs[0].publish_accel):
                 _read_in_bulk(bag, topics, runs[0], reading, progress)
             else:
                 _read_messages(bag, topics, runs, copy, decode_bulk, reading, progress)

@@ -10,6 +10,7 @@ from rosbags.typesys import Stores, get_typestore
 IMU_TYPE = "sensor_msgs/msg/Imu"
 MAG_TYPE = "sensor_msgs/msg/MagneticField"
 VECTOR3_STAMPED_TYPE = "geometry_msgs/msg/Vector3Stamped"
+ACCEL_WITH_COVARIANCE_STAMPED_TYPE = "geometry_msgs/msg/AccelWithCovarianceStamped"
 QUATERNION_STAMPED_TYPE = "geometry_msgs/msg/QuaternionStamped"
 POSE_STAMPED_TYPE = "geometry_msgs/msg/PoseStamped"
 ODOMETRY_TYPE = "nav_msgs/msg/Odometry"

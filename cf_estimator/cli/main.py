@@ -20,7 +20,8 @@ from cf_estimator.cli.base import CliError, finite_float
 __all__ = ["COMMANDS", "CliError", "build_parser", "finite_float", "main"]
 
 #: Sub-command modules, in the order ``--help`` lists them.
-COMMANDS: tuple[str, ...] = ("design", "bench", "tune", "demo", "simulate", "replay")
+COMMANDS: tuple[str, ...] = ("design", "bench", "tune", "demo", "simulate", "replay",
+                             "calibrate_mag")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -66,10 +67,11 @@ def missing_module_text(command: str, exc: ModuleNotFoundError) -> str:
 
 def _register_missing(sub: Any, name: str, exc: ModuleNotFoundError) -> None:
     """A sub-command whose module cannot be imported: listed, and a one-line error when run."""
-    text = missing_module_text(name, exc)
-    sub.add_parser(name, help=f"(unavailable: needs {(exc.name or '?').split('.')[0]})",
+    command = name.replace("_", "-")
+    text = missing_module_text(command, exc)
+    sub.add_parser(command, help=f"(unavailable: needs {(exc.name or '?').split('.')[0]})",
                    description=text)
-    _MISSING[name] = text
+    _MISSING[command] = text
 
 
 #: Sub-commands whose module could not be imported → their one-line error (see main()).

@@ -315,6 +315,8 @@ def estimate(
     offline: bool = False,
     velocity: tuple[ArrayLike, ArrayLike] | None = None,
     velocity_latency_s: float = 0.0,
+    mag_hard_iron_t: Sequence[float] | None = None,
+    mag_soft_iron: Sequence[float] | None = None,
 ) -> EstimateResult:
     """Run the filter over a recording.
 
@@ -331,7 +333,21 @@ def estimate(
     :mod:`cf_estimator.core.velocity`. ``velocity_latency_s``: each velocity sample becomes
     available that long after its stamp (transport delay, as GNSS; alignment is by stamps).
     Offline, the aided specific force of a causal pass is fed to the acausal estimate.
+
+    ``mag_hard_iron_t`` (3 floats, the unit of ``mag``: Tesla as the node's) and
+    ``mag_soft_iron`` (9 floats, 3x3 row-major): the magnetometer calibration, applied to
+    ``mag`` before the filter as the node and the replay apply the parameters of the same
+    names (``m = S (m_raw - h)``, :mod:`cf_estimator.pipeline.magcal`; ``cf-estimator
+    calibrate-mag`` fits them). Invalid values raise :class:`ParameterError`.
     """
+    if mag is not None and (mag_hard_iron_t is not None or mag_soft_iron is not None):
+        from cf_estimator.pipeline.magcal import correct_mag
+        from cf_estimator.pipeline.params import PipelineParams
+
+        cal = PipelineParams(**{k: v for k, v in (("mag_hard_iron_t", mag_hard_iron_t),
+                                                   ("mag_soft_iron", mag_soft_iron))
+                                if v is not None})  # the schema's checks and reasons
+        mag = correct_mag(mag, cal.mag_hard_iron_t, cal.mag_soft_iron)
     gyro, acc, mg = _rows(gyro_rad_s, accel_m_s2, mag)
     n = gyro.shape[0]
     t = sample_times(n, rate_hz, timestamps_s)

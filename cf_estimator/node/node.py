@@ -33,7 +33,11 @@ from rcl_interfaces.msg import (
 )
 from rclpy.clock import Clock, ClockType, JumpThreshold
 from rclpy.duration import Duration
-from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.exceptions import (
+    InvalidParameterTypeException,
+    InvalidParameterValueException,
+    ParameterNotDeclaredException,
+)
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.logging import get_logger
 from rclpy.node import Node
@@ -43,10 +47,14 @@ from sensor_msgs.msg import Imu, MagneticField
 
 from cf_estimator.node.errors import StartError
 from cf_estimator.params_file import (
+    MAG_BIAS_ALIASES,
+    ROS_STANDARD_PARAMETERS,
+    ROS_STANDARD_PREFIXES,
     all_specs,
     build_params,
     check_names,
     describe_unknown,
+    hard_iron_from_aliases,
     unapplied_file_warning,
     unknown_names,
 )
@@ -54,6 +62,7 @@ from cf_estimator.pipeline import ImuPipeline
 from cf_estimator.pipeline.checks import RESET_CLOCK_JUMP, input_type_problem
 from cf_estimator.pipeline.diagnostics import LEVEL_NAMES
 from cf_estimator.pipeline.frames import check_tf_frames
+from cf_estimator.pipeline.linear_acceleration import accel_covariance6
 from cf_estimator.pipeline.log_events import RateLimitedWarnings
 from cf_estimator.schema import ParameterError, ParamSpec, as_dict
 
@@ -62,6 +71,8 @@ IMU_IN = "imu/data_raw"
 MAG_IN = "imu/mag"
 IMU_OUT = "imu/data"
 RPY_OUT = "imu/rpy"
+ACCEL_OUT = "imu/linear_acceleration"
+ACCEL_WORLD_OUT = "imu/linear_acceleration_world"
 DIAGNOSTICS_OUT = "/diagnostics"
 TF_OUT = "/tf"
 #: Depth of the reliable publishers' history.
@@ -116,6 +127,25 @@ def _type_hint(spec: ParamSpec, text: str) -> str:
         "float": " (write a number with a decimal point, e.g. 1.0)",
         "str": " (write a string)",
     }[spec.kind]
+
+
+class UnknownParameter(ParameterNotDeclaredException):
+    """A live set of a parameter the node does not have: the parameter service answers with
+    this one line (the nearest name, or ours for an imu_filter_madgwick name)."""
+
+    def __init__(self, names: list[str]) -> None:
+        super().__init__(names)
+        self.text = f"unknown parameter {describe_unknown(names)}"
+
+    def __str__(self) -> str:
+        return self.text
+
+
+def exact_float(value: Any) -> float | None:
+    """``value`` as a float when it is an integer that a double holds exactly, else None."""
+    if isinstance(value, bool) or not isinstance(value, int) or abs(value) > 2**53:
+        return None
+    return float(value)
 
 
 def _sensor_qos(depth: int = qos_profile_sensor_data.depth) -> QoSProfile:
@@ -179,6 +209,17 @@ class CfEstimatorNode(Node):
         self._pub_diag = self.create_publisher(
             DiagnosticArray, DIAGNOSTICS_OUT, QoSProfile(depth=PUBLISHER_DEPTH)
         )
+        self._pub_accel = self._pub_accel_world = None
+        if pipeline_params.publish_linear_acceleration:
+            from geometry_msgs.msg import AccelWithCovarianceStamped
+
+            self._accel_type = AccelWithCovarianceStamped
+            self._pub_accel = self.create_publisher(
+                AccelWithCovarianceStamped, ACCEL_OUT, QoSProfile(depth=PUBLISHER_DEPTH),
+                qos_overriding_options=overrides)
+            self._pub_accel_world = self.create_publisher(
+                AccelWithCovarianceStamped, ACCEL_WORLD_OUT, QoSProfile(depth=PUBLISHER_DEPTH),
+                qos_overriding_options=overrides)
         self._pub_tf = None
         if pipeline_params.publish_tf:
             refusal, tf_warning = check_tf_frames(
@@ -231,6 +272,7 @@ class CfEstimatorNode(Node):
                           on_clock_change=False),
             post_callback=self._on_time_jump,
         )
+        self.add_pre_set_parameters_callback(self._convert_parameters)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self._post_set = hasattr(self, "add_post_set_parameters_callback")
         if self._post_set:
@@ -243,6 +285,8 @@ class CfEstimatorNode(Node):
                 f"{self._sub_vel.msg_type.__name__})"] if self._sub_vel else []),
             "out": [self.resolve_topic_name(IMU_OUT)]
             + ([self.resolve_topic_name(RPY_OUT)] if self._pub_rpy else [])
+            + ([self.resolve_topic_name(ACCEL_OUT), self.resolve_topic_name(ACCEL_WORLD_OUT)]
+               if self._pub_accel else [])
             + [DIAGNOSTICS_OUT]
             + ([TF_OUT] if self._pub_tf else []),
         }
@@ -272,6 +316,17 @@ class CfEstimatorNode(Node):
         """Declare every schema parameter; input_type first: PX4 input declares body_frame,
         world_frame and velocity_frame with PX4's defaults (overrides still win)."""
         specs = {s.name: s for s in all_specs()}
+        overrides = getattr(self, "_parameter_overrides", {})
+        alias = hard_iron_from_aliases(
+            {k: p.value for k, p in overrides.items()
+             if k in MAG_BIAS_ALIASES or k == "mag_hard_iron_t"})
+        if alias is not None:  # imu_filter_madgwick's mag_bias_x/y/z: the hard iron's default
+            import dataclasses
+
+            specs["mag_hard_iron_t"] = dataclasses.replace(specs["mag_hard_iron_t"],
+                                                           default=alias)
+            self.get_logger().info(f"imu_filter_madgwick's mag_bias_x/y/z taken as "
+                                   f"mag_hard_iron_t {list(alias)} [T]")
         values = {"input_type": self._declare(specs["input_type"])}
         px4_in = values["input_type"] == "px4"
         if px4_in:
@@ -333,10 +388,27 @@ class CfEstimatorNode(Node):
                 rpy.header = msg.header
                 rpy.vector.x, rpy.vector.y, rpy.vector.z = out.rpy_rad
                 self._pub_rpy.publish(rpy)
+            if self._pub_accel is not None and out.gravity_free is not None:
+                self._publish_accel(msg, out.gravity_free)
             if self._pub_tf is not None:
                 self._publish_tf(msg)
         except Exception as exc:  # noqa: BLE001 - never die on one message
             log.error(f"cannot publish the output: {exc}", throttle_duration_sec=LOG_THROTTLE_S)
+
+    def _publish_accel(self, msg: Imu, gravity_free: Any) -> None:
+        """imu/linear_acceleration (body axes, imu/data's frame id) and
+        imu/linear_acceleration_world (frame id tf_parent_frame): gravity removed."""
+        a_b, c_b, a_w, c_w = gravity_free
+        for pub, frame, a, c in ((self._pub_accel, msg.header.frame_id, a_b, c_b),
+                                 (self._pub_accel_world,
+                                  self._pipe.pipeline_params.tf_parent_frame, a_w, c_w)):
+            m = self._accel_type()
+            m.header.stamp = msg.header.stamp
+            m.header.frame_id = frame
+            lin = m.accel.accel.linear
+            lin.x, lin.y, lin.z = a
+            m.accel.covariance = accel_covariance6(c)
+            pub.publish(m)
 
     def _publish_tf(self, msg: Imu) -> None:
         """/tf: tf_parent_frame → the IMU frame (or the reverse), rotation = the orientation."""
@@ -460,6 +532,36 @@ class CfEstimatorNode(Node):
             self._resets_logged = self._pipe.reset_total
 
     # -- parameters -------------------------------------------------------------------------------
+    def _convert_parameters(self, params: list[Any]) -> list[Any]:
+        """Before rclpy checks types: an integer for a float parameter (``ros2 param set …
+        k1 1``) becomes that float where it is exact, integers for a double array alike; a
+        name the node does not have is refused with the nearest one (as at start-up)."""
+        from rclpy.parameter import Parameter
+
+        specs = {s.name: s for s in all_specs()}
+        out = []
+        unknown = []
+        for p in params:
+            spec = specs.get(p.name)
+            if spec is None:
+                if (not self.has_parameter(p.name) and p.name not in ROS_STANDARD_PARAMETERS
+                        and not p.name.startswith(ROS_STANDARD_PREFIXES)):
+                    unknown.append(p.name)
+                out.append(p)
+                continue
+            if spec.kind == "float" and p.type_ == Parameter.Type.INTEGER:
+                value = exact_float(p.value)
+                if value is not None:
+                    p = Parameter(p.name, Parameter.Type.DOUBLE, value)
+            elif spec.kind == "float_list" and p.type_ == Parameter.Type.INTEGER_ARRAY:
+                values = [exact_float(v) for v in p.value]
+                if all(v is not None for v in values):
+                    p = Parameter(p.name, Parameter.Type.DOUBLE_ARRAY, values)
+            out.append(p)
+        if unknown and not self._allow_undeclared_parameters:
+            raise UnknownParameter(unknown)
+        return out
+
     def _changes(self, params: list[Any]) -> dict[str, Any]:
         return {p.name: p.value for p in params if p.name in self._names}
 

@@ -366,6 +366,8 @@ def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = N
         if mag_block is not None and prev_mag.any():
             mrows = st["row"][prev_ev[prev_mag]]
             vals = mag_block.values[mrows, 0:3]
+            if not p.mag_correction.identity:  # as on_mag: calibration, then the flip
+                vals = p.mag_correction.apply_rows(vals)
             if rules.flip:  # body_frame FLU <-> FRD, as on_mag turns the field
                 vals = np.column_stack([vals[:, 0], -vals[:, 1], -vals[:, 2]])
             mag[prev_mag] = vals
@@ -390,7 +392,14 @@ def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = N
         mxs, mys, mzs = ev.column("mx"), ev.column("my"), ev.column("mz")
         if rules.flip:  # body_frame FLU <-> FRD, as on_mag turns the field
             mys, mzs = ev.column("-my"), ev.column("-mz")
-        pending = (int(st["t_ns"][last_ev]), mxs[r], mys[r], mzs[r])
+        if p.mag_correction.identity:
+            pending = (int(st["t_ns"][last_ev]), mxs[r], mys[r], mzs[r])
+        else:  # as on_mag: the raw sample calibrated, then the flip
+            raw = ev.column("mx")[r], ev.column("my")[r], ev.column("mz")[r]
+            cx, cy, cz = p.mag_correction.apply(*raw)
+            if rules.flip:
+                cy, cz = -cy, -cz
+            pending = (int(st["t_ns"][last_ev]), cx, cy, cz)
     elif n_imu:
         pending = None
     # intervals: the window statistics see the raw interval, the filter the mean one across

@@ -145,16 +145,24 @@ def compose_report(
             f"accelerometer error clipped in {100.0 * window.n_clipped / window.n_err:.0f}% of "
             "samples (sustained acceleration or vibration)"
         )
+    # magnetometer messages came before and none this period: the sensor (or its driver, or
+    # the link) stopped; a stopped sensor is not a disturbed field
+    mag_stopped = (use_mag and counters["received_mag"] > 0 and d_mag["received_mag"] == 0
+                   and d_recv > 0)
     if use_mag:
         if counters["received_mag"] == 0:
             warns.append("use_mag is true but no magnetometer messages received: yaw drifts")
+        elif mag_stopped:
+            age = f" (last used sample {mag_age_s:.3g} s old)" if mag_age_s is not None else ""
+            warns.append("magnetometer stopped: no magnetometer message since the last report"
+                         f"{age}: heading on the gyro alone, yaw drifts")
         elif mag_age_s is None or mag_age_s > mag_timeout_s:
             age = f"for {mag_age_s:.3g} s" if mag_age_s is not None else "yet"
             warns.append(
                 f"no usable magnetometer sample {age} (stale {counters['mag_stale']}, invalid "
                 f"{counters['mag_invalid']}, rejected {counters['mag_rejected']}): yaw drifts"
             )
-        if initialized and status.heading_source == "gyro":
+        if initialized and status.heading_source == "gyro" and not mag_stopped:
             warns.append(
                 "heading on the gyro alone: the magnetic field moves with the sensor as it turns "
                 "(a magnet or a current-carrying wire on the vehicle?)" if status.mag_on_body else
@@ -186,6 +194,7 @@ def compose_report(
         ("filter_backend", filter_backend or "unknown"),
         ("initialized", str(initialized).lower()),
         ("phase", status.phase if initialized else "uninitialized"),
+        ("mag_stopped", str(mag_stopped).lower()),
         ("imu_received", str(counters["received_imu"])),
         ("imu_processed", str(counters["processed"])),
         ("imu_rejected", str(sum(counters["rejected"].values()))),

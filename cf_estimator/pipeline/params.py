@@ -83,6 +83,14 @@ class PipelineParams:
         "(e.g. -190 deg instead of +170 deg); false: roll, yaw in (-pi, pi].",
         group="output",
     )
+    publish_linear_acceleration: bool = param(
+        False, "", "Publish the acceleration with gravity removed (geometry_msgs/"
+        "AccelWithCovarianceStamped [m/s^2]): imu/linear_acceleration in the published body "
+        "axes (frame_id as imu/data) and imu/linear_acceleration_world in the world frame "
+        "(frame_id tf_parent_frame), covariance from the orientation's and the input's. "
+        "Off by default: it costs the node CPU per message.",
+        read_only=True, group="output",
+    )
     mag_timeout_s: float = param(
         0.5, "s", "Freshness window: a magnetometer sample is used by the next IMU message only "
         "if their header stamps differ by at most this; older samples are counted stale.",
@@ -174,6 +182,20 @@ class PipelineParams:
         read_only=True, group="px4",
     )
 
+    mag_hard_iron_t: tuple[float, float, float] = param(
+        (0.0, 0.0, 0.0), "T", "Hard-iron offset h subtracted from every magnetometer sample "
+        "before the filter (m = mag_soft_iron * (m_raw - h)), in the magnetometer message's own "
+        "axes (before body_frame): 'cf-estimator calibrate-mag LOG' fits it. imu_filter_madgwick's "
+        "mag_bias_x/y/z are taken as this when it is not set.",
+        group="mag_calibration",
+    )
+    mag_soft_iron: tuple[float, ...] = param(
+        (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0), "", "Soft-iron matrix S (3x3, row-major) "
+        "applied after the hard iron is removed, same axes; identity = none. From "
+        "'cf-estimator calibrate-mag' (symmetric, det 1); must be invertible and not flip the "
+        "axes (det > 0).",
+        group="mag_calibration",
+    )
     strict_parameters: bool = param(
         False, "", "Node start-up: refuse to start (exit 2, one line, as replay --params) on any "
         "unknown or misspelt parameter and on a --params-file none of whose sections applies "
@@ -201,6 +223,17 @@ class PipelineParams:
                 f"px4_topic_prefix: {prefix!r} is not a topic namespace (e.g. /fmu/out or "
                 "/px4_1/fmu/out: no trailing '/', no spaces)"
             )
+        s = self.mag_soft_iron
+        det = (s[0] * (s[4] * s[8] - s[5] * s[7]) - s[1] * (s[3] * s[8] - s[5] * s[6])
+               + s[2] * (s[3] * s[7] - s[4] * s[6]))
+        if not det > 1e-6:
+            raise ParameterError(
+                f"mag_soft_iron: determinant {det:.3g}: a calibration matrix must be invertible "
+                "and keep the axes' handedness (det > 0); identity = no soft iron")
+        if max(abs(v) for v in self.mag_hard_iron_t) > 1e-3:
+            raise ParameterError(
+                f"mag_hard_iron_t: {self.mag_hard_iron_t!r} T is not a hard iron (over 1 mT, "
+                "twenty times the Earth's field): Tesla expected (1 G = 1e-4 T)")
         if 0.0 < self.reset_after_gap_s < self.max_dt_s:
             raise ParameterError(
                 f"reset_after_gap_s: {self.reset_after_gap_s:g} s must be 0 (never) or at least "

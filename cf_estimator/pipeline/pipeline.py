@@ -50,6 +50,8 @@ from cf_estimator.pipeline.diagnostics import (
     compose_report,
     velocity_values,
 )
+from cf_estimator.pipeline.linear_acceleration import gravity_free
+from cf_estimator.pipeline.magcal import MagCorrection
 from cf_estimator.pipeline.messages import UNKNOWN_COVARIANCE, covariance9
 from cf_estimator.pipeline.params import PipelineParams
 from cf_estimator.pipeline.state import ImuTime, InputRules, MagInput, MessageCounts
@@ -87,6 +89,10 @@ class PipelineOutput:
     rpy_rad: Vec3 | None
     initialized: bool
     warnings: list[str] = field(default_factory=list)
+    #: ``publish_linear_acceleration``: (a_body, cov_body, a_world, cov_world), gravity removed
+    #: [m/s², m²/s⁴ row-major] (pipeline/linear_acceleration.py); None when off or not
+    #: initialized
+    gravity_free: tuple[Vec3, tuple[float, ...], Vec3, tuple[float, ...]] | None = None
 
 
 class ImuPipeline:
@@ -218,6 +224,8 @@ class ImuPipeline:
         self.rules.jump_back_ns = int(round(pp.time_jump_back_threshold_s * 1e9))
         self.rules.mag_timeout_ns = int(round(pp.mag_timeout_s * 1e9))
         self.rules.use_mag = self._fp.use_mag
+        #: hard and soft iron, applied to every magnetometer sample before anything else
+        self.mag_correction = MagCorrection(pp.mag_hard_iron_t, pp.mag_soft_iron)
         self._ned = self._fp.world_frame == "ned"
         # the published world frame, true north, yaw offset (identity: skipped, bit-identical)
         self._out_frame = frames.OutputFrame(self._fp.world_frame, pp.magnetic_declination_rad,
@@ -360,7 +368,8 @@ class ImuPipeline:
 
     # -- magnetometer -----------------------------------------------------------------------------
     def on_mag(self, msg: Any) -> None:
-        """Store the latest valid magnetometer sample (any unit; only directions are used)."""
+        """Store the latest valid magnetometer sample (any unit; only directions are used),
+        corrected by ``mag_hard_iron_t`` / ``mag_soft_iron`` first (pipeline/magcal.py)."""
         self.tally.received_mag += 1
         try:
             st = msg.header.stamp
@@ -368,6 +377,8 @@ class ImuPipeline:
             m = msg.magnetic_field
             mx, my, mz = float(m.x), float(m.y), float(m.z)
             frame = msg.header.frame_id
+            if not self.mag_correction.identity:  # calibration: the message's own axes
+                mx, my, mz = self.mag_correction.apply(mx, my, mz)
             if self.rules.flip:
                 my, mz = -my, -mz
         except Exception:  # noqa: BLE001 - malformed: counted, never raised
@@ -616,6 +627,9 @@ class ImuPipeline:
             sec, nsec, self.output_frame_id(str(frame)), xyzw, cov, (gx, gy, gz), av_cov,
             (ax, ay, az), la_cov, rpy, initialized, warnings,
         )
+        if self._pp.publish_linear_acceleration and initialized:
+            out.gravity_free = gravity_free(xyzw, out.linear_acceleration, cov, la_cov,
+                                            self._fp.gravity_m_s2, self._fp.world_frame)
         # -- statistics (incremental) -----------------------------------------------------------
         if w.n == 0:
             w.first_ns = t_ns
