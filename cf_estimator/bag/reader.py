@@ -57,7 +57,8 @@ def _looks_like_bag(path: Path) -> str | None:
             )
         return None
     if path.suffix != ".bag":
-        return "not a ROS 1 .bag file, a ROS 2 bag directory or a PX4 .ulg log"
+        return ("not a ROS 1 .bag file, a ROS 2 bag directory or .mcap file, a PX4 .ulg log or "
+                "an ArduPilot .bin log")
     return None
 
 
@@ -449,14 +450,20 @@ def migrate_to_jazzy(src_store: Any, msgtype: str, msg: Any, cache: dict[str, ob
 
 
 def open_bag(path: str | os.PathLike[str], *, ulog_instance: int | None = None) -> InputBag:
-    """Open a ROS 1 ``.bag``, a ROS 2 bag directory or a PX4 ``.ulg`` log
-    (:mod:`cf_estimator.bag.ulog`; ``ulog_instance``: the multi_id to use where a topic has
-    several) — :class:`BagError` names the file."""
+    """Open a ROS 1 ``.bag``, a ROS 2 bag directory, a PX4 ``.ulg`` log
+    (:mod:`cf_estimator.bag.ulog`) or an ArduPilot ``.bin`` DataFlash log
+    (:mod:`cf_estimator.bag.dataflash`) — ``ulog_instance``: the instance (ulog multi_id,
+    DataFlash IMU/MAG instance) to use where a topic has several; :class:`BagError` names the
+    file."""
     p = Path(path)
     if p.suffix.lower() == ".ulg" and not p.is_dir():
         from cf_estimator.bag.ulog import open_ulog
 
         return open_ulog(p, ulog_instance)
+    if p.suffix.lower() == ".bin" and not p.is_dir():
+        from cf_estimator.bag.dataflash import open_dataflash
+
+        return open_dataflash(p, ulog_instance)
     why = _looks_like_bag(p)
     if why is not None:
         raise BagError(f"{p}: {why}", 2 if not p.exists() else 1)

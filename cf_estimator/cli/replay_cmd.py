@@ -34,7 +34,8 @@ def register(subparsers: Any) -> None:
     """Add the ``replay`` sub-command to ``subparsers``."""
     p = subparsers.add_parser(
         "replay",
-        help="replay a ROS 1/ROS 2 bag or a PX4 ulog through the estimator (no ROS needed)",
+        help="replay a ROS 1/ROS 2 bag, a PX4 ulog or an ArduPilot DataFlash log through the "
+             "estimator (no ROS needed)",
         description=(
             "Replay a recorded bag (ROS 1 .bag, or ROS 2 bag directory with sqlite3 or mcap "
             "storage) through exactly the node's processing and write a ROS 2 bag with its "
@@ -44,11 +45,14 @@ def register(subparsers: Any) -> None:
             "bag: sensor_combined, vehicle_magnetometer (or sensor_combined's magnetometer), "
             "vehicle_local_position for --velocity-topic; the output follows PX4's conventions "
             "(FRD body -> NED, stamps = log time since boot) and is compared with the log's "
-            "vehicle_attitude (agreement with the autopilot, not ground truth)."
+            "vehicle_attitude (agreement with the autopilot, not ground truth). An ArduPilot "
+            "DataFlash log (.bin, read with pymavlink) likewise: IMU, MAG, compared with ATT "
+            "(and AHR2, EKF1, NKF1, XKF1 where logged)."
         ),
     )
     p.add_argument("bag", metavar="BAG", nargs="+",
-                   help="input bag: ROS 1 .bag file, ROS 2 bag directory or PX4 .ulg log; "
+                   help="input bag: ROS 1 .bag file, ROS 2 bag directory or .mcap file, PX4 "
+                   ".ulg log or ArduPilot .bin log; "
                    "several, or a directory of them (searched recursively, mixed), replay a "
                    "fleet: one output per bag, a summary table and one JSON")
     p.add_argument("-o", "--output", metavar="OUT",
@@ -68,7 +72,8 @@ def register(subparsers: Any) -> None:
                         "statistics")
     p.add_argument("--instance", type=int, metavar="N",
                    help="PX4 ulog: the instance (multi_id) to use of a topic logged several "
-                        "times, e.g. a second magnetometer (default: the lowest, said)")
+                        "times, e.g. a second magnetometer; ArduPilot log: the IMU and MAG "
+                        "instance (IMU2, MAG2 = 1; default: the lowest, said)")
     p.add_argument("--heading-alignment", choices=HEADING_ALIGNMENTS, default="auto",
                    help="unknown constant heading offset of the reference: none, first (match the "
                         "first scored sample), mean (circular mean); auto = none with a "
@@ -180,6 +185,20 @@ def autopilot_line(ref: dict[str, Any]) -> str:
             f"RMS/max [deg] {', '.join(parts)}")
 
 
+def ardupilot_lines(x: dict[str, Any]) -> list[str]:
+    """The ``ardupilot`` lines of the summary: vehicle, frames and conventions, magnetometer,
+    and where the comparison ends before a flip or crash."""
+    lines = [f"ardupilot {x.get('vehicle') or 'vehicle not named in the log'}: output "
+             f"{x['output_frames']} (ArduPilot conventions: "
+             f"{', '.join(x['conventions_applied']) or 'as set'}); stamps: log time since boot"]
+    if x.get("magnetometer"):
+        lines.append(f"          {x['magnetometer']}")
+    if x.get("scored_until_s") is not None:
+        lines.append(f"          upside down at {x['upside_down_s']:.1f} s (flip or crash): "
+                     f"compared up to {x['scored_until_s']:.1f} s")
+    return lines
+
+
 def _fmt(value: Any, spec: str, missing: str = "n/a") -> str:
     """``value`` formatted with ``spec``; ``missing`` for None, NaN or Inf (a summary figure
     that could not be computed must not stop the summary)."""
@@ -228,6 +247,9 @@ def print_summary(s: dict[str, Any], out: Any = None) -> None:
         print(f"px4     output {x['output_frames']} (PX4 conventions: "
               f"{', '.join(x['conventions_applied']) or 'as set'}); stamps: log time since "
               "boot", file=out)
+    if s.get("ardupilot"):
+        for line in ardupilot_lines(s["ardupilot"]):
+            print(line, file=out)
     rej = s["messages_rejected"]
     print(f"pipeline processed {s['messages_processed']}, rejected "
           f"{sum(rej.values())} ({_format_counts(rej)}), gaps {s.get('gaps')}, resets "
@@ -251,6 +273,12 @@ def print_summary(s: dict[str, Any], out: Any = None) -> None:
     ref = s.get("reference")
     if ref and ref.get("kind") == "autopilot":
         print(autopilot_line(ref), file=out)
+        for topic, e in ((s.get("ardupilot") or {}).get("estimates") or {}).items():
+            if topic != ref.get("topic"):
+                print(f"  vs {topic:<5} {e['samples_scored']} samples: inclination RMS/max "
+                      f"{_fmt(e['inclination_rmse_deg'], '.3f')}/"
+                      f"{_fmt(e['inclination_max_deg'], '.3f')} deg, heading RMS "
+                      f"{_fmt(e['heading_rmse_deg'], '.3f')} deg", file=out)
     elif ref:
         rmse = ref.get("rmse_deg")
         if rmse:
