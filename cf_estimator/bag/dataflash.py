@@ -214,6 +214,7 @@ class DataflashBag(StreamBag):
         self.is_ros2 = True
         self.imu_topic = IMU_TOPIC
         self.reference_topic = ATTITUDE_TOPIC
+        self.estimate_topics = (ATTITUDE_TOPIC, *ESTIMATE_TOPICS)
         self.notes: list[str] = []  #: what the reader had to say (instance, truncation, crash)
         self.instances: dict[str, int] = {}  #: topic -> instance used
         try:
