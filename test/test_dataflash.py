@@ -19,7 +19,7 @@ pytest.importorskip("pymavlink")
 from conftest import DATA_ROOT  # noqa: E402
 
 from cf_estimator import FilterParams, estimate  # noqa: E402
-from cf_estimator.bag import dataflash, io  # noqa: E402
+from cf_estimator.bag import dataflash  # noqa: E402
 from cf_estimator.bag.fleet import find_bags  # noqa: E402
 from cf_estimator.bag.logarrays import log_arrays  # noqa: E402
 from cf_estimator.bag.replay import replay_bag  # noqa: E402
