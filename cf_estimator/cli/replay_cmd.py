@@ -89,6 +89,10 @@ def register(subparsers: Any) -> None:
     p.add_argument("--plot", metavar="DIR",
                    help="write PNG plots into DIR (created; an existing DIR needs --overwrite)")
     p.add_argument("--json", metavar="FILE", help="write the JSON summary to FILE ('-' = stdout)")
+    p.add_argument("--csv", metavar="FILE",
+                   help="write the per-sample results to FILE (one row per IMU message: stamp, "
+                   "quaternion, roll/pitch/yaw, variances, gyro bias, flags, the reference "
+                   "where there is one; cf_estimator/bag/csvout.py); one input only")
     p.add_argument("--overwrite", action="store_true",
                    help="replace an existing output bag and JSON file, write into an existing "
                    "plot directory")
@@ -391,13 +395,17 @@ def _finish_summary(summary: dict, args: argparse.Namespace, prefix: str = "") -
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.output is None and args.json is None and args.plot is None:
-        raise CliError("nothing to write: give -o OUT, --json FILE or --plot DIR", 2)
+    if args.output is None and args.json is None and args.plot is None and args.csv is None:
+        raise CliError("nothing to write: give -o OUT, --json FILE, --csv FILE or --plot DIR", 2)
     if _is_fleet(args):
+        if args.csv is not None:
+            raise CliError("--csv writes one input's samples: give one bag or log (a fleet "
+                           "writes -o, --json and --plot)", 2)
         return run_fleet(args)
     args.bag = args.bag[0]
     check_input_path(args.bag, "input bag")
     check_output_file(args.json, overwrite=args.overwrite, option="--json")
+    check_output_file(args.csv, overwrite=args.overwrite, option="--csv")
     check_output_dir(args.plot, overwrite=args.overwrite, option="--plot")
     if args.output is not None:
         try:
@@ -421,6 +429,10 @@ def run(args: argparse.Namespace) -> int:
 
             paths = plot_replay(result, args.plot, title=Path(args.bag).name)
             summary["plots"] = [str(p) for p in paths]
+        if args.csv is not None:
+            from cf_estimator.bag.csvout import write_csv
+
+            summary["csv"] = {"path": args.csv, "rows": write_csv(args.csv, result.series)}
         if args.json is not None:
             write_json(args.json, summary)
     except BaseException:  # no output bag without its summary: it would look complete
@@ -433,6 +445,8 @@ def run(args: argparse.Namespace) -> int:
         print_summary(summary)
         if summary.get("plots"):
             print(f"plots   {', '.join(summary['plots'])}")
+        if args.csv is not None:
+            print(f"csv     {args.csv} ({summary['csv']['rows']} rows)")
         if args.json is not None:
             print(f"json    {args.json}")
     return 0
