@@ -56,7 +56,7 @@ def _looks_like_bag(path: Path) -> str | None:
                 "(no metadata.yaml)"
             )
         return None
-    if path.suffix != ".bag":
+    if path.suffix not in (".bag", ".mcap"):  # a bare .mcap file is a ROS 2 bag (rosbags)
         return ("not a ROS 1 .bag file, a ROS 2 bag directory or .mcap file, a PX4 .ulg log or "
                 "an ArduPilot .bin log")
     return None
@@ -101,7 +101,8 @@ class InputBag:
         """``ros1``, ``ros2-sqlite3`` or ``ros2-mcap``."""
         if not self.is_ros2:
             return "ros1"
-        suffixes = {p.suffix for p in self.path.iterdir()} if self.path.is_dir() else set()
+        suffixes = ({p.suffix for p in self.path.iterdir()} if self.path.is_dir()
+                    else {self.path.suffix})
         return "ros2-mcap" if ".mcap" in suffixes else "ros2-sqlite3"
 
     @property
