@@ -91,6 +91,8 @@ setup(
         "pyyaml",
         # PX4 .ulg flight logs for the offline tools (replay, tune --bag); never the node's
         "pyulog",
+        # ArduPilot .bin DataFlash logs (DFReader) for the offline tools; never the node's
+        "pymavlink",
     ],
     extras_require={
         # vqf: the peer the bench tests run; dask[distributed]: the LocalCluster (loopback) tests;

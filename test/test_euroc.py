@@ -262,7 +262,10 @@ def test_onboard_filter_is_read_from_the_recording_and_only_when_named():
     like every column; never part of 'all'; NaN where a recording has none (EuRoC)."""
     assert "onboard" not in ev.peer_names() and "onboard" in ev.peer_names(recorded=True)
     assert ev.select_peers(["onboard"]) == (["onboard"], [])
-    flight = euroc.load_flight(REAL_DATA.parent / "phantom4_horizontal" / "H01_imu1")
+    folder = REAL_DATA.parent / "phantom4_horizontal" / "H01_imu1"
+    if not folder.is_dir():
+        pytest.skip(f"phantom4 recording not available (expected in {folder})")
+    flight = euroc.load_flight(folder)
     q = ev.ALGORITHMS["onboard"].run(flight, FilterParams())
     covered = np.isfinite(q).all(axis=1)
     assert covered.all()  # the last few ms beyond the file's stamps are held
@@ -275,6 +278,9 @@ def test_onboard_filter_is_read_from_the_recording_and_only_when_named():
 
 
 def test_a_corrupt_onboard_file_is_one_line_and_exit_2(tmp_path, capsys):
+    recording = REAL_DATA.parent / "phantom4" / "V01_imu1" / "mav0"
+    if not recording.is_dir():
+        pytest.skip(f"phantom4 recording not available (expected in {recording})")
     flight = tmp_path / "V01_imu1"
     flight.mkdir()
     (flight / "mav0").symlink_to(REAL_DATA.parent / "phantom4" / "V01_imu1" / "mav0")

@@ -22,6 +22,9 @@ from cf_estimator.bag.replay import ReplayError, ReplayOptions, replay_bag
 from cf_estimator.core.params import FilterParams
 from cf_estimator.pipeline import PipelineParams
 
+#: Files a fleet directory is searched for (any case): ROS 1 bags, PX4 ulogs,
+#: ArduPilot DataFlash logs. (".bag" stays lower case: rosbags reads ROS 1 by that suffix.)
+LOG_SUFFIXES = (".bag", ".ulg", ".bin")
 #: Summary keys that depend on the machine, not on the data (left out of comparisons).
 TIMING_KEYS = ("wall_time_s", "messages_per_s")
 
@@ -57,7 +60,7 @@ def find_bags(inputs: Sequence[str | os.PathLike[str]]) -> list[Path]:
                 dirs[:] = []
                 continue
             here_found.extend(here / f for f in files
-                              if f.endswith((".bag", ".ulg")) and not f.startswith("."))
+                              if f.lower().endswith(LOG_SUFFIXES) and not f.startswith("."))
             if here == p and _storage_dir(here):
                 here_found.append(here)
         found.extend(sorted(here_found, key=lambda b: b.relative_to(p).as_posix()))
@@ -67,7 +70,7 @@ def find_bags(inputs: Sequence[str | os.PathLike[str]]) -> list[Path]:
 def output_names(bags: Sequence[Path]) -> list[str]:
     """One unique output name per bag: its name without ``.bag``; on a clash, its path
     below the common directory with ``/`` as ``_``."""
-    stems = [b.name[:-4] if b.name.endswith((".bag", ".ulg")) else b.name for b in bags]
+    stems = [b.name[:-4] if b.name.lower().endswith(LOG_SUFFIXES) else b.name for b in bags]
     if len(set(stems)) == len(stems):
         return stems
     absolute = [b.resolve() for b in bags]
@@ -75,7 +78,7 @@ def output_names(bags: Sequence[Path]) -> list[str]:
     names = []
     for a in absolute:
         rel = a.relative_to(root).as_posix()
-        names.append((rel[:-4] if rel.endswith((".bag", ".ulg")) else rel).replace("/", "_"))
+        names.append((rel[:-4] if rel.lower().endswith(LOG_SUFFIXES) else rel).replace("/", "_"))
     return names
 
 

@@ -56,8 +56,9 @@ def _looks_like_bag(path: Path) -> str | None:
                 "(no metadata.yaml)"
             )
         return None
-    if path.suffix != ".bag":
-        return "not a ROS 1 .bag file, a ROS 2 bag directory or a PX4 .ulg log"
+    if path.suffix not in (".bag", ".mcap"):  # a bare .mcap file is a ROS 2 bag (rosbags)
+        return ("not a ROS 1 .bag file, a ROS 2 bag directory or .mcap file, a PX4 .ulg log or "
+                "an ArduPilot .bin log")
     return None
 
 
@@ -100,7 +101,8 @@ class InputBag:
         """``ros1``, ``ros2-sqlite3`` or ``ros2-mcap``."""
         if not self.is_ros2:
             return "ros1"
-        suffixes = {p.suffix for p in self.path.iterdir()} if self.path.is_dir() else set()
+        suffixes = ({p.suffix for p in self.path.iterdir()} if self.path.is_dir()
+                    else {self.path.suffix})
         return "ros2-mcap" if ".mcap" in suffixes else "ros2-sqlite3"
 
     @property
@@ -449,14 +451,20 @@ def migrate_to_jazzy(src_store: Any, msgtype: str, msg: Any, cache: dict[str, ob
 
 
 def open_bag(path: str | os.PathLike[str], *, ulog_instance: int | None = None) -> InputBag:
-    """Open a ROS 1 ``.bag``, a ROS 2 bag directory or a PX4 ``.ulg`` log
-    (:mod:`cf_estimator.bag.ulog`; ``ulog_instance``: the multi_id to use where a topic has
-    several) — :class:`BagError` names the file."""
+    """Open a ROS 1 ``.bag``, a ROS 2 bag directory, a PX4 ``.ulg`` log
+    (:mod:`cf_estimator.bag.ulog`) or an ArduPilot ``.bin`` DataFlash log
+    (:mod:`cf_estimator.bag.dataflash`) — ``ulog_instance``: the instance (ulog multi_id,
+    DataFlash IMU/MAG instance) to use where a topic has several; :class:`BagError` names the
+    file."""
     p = Path(path)
     if p.suffix.lower() == ".ulg" and not p.is_dir():
         from cf_estimator.bag.ulog import open_ulog
 
         return open_ulog(p, ulog_instance)
+    if p.suffix.lower() == ".bin" and not p.is_dir():
+        from cf_estimator.bag.dataflash import open_dataflash
+
+        return open_dataflash(p, ulog_instance)
     why = _looks_like_bag(p)
     if why is not None:
         raise BagError(f"{p}: {why}", 2 if not p.exists() else 1)

@@ -632,7 +632,7 @@ def _select_topics(bag: Any, opts: ReplayOptions, px4_in: _Px4Input | None) -> _
                                option="--mag-topic")
     ref = None
     if px4_in is not None and px4_in.reference:
-        ref = ulog.ATTITUDE_TOPIC  # the autopilot's own estimate, beside ours
+        ref = px4_in.reference_topic  # the autopilot's own estimate, beside ours
     elif opts.reference_topic is not None and opts.reference_topic.lower() != "none":
         ref = bag.select_topic("reference", opts.reference_topic,
                                (*io.REFERENCE_TYPES, io.IMU_TYPE), required=True,
@@ -834,7 +834,8 @@ def _result(r: _Run, in_path: Path, in_format: str, topics: _Topics, reading: _R
     if px4_in is not None:
         r.warnings[:0] = px4_in.notes
     r_ref_t, r_ref_q = reading.ref_t, reading.ref_q
-    if px4_in is not None and topics.reference == ulog.ATTITUDE_TOPIC:
+    autopilot_ref = px4_in is not None and topics.reference in px4_in.estimate_topics
+    if autopilot_ref:
         r_ref_t, r_ref_q = px4_in.reference_in_output(r, reading.ref_t, reading.ref_q)
     series = _series(r, r_ref_t, r_ref_q)
     counters = _jsonable(dict(r.pipe.counters))
@@ -896,91 +897,161 @@ def _result(r: _Run, in_path: Path, in_format: str, topics: _Topics, reading: _R
         if wall > 0 else None,
     }
     scored = None
+    align: str | None = None
     if topics.reference is not None:
         align = resolve_heading_alignment(opts.heading_alignment, mag_in_use)
+        if autopilot_ref and opts.heading_alignment == "auto" and px4_in.heading_unknown:
+            align = "mean"  # the autopilot's north is not in the log (px4_in's note says so)
         stats, scored = error_statistics(series.t_s, series.q_wxyz, series.ref_t_s,
                                          series.ref_q_wxyz, align)
         stats["topic"] = topics.reference
-        if px4_in is not None and topics.reference == ulog.ATTITUDE_TOPIC:
+        if autopilot_ref:
             stats["kind"] = "autopilot"
-            stats["label"] = AUTOPILOT_LABEL
+            stats["label"] = autopilot_label(topics.reference)
         if not r.offline and scored and stats.get("kind") != "autopilot":
             # the reported sigma against a ground truth (not against another estimate)
             stats["covariance"] = covariance_consistency(series, scored, mag_in_use)
         summary["reference"] = stats
         summary["rmse_deg"] = stats.get("rmse_deg")
     if px4_in is not None:
-        summary["px4"] = px4_in.summary(r)
+        summary[px4_in.kind] = px4_in.summary(r, series, align if topics.reference else None)
     return ReplayResult(_jsonable(summary), series, r.out_path, scored)
 
 
-AUTOPILOT_LABEL = ("agreement with the autopilot's estimate (vehicle_attitude, itself an "
-                   "estimate), not ground truth")
+def autopilot_label(topic: str) -> str:
+    """The label of a comparison with the autopilot's own estimate (``topic`` of the log)."""
+    return (f"agreement with the autopilot's estimate ({topic}, itself an estimate), not "
+            "ground truth")
+
+
+AUTOPILOT_LABEL = autopilot_label(ulog.ATTITUDE_TOPIC)
 #: Below this share of the log's duration covered by the IMU, the replay says so.
 IMU_COVERAGE_WARN_FRACTION = 0.5
 
 
 @dataclass
 class _Px4Input:
-    """What a PX4 ulog changes in a replay: the conventions, the autopilot comparison, notes."""
+    """What an autopilot's flight log (a PX4 ulog, an ArduPilot DataFlash log) changes in a
+    replay: the conventions, the comparison with the autopilot's estimate, notes."""
 
     bag: Any
     variants: list[ReplayVariant]
     changed: list[str]
-    reference: bool  #: compare with the log's vehicle_attitude
+    reference: bool  #: compare with the log's attitude (vehicle_attitude, ATT)
     notes: list[str]
     span: tuple[float, float, float]  #: first, last IMU stamp, log duration [s]
+    kind: str = "px4"  #: the summary's key: ``px4`` or ``ardupilot``
+    reference_topic: str = ulog.ATTITUDE_TOPIC  #: the log's attitude compared by default
+    #: the log's topics that are the autopilot's estimates (FRD → NED quaternions)
+    estimate_topics: tuple[str, ...] = (ulog.ATTITUDE_TOPIC,)
+    heading_unknown: bool = False  #: the autopilot's north (declination) is not in the log
+    scored_until_s: float | None = None  #: the comparison ends here [s] (a flip or crash)
 
     def reference_in_output(self, r: _Run, ref_t: Sequence[float], ref_q: Sequence[Any]
                             ) -> tuple[list[float], list[Any]]:
-        """vehicle_attitude (FRD → NED) in the run's output frames, within the IMU's span."""
+        """The autopilot's attitude (FRD → NED) in the run's output frames, within the IMU's
+        span and before a flip or crash."""
         t = np.asarray(ref_t, dtype=float)
         q = np.asarray(ref_q, dtype=float).reshape(-1, 4)
         lo, hi, _dur = self.span
+        if self.scored_until_s is not None:
+            hi = min(hi, self.scored_until_s)
         keep = (t >= lo - MAX_INTERPOLATION_GAP_S) & (t <= hi + MAX_INTERPOLATION_GAP_S)
+        if self.scored_until_s is not None:
+            keep &= t <= self.scored_until_s
         world = r.fparams.world_frame
         qo = px4.attitude_in_output_frames(q[keep], world,
                                            px4.output_body(r.pparams.body_frame, world))
         if qo is None:
-            text = f"vehicle_attitude is not compared: no conversion into world frame {world}"
+            text = (f"{self.reference_topic} is not compared: no conversion into world frame "
+                    f"{world}")
             if text not in r.warnings:
                 r.warnings.append(text)
             return [], []
         return t[keep].tolist(), [tuple(x) for x in qo.tolist()]
 
-    def summary(self, r: _Run) -> dict[str, Any]:
+    def summary(self, r: _Run, series: ReplaySeries | None = None,
+                align: str | None = None) -> dict[str, Any]:
         lo, hi, dur = self.span
-        applied = [self.bag.mag_bias_text] if self.bag.mag_bias_ga is not None else []
-        return {"conventions_applied": self.changed + applied,
-                "magnetometer_bias": self.bag.mag_bias_text or None,
-                "instances": dict(self.bag.instances),
-                "truncated": bool(self.bag.truncated), "imu_first_s": lo, "imu_last_s": hi,
-                "log_duration_s": dur,
-                "output_frames": f"{px4.output_body(r.pparams.body_frame, r.fparams.world_frame)}"
-                                 f" body -> {r.fparams.world_frame} world"}
+        out = {"conventions_applied": list(self.changed),
+               "instances": dict(self.bag.instances),
+               "truncated": bool(self.bag.truncated), "imu_first_s": lo, "imu_last_s": hi,
+               "log_duration_s": dur,
+               "output_frames": f"{px4.output_body(r.pparams.body_frame, r.fparams.world_frame)}"
+                                f" body -> {r.fparams.world_frame} world"}
+        if self.kind == "px4":
+            applied = [self.bag.mag_bias_text] if self.bag.mag_bias_ga is not None else []
+            out["conventions_applied"] += applied
+            out["magnetometer_bias"] = self.bag.mag_bias_text or None
+            return out
+        out.update({"vehicle": self.bag.vehicle or None, "magnetometer": self.bag.mag_text,
+                    "upside_down_s": self.bag.upside_down_s,
+                    "scored_until_s": self.scored_until_s,
+                    "heading_alignment": align})
+        if series is not None:
+            out["estimates"] = self._other_estimates(r, series, align or "none")
+        return out
+
+    def _other_estimates(self, r: _Run, series: ReplaySeries, align: str
+                         ) -> dict[str, dict[str, Any]]:
+        """Ours against each of the log's other attitude estimates (AHR2, EKF1, NKF1, XKF1),
+        the same way as against the reference: inclination and heading RMS / max [deg]."""
+        out: dict[str, dict[str, Any]] = {}
+        for topic in self.estimate_topics:
+            stream = self.bag.streams.get(topic)
+            if stream is None or stream.t_ns.shape[0] == 0:
+                continue
+            t_ref, q_ref = self.reference_in_output(r, (stream.t_ns * 1e-9).tolist(),
+                                                    stream.values.tolist())
+            if not t_ref:
+                continue
+            stats, _ = error_statistics(series.t_s, series.q_wxyz, np.asarray(t_ref),
+                                        np.asarray(q_ref).reshape(-1, 4), align)
+            if stats.get("rmse_deg"):
+                out[topic] = {"samples_scored": stats["samples_scored"],
+                              "inclination_rmse_deg": stats["rmse_deg"]["inclination"],
+                              "inclination_max_deg": stats["max_deg"]["inclination"],
+                              "heading_rmse_deg": stats["rmse_deg"]["heading"]}
+        return out
 
 
 def _px4_input(bag: Any, opts: ReplayOptions, variants: Sequence[ReplayVariant]
                ) -> _Px4Input | None:
-    """PX4 input (a ulog): PX4's conventions for every parameter the user did not set, the
-    log's vehicle_attitude as the comparison (unless another reference was asked for), and
-    the reader's notes; None for a bag."""
-    if not isinstance(bag, ulog.UlogBag):
+    """An autopilot's flight log (a PX4 ulog, an ArduPilot DataFlash log): its conventions
+    (FRD body, NED world, the log's declination) for every parameter the user did not set, the
+    log's attitude as the comparison (unless another reference was asked for), and the
+    reader's notes; None for a bag."""
+    from cf_estimator.bag.dataflash import DataflashBag
+
+    if not isinstance(bag, ulog.UlogBag | DataflashBag):
         return None
+    ardupilot = isinstance(bag, DataflashBag)
+    from_log, decl_note = bag.log_defaults() if ardupilot else (None, "")
     out, changed = [], []
     for v in variants:
         fp, pp, changed = px4.apply_px4_conventions(
             v.filter_params or FilterParams(), v.pipeline_params or PipelineParams(),
-            opts.explicit_params, bag.parameters)
+            opts.explicit_params, bag.parameters, from_log=from_log,
+            declination_name="COMPASS_DEC" if ardupilot else px4.PX4_DECLINATION_PARAM)
         out.append(dataclasses.replace(v, filter_params=fp, pipeline_params=pp))
     notes = list(bag.notes)
     lo, hi, dur = bag.imu_coverage()
     if dur > 0 and (hi - lo) < IMU_COVERAGE_WARN_FRACTION * dur:
-        notes.append(f"{ulog.IMU_TOPIC} covers only {hi - lo:.1f} s ({lo:.1f} s to {hi:.1f} s "
+        notes.append(f"{bag.imu_topic} covers only {hi - lo:.1f} s ({lo:.1f} s to {hi:.1f} s "
                      f"since boot) of the {dur:.1f} s log: the estimate and the comparison "
                      "cover that span only")
-    want_ref = opts.reference_topic is None and bag.count([ulog.ATTITUDE_TOPIC]) > 0
-    return _Px4Input(bag, out, changed, want_ref, notes, (lo, hi, dur))
+    mag_used = out[0].filter_params.use_mag and opts.mag_topic != "none" if out else False
+    if decl_note and mag_used:
+        notes.append(decl_note)
+    want_ref = opts.reference_topic is None and bag.count([bag.reference_topic]) > 0
+    if not ardupilot:
+        return _Px4Input(bag, out, changed, want_ref, notes, (lo, hi, dur))
+    from cf_estimator.bag import dataflash
+
+    return _Px4Input(bag, out, changed, want_ref, notes, (lo, hi, dur), kind="ardupilot",
+                     reference_topic=dataflash.ATTITUDE_TOPIC,
+                     estimate_topics=(dataflash.ATTITUDE_TOPIC, *dataflash.ESTIMATE_TOPICS),
+                     heading_unknown=bool(decl_note), scored_until_s=bag.scored_until_s())
 
 
 def _velocity_summary(pipe: Any, n_vel: int) -> dict[str, Any]:

@@ -34,7 +34,6 @@ from __future__ import annotations
 import contextlib
 import io as io_
 import os
-from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -42,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from cf_estimator.bag import cdr, io
+from cf_estimator.bag.logbag import Stream, StreamBag
 from cf_estimator.pipeline import px4
 
 IMU_TOPIC = "sensor_combined"
@@ -52,8 +52,6 @@ VELOCITY_TOPIC = "vehicle_local_position"
 ATTITUDE_TOPIC = "vehicle_attitude"
 ULOG_FORMAT = "px4-ulog"
 _WANTED = (IMU_TOPIC, MAG_TOPIC, VELOCITY_TOPIC, ATTITUDE_TOPIC)
-#: Events per chunk of :meth:`UlogBag.chunks` (as bags).
-_CHUNK = 8192
 
 
 def is_ulog(path: str | os.PathLike[str]) -> bool:
@@ -169,16 +167,6 @@ def _fast_parse(data: bytes) -> tuple[_Parsed, int | None] | None:
                    dict(head.initial_parameters)), cut
 
 
-@dataclass
-class _Stream:
-    """One replayable topic: stamps [ns since boot] and values."""
-
-    topic: str
-    msgtype: str
-    t_ns: np.ndarray
-    values: np.ndarray
-
-
 def _mag_device_ids(chosen: dict[str, Any]) -> set[int]:
     """The device ids (non-zero) the log gives for the magnetometer read: vehicle_magnetometer's
     own ``device_id``, else the ``mag_device_id`` of sensor_selection (the magnetometer PX4
@@ -205,7 +193,7 @@ def _stamp_us(data: dict[str, np.ndarray]) -> np.ndarray:
     return np.asarray(t, dtype=np.int64)
 
 
-class UlogBag(io.InputBag):
+class UlogBag(StreamBag):
     """A PX4 ulog opened for replay (use :func:`open_ulog` or ``io.open_bag``)."""
 
     def __init__(self, path: Path, instance: int | None = None) -> None:  # noqa: D107
@@ -214,6 +202,8 @@ class UlogBag(io.InputBag):
 
         self.path = path
         self.is_ros2 = True
+        self.imu_topic = IMU_TOPIC
+        self.reference_topic = ATTITUDE_TOPIC
         self.notes: list[str] = []  #: what the reader had to say (instances, truncation, span)
         self.instances: dict[str, int] = {}  #: topic -> multi_id used
         try:
@@ -259,7 +249,7 @@ class UlogBag(io.InputBag):
         if instance is not None and not any(len(by_name.get(n, {})) > 1 for n in _WANTED):
             self.notes.append(f"--instance {instance}: no topic the replay reads has several "
                               "instances in this log (each has one)")
-        self.streams: dict[str, _Stream] = {}
+        self.streams: dict[str, Stream] = {}
         self._imu(chosen[IMU_TOPIC].data)
         #: EKF2's saved magnetometer bias [Gauss] when EKF2 subtracted it (px4.saved_mag_bias)
         self.mag_bias_ga: np.ndarray | None = None
@@ -280,10 +270,13 @@ class UlogBag(io.InputBag):
             d = chosen[ATTITUDE_TOPIC].data
             q = _field(d, "q", 4)
             ok = np.all(np.isfinite(q), axis=1) & (np.linalg.norm(q, axis=1) > 0.5)
-            self.streams[ATTITUDE_TOPIC] = _Stream(ATTITUDE_TOPIC, io.QUATERNION_STAMPED_TYPE,
+            self.streams[ATTITUDE_TOPIC] = Stream(ATTITUDE_TOPIC, io.QUATERNION_STAMPED_TYPE,
                                                    _stamp_us(d)[ok] * 1000, q[ok])
-        self.topics = sorted((io.TopicInfo(s.topic, s.msgtype, int(s.t_ns.shape[0]))
-                              for s in self.streams.values()), key=lambda i: i.topic)
+        self.finish_topics()
+
+    @property
+    def format(self) -> str:
+        return ULOG_FORMAT
 
     # -- reading the log -------------------------------------------------------------------------
     def _pick(self, name: str, inst: dict[int, Any], wanted: int | None) -> Any:
@@ -320,14 +313,14 @@ class UlogBag(io.InputBag):
         values[:, 4] = -1.0
         values[:, 13:16] = gyro[keep]
         values[:, 25:28] = accel[keep]
-        self.streams[IMU_TOPIC] = _Stream(IMU_TOPIC, io.IMU_TYPE, t[keep] * 1000, values)
+        self.streams[IMU_TOPIC] = Stream(IMU_TOPIC, io.IMU_TYPE, t[keep] * 1000, values)
 
     def _mag_stream(self, topic: str, t_us: np.ndarray, ga: np.ndarray) -> None:
         ok = np.all(np.isfinite(ga), axis=1)
         values = np.zeros((int(ok.sum()), cdr.MAG_DOUBLES))
         ga = ga[ok] if self.mag_bias_ga is None else ga[ok] - self.mag_bias_ga
         values[:, 0:3] = ga * px4.GAUSS_TO_TESLA
-        self.streams[topic] = _Stream(topic, io.MAG_TYPE, t_us[ok] * 1000, values)
+        self.streams[topic] = Stream(topic, io.MAG_TYPE, t_us[ok] * 1000, values)
 
     def _mag(self, d: dict[str, np.ndarray]) -> None:
         self._mag_stream(MAG_TOPIC, _stamp_us(d), _field(d, "magnetometer_ga", 3))
@@ -356,185 +349,8 @@ class UlogBag(io.InputBag):
         for flag in ("v_xy_valid", "v_z_valid"):
             if flag in d:
                 ok &= np.asarray(d[flag]) != 0
-        self.streams[VELOCITY_TOPIC] = _Stream(VELOCITY_TOPIC, io.TWIST_STAMPED_TYPE,
+        self.streams[VELOCITY_TOPIC] = Stream(VELOCITY_TOPIC, io.TWIST_STAMPED_TYPE,
                                                _stamp_us(d)[ok] * 1000, v[ok])
-
-    # -- InputBag ---------------------------------------------------------------------------------
-    def close(self) -> None:
-        """Nothing stays open (the log was read at construction)."""
-
-    @property
-    def format(self) -> str:
-        return ULOG_FORMAT
-
-    @property
-    def start_time_ns(self) -> int:
-        return self.log_start_us * 1000
-
-    @property
-    def duration_s(self) -> float:
-        return (self.log_last_us - self.log_start_us) * 1e-6
-
-    def _listing(self) -> str:
-        return "topics: " + ", ".join(f"{i.topic} [{i.msgtype}]" for i in self.topics)
-
-    def imu_coverage(self) -> tuple[float, float, float]:
-        """(first, last IMU stamp, log duration) [s]: how much of the log the IMU covers."""
-        t = self.streams[IMU_TOPIC].t_ns
-        if t.shape[0] == 0:
-            return 0.0, 0.0, self.duration_s
-        return float(t[0]) * 1e-9, float(t[-1]) * 1e-9, self.duration_s
-
-    def _order(self, topics: Iterable[str]) -> tuple[list[_Stream], np.ndarray, np.ndarray]:
-        """The streams of ``topics``, and (stream index, row) of every event in time order
-        (ties: the order of the streams as asked for)."""
-        streams = [self.streams[t] for t in dict.fromkeys(topics) if t in self.streams]
-        if not streams:
-            return [], np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-        t = np.concatenate([s.t_ns for s in streams])
-        which = np.concatenate([np.full(s.t_ns.shape[0], k, dtype=np.int64)
-                                for k, s in enumerate(streams)])
-        row = np.concatenate([np.arange(s.t_ns.shape[0], dtype=np.int64) for s in streams])
-        order = np.lexsort((which, t))
-        return streams, which[order], row[order]
-
-    def messages(self, topics: Iterable[str], *, bulk: bool = False) -> Iterator[io.BagMessage]:
-        """The messages of ``topics`` one by one, log-time order (``bulk`` changes nothing)."""
-        streams, which, row = self._order(topics)
-        for k, r in zip(which.tolist(), row.tolist(), strict=True):
-            s = streams[k]
-            yield io.BagMessage(s.topic, s.msgtype, int(s.t_ns[r]), message(s, r))
-
-    def chunks(self, topics: Iterable[str]) -> Iterator[_UlogChunk]:
-        """The messages of ``topics`` a few thousand at a time, Imu and MagneticField as decoded
-        blocks (what :meth:`cf_estimator.bag.io.InputBag.chunks` gives for a bag)."""
-        streams, which, row = self._order(topics)
-        for a in range(0, which.shape[0], _CHUNK):
-            yield _UlogChunk(streams, which[a:a + _CHUNK], row[a:a + _CHUNK])
-
-    def to_jazzy(self, msg: Any, msgtype: str) -> Any:
-        """A Jazzy message object for ``--copy-inputs`` from one of this log's messages."""
-        h = msg.header
-        sec, ns, frame = h.stamp.sec, h.stamp.nanosec, h.frame_id
-        if msgtype == io.IMU_TYPE:
-            o, w, a = msg.orientation, msg.angular_velocity, msg.linear_acceleration
-            return io.imu_message(sec, ns, frame, (o.x, o.y, o.z, o.w),
-                                  msg.orientation_covariance, (w.x, w.y, w.z),
-                                  msg.angular_velocity_covariance, (a.x, a.y, a.z),
-                                  msg.linear_acceleration_covariance)
-        if msgtype == io.MAG_TYPE:
-            f = msg.magnetic_field
-            return io.magnetic_field_message(sec, ns, frame, (f.x, f.y, f.z),
-                                             msg.magnetic_field_covariance)
-        if msgtype == io.TWIST_STAMPED_TYPE:
-            v = msg.twist.linear
-            return io.twist_stamped_message(sec, ns, frame, (v.x, v.y, v.z))
-        q = msg.quaternion
-        return io.quaternion_stamped_message(sec, ns, frame, (q.w, q.x, q.y, q.z))
-
-
-class _Twist:
-    __slots__ = ("linear", "angular")
-
-
-class _TwistStampedView:
-    """geometry_msgs/TwistStamped fields (velocity [m/s], NED)."""
-
-    __slots__ = ("header", "twist")
-
-
-class _QuaternionStampedView:
-    """geometry_msgs/QuaternionStamped fields."""
-
-    __slots__ = ("header", "quaternion")
-
-
-def _header(t_ns: int, frame: str) -> cdr.Header:
-    sec, ns = divmod(int(t_ns), 1_000_000_000)
-    return cdr.Header(cdr.Stamp(sec, ns), frame)
-
-
-def message(s: _Stream, r: int) -> Any:
-    """Row ``r`` of a stream as a light message object (sensor_msgs / geometry_msgs names)."""
-    if s.msgtype in (io.IMU_TYPE, io.MAG_TYPE):
-        return _block(s, np.array([r])).message(0)
-    v = s.values[r].tolist()
-    if s.msgtype == io.TWIST_STAMPED_TYPE:
-        m = _TwistStampedView()
-        m.header = _header(s.t_ns[r], "ned")
-        tw = _Twist()
-        tw.linear, tw.angular = cdr.Vector(*v), cdr.Vector(0.0, 0.0, 0.0)
-        m.twist = tw
-        return m
-    q = _QuaternionStampedView()
-    q.header = _header(s.t_ns[r], "ned")
-    q.quaternion = cdr.Vector(v[1], v[2], v[3], v[0])
-    return q
-
-
-def _block(s: _Stream, rows: np.ndarray) -> cdr.Block:
-    """Rows of an Imu/MagneticField stream as a decoded :class:`cf_estimator.bag.cdr.Block`."""
-    n = int(rows.shape[0])
-    b = cdr.Block(n, s.msgtype == io.IMU_TYPE)
-    b.values = np.ascontiguousarray(s.values[rows])
-    sec, ns = np.divmod(s.t_ns[rows], 1_000_000_000)
-    b.sec, b.nsec = sec.tolist(), ns.tolist()
-    b.frame = [px4.PX4_BODY_FRAME_ID] * n
-    b.plain = [True] * n
-    return b
-
-
-class _UlogChunk:
-    """Consecutive messages, as :class:`cf_estimator.bag.io.MessageChunk` has them."""
-
-    def __init__(self, streams: Sequence[_Stream], which: np.ndarray, row: np.ndarray) -> None:
-        self._streams = streams
-        self.topic = [streams[k].topic for k in which.tolist()]
-        self.msgtype = [streams[k].msgtype for k in which.tolist()]
-        t = np.empty(which.shape[0], dtype=np.int64)
-        self.blocks: dict[str, cdr.Block] = {}
-        self.row = [-1] * int(which.shape[0])
-        self._rows = row.tolist()
-        self._which = which.tolist()
-        for k, s in enumerate(streams):
-            idx = np.flatnonzero(which == k)
-            if idx.size == 0:
-                continue
-            t[idx] = s.t_ns[row[idx]]
-            if s.msgtype in (io.IMU_TYPE, io.MAG_TYPE):
-                self.blocks[s.msgtype] = _block(s, row[idx])
-                for j, i in enumerate(idx.tolist()):
-                    self.row[i] = j
-        self.log_ns = t.tolist()
-
-    def __len__(self) -> int:
-        return len(self.topic)
-
-    def references(self, topic: str, ref_t: list[float], ref_q: list[Any]) -> int:
-        """The QuaternionStamped messages of ``topic`` in this chunk appended as stamps [s]
-        and normalised (w, x, y, z) (what the replay takes from each one); returns how many
-        messages there were."""
-        k = next((j for j, s in enumerate(self._streams) if s.topic == topic), None)
-        if k is None:
-            return 0
-        s = self._streams[k]
-        rows = np.asarray(self._rows)[np.asarray(self._which) == k]
-        if rows.size == 0:
-            return 0
-        q = s.values[rows]
-        q = q / np.linalg.norm(q, axis=1, keepdims=True)  # rows of norm > 0.5 (the reader's)
-        sec, ns = np.divmod(s.t_ns[rows], 1_000_000_000)
-        ref_t.extend((sec + ns * 1e-9).tolist())
-        ref_q.extend(tuple(r) for r in q.tolist())
-        return int(rows.size)
-
-    def msg(self, i: int) -> Any:
-        """Message i as a light object."""
-        block = self.blocks.get(self.msgtype[i])
-        if block is not None:
-            return block.message(self.row[i])
-        return message(self._streams[self._which[i]], self._rows[i])
-
 
 def open_ulog(path: str | os.PathLike[str], instance: int | None = None) -> UlogBag:
     """Read a PX4 ulog for replay (:class:`cf_estimator.bag.io.BagError` names the file)."""

@@ -247,9 +247,10 @@ def _build(c: _Collected, path: Path, topics: dict[str, str | None], score_after
 
 
 def _is_ulog(bag: Any) -> bool:
-    from cf_estimator.bag.ulog import UlogBag
+    """A flight log (PX4 ulog, ArduPilot DataFlash): its attitude is the autopilot's, FRD → NED."""
+    from cf_estimator.bag.logbag import StreamBag
 
-    return isinstance(bag, UlogBag)
+    return isinstance(bag, StreamBag)
 
 
 def load_bag_trial(
@@ -273,12 +274,16 @@ def load_bag_trial(
     with io.open_bag(p) as bag:
         px4_log = _is_ulog(bag)
         if px4_log and reference_topic == DEFAULT_REFERENCE_TOPIC:
-            from cf_estimator.bag.ulog import ATTITUDE_TOPIC
-
-            reference_topic = ATTITUDE_TOPIC  # a PX4 log: the autopilot's own estimate
+            reference_topic = bag.reference_topic  # a flight log: the autopilot's own estimate
         topics = _select_topics(bag, imu_topic, mag_topic, reference_topic)
         c = _collect(bag, topics, pp.mag_timeout_s if mag_timeout_s is None else mag_timeout_s)
-    if px4_log and topics["reference"] == "vehicle_attitude" and c.ref_q:
+        until = bag.scored_until_s() if hasattr(bag, "scored_until_s") else None
+        estimates = set(getattr(bag, "estimate_topics", ())) | {getattr(bag, "reference_topic",
+                                                                        None)}
+    if px4_log and until is not None and c.ref_q:  # a flip or crash ends the scored flight
+        keep = [i for i, t in enumerate(c.ref_ns) if t * 1e-9 <= until]
+        c.ref_ns, c.ref_q = [c.ref_ns[i] for i in keep], [c.ref_q[i] for i in keep]
+    if px4_log and topics["reference"] in estimates and c.ref_q:
         # FRD → NED as logged; the trial's filter sees the FRD axes as they are (body "sensor")
         from cf_estimator.pipeline import px4
 

@@ -34,7 +34,8 @@ def register(subparsers: Any) -> None:
     """Add the ``replay`` sub-command to ``subparsers``."""
     p = subparsers.add_parser(
         "replay",
-        help="replay a ROS 1/ROS 2 bag or a PX4 ulog through the estimator (no ROS needed)",
+        help="replay a ROS 1/ROS 2 bag, a PX4 ulog or an ArduPilot DataFlash log through the "
+             "estimator (no ROS needed)",
         description=(
             "Replay a recorded bag (ROS 1 .bag, or ROS 2 bag directory with sqlite3 or mcap "
             "storage) through exactly the node's processing and write a ROS 2 bag with its "
@@ -44,11 +45,14 @@ def register(subparsers: Any) -> None:
             "bag: sensor_combined, vehicle_magnetometer (or sensor_combined's magnetometer), "
             "vehicle_local_position for --velocity-topic; the output follows PX4's conventions "
             "(FRD body -> NED, stamps = log time since boot) and is compared with the log's "
-            "vehicle_attitude (agreement with the autopilot, not ground truth)."
+            "vehicle_attitude (agreement with the autopilot, not ground truth). An ArduPilot "
+            "DataFlash log (.bin, read with pymavlink) likewise: IMU, MAG, compared with ATT "
+            "(and AHR2, EKF1, NKF1, XKF1 where logged)."
         ),
     )
     p.add_argument("bag", metavar="BAG", nargs="+",
-                   help="input bag: ROS 1 .bag file, ROS 2 bag directory or PX4 .ulg log; "
+                   help="input bag: ROS 1 .bag file, ROS 2 bag directory or .mcap file, PX4 "
+                   ".ulg log or ArduPilot .bin log; "
                    "several, or a directory of them (searched recursively, mixed), replay a "
                    "fleet: one output per bag, a summary table and one JSON")
     p.add_argument("-o", "--output", metavar="OUT",
@@ -68,7 +72,8 @@ def register(subparsers: Any) -> None:
                         "statistics")
     p.add_argument("--instance", type=int, metavar="N",
                    help="PX4 ulog: the instance (multi_id) to use of a topic logged several "
-                        "times, e.g. a second magnetometer (default: the lowest, said)")
+                        "times, e.g. a second magnetometer; ArduPilot log: the IMU and MAG "
+                        "instance (IMU2, MAG2 = 1; default: the lowest, said)")
     p.add_argument("--heading-alignment", choices=HEADING_ALIGNMENTS, default="auto",
                    help="unknown constant heading offset of the reference: none, first (match the "
                         "first scored sample), mean (circular mean); auto = none with a "
@@ -84,6 +89,10 @@ def register(subparsers: Any) -> None:
     p.add_argument("--plot", metavar="DIR",
                    help="write PNG plots into DIR (created; an existing DIR needs --overwrite)")
     p.add_argument("--json", metavar="FILE", help="write the JSON summary to FILE ('-' = stdout)")
+    p.add_argument("--csv", metavar="FILE",
+                   help="write the per-sample results to FILE (one row per IMU message: stamp, "
+                   "quaternion, roll/pitch/yaw, variances, gyro bias, flags, the reference "
+                   "where there is one; cf_estimator/bag/csvout.py); one input only")
     p.add_argument("--overwrite", action="store_true",
                    help="replace an existing output bag and JSON file, write into an existing "
                    "plot directory")
@@ -180,6 +189,20 @@ def autopilot_line(ref: dict[str, Any]) -> str:
             f"RMS/max [deg] {', '.join(parts)}")
 
 
+def ardupilot_lines(x: dict[str, Any]) -> list[str]:
+    """The ``ardupilot`` lines of the summary: vehicle, frames and conventions, magnetometer,
+    and where the comparison ends before a flip or crash."""
+    lines = [f"ardupilot {x.get('vehicle') or 'vehicle not named in the log'}: output "
+             f"{x['output_frames']} (ArduPilot conventions: "
+             f"{', '.join(x['conventions_applied']) or 'as set'}); stamps: log time since boot"]
+    if x.get("magnetometer"):
+        lines.append(f"          {x['magnetometer']}")
+    if x.get("scored_until_s") is not None:
+        lines.append(f"          upside down at {x['upside_down_s']:.1f} s (flip or crash): "
+                     f"compared up to {x['scored_until_s']:.1f} s")
+    return lines
+
+
 def _fmt(value: Any, spec: str, missing: str = "n/a") -> str:
     """``value`` formatted with ``spec``; ``missing`` for None, NaN or Inf (a summary figure
     that could not be computed must not stop the summary)."""
@@ -228,6 +251,9 @@ def print_summary(s: dict[str, Any], out: Any = None) -> None:
         print(f"px4     output {x['output_frames']} (PX4 conventions: "
               f"{', '.join(x['conventions_applied']) or 'as set'}); stamps: log time since "
               "boot", file=out)
+    if s.get("ardupilot"):
+        for line in ardupilot_lines(s["ardupilot"]):
+            print(line, file=out)
     rej = s["messages_rejected"]
     print(f"pipeline processed {s['messages_processed']}, rejected "
           f"{sum(rej.values())} ({_format_counts(rej)}), gaps {s.get('gaps')}, resets "
@@ -251,6 +277,12 @@ def print_summary(s: dict[str, Any], out: Any = None) -> None:
     ref = s.get("reference")
     if ref and ref.get("kind") == "autopilot":
         print(autopilot_line(ref), file=out)
+        for topic, e in ((s.get("ardupilot") or {}).get("estimates") or {}).items():
+            if topic != ref.get("topic"):
+                print(f"  vs {topic:<5} {e['samples_scored']} samples: inclination RMS/max "
+                      f"{_fmt(e['inclination_rmse_deg'], '.3f')}/"
+                      f"{_fmt(e['inclination_max_deg'], '.3f')} deg, heading RMS "
+                      f"{_fmt(e['heading_rmse_deg'], '.3f')} deg", file=out)
     elif ref:
         rmse = ref.get("rmse_deg")
         if rmse:
@@ -363,13 +395,17 @@ def _finish_summary(summary: dict, args: argparse.Namespace, prefix: str = "") -
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.output is None and args.json is None and args.plot is None:
-        raise CliError("nothing to write: give -o OUT, --json FILE or --plot DIR", 2)
+    if args.output is None and args.json is None and args.plot is None and args.csv is None:
+        raise CliError("nothing to write: give -o OUT, --json FILE, --csv FILE or --plot DIR", 2)
     if _is_fleet(args):
+        if args.csv is not None:
+            raise CliError("--csv writes one input's samples: give one bag or log (a fleet "
+                           "writes -o, --json and --plot)", 2)
         return run_fleet(args)
     args.bag = args.bag[0]
     check_input_path(args.bag, "input bag")
     check_output_file(args.json, overwrite=args.overwrite, option="--json")
+    check_output_file(args.csv, overwrite=args.overwrite, option="--csv")
     check_output_dir(args.plot, overwrite=args.overwrite, option="--plot")
     if args.output is not None:
         try:
@@ -393,6 +429,10 @@ def run(args: argparse.Namespace) -> int:
 
             paths = plot_replay(result, args.plot, title=Path(args.bag).name)
             summary["plots"] = [str(p) for p in paths]
+        if args.csv is not None:
+            from cf_estimator.bag.csvout import write_csv
+
+            summary["csv"] = {"path": args.csv, "rows": write_csv(args.csv, result.series)}
         if args.json is not None:
             write_json(args.json, summary)
     except BaseException:  # no output bag without its summary: it would look complete
@@ -405,6 +445,8 @@ def run(args: argparse.Namespace) -> int:
         print_summary(summary)
         if summary.get("plots"):
             print(f"plots   {', '.join(summary['plots'])}")
+        if args.csv is not None:
+            print(f"csv     {args.csv} ({summary['csv']['rows']} rows)")
         if args.json is not None:
             print(f"json    {args.json}")
     return 0

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -106,6 +107,36 @@ class EstimateResult:
     def euler_rad(self) -> np.ndarray:
         """(N, 3) roll, pitch, yaw [rad] (aerospace ZYX) of :attr:`quaternion`."""
         return quat.to_euler(self.quaternion)
+
+    def to_dataframe(self) -> Any:
+        """The per-sample results as a pandas DataFrame (pandas is optional: ``ImportError``
+        naming it when absent), one row per sample, indexed by ``t_s`` [s]: quaternion
+        ``qw qx qy qz`` (q_world_from_sensor), ``roll_rad pitch_rad yaw_rad`` (ZYX),
+        ``cov_xx_rad2 cov_yy_rad2 cov_zz_rad2`` (the diagonal of
+        :meth:`orientation_covariance`), ``bias_x/y/z_rad_s``, ``bias_sigma_rad_s``, the flags
+        ``clipped``, ``at_rest``, ``phase``, ``mag_status`` (codes as documented on the
+        fields) and, with velocity aiding, ``velocity_aided``."""
+        try:
+            import pandas as pd
+        except ImportError:
+            raise ImportError("EstimateResult.to_dataframe needs pandas (pip install pandas)"
+                              ) from None
+        rpy = self.euler_rad()
+        cov = self.orientation_covariance()
+        cols: dict[str, np.ndarray] = {
+            "qw": self.quaternion[:, 0], "qx": self.quaternion[:, 1],
+            "qy": self.quaternion[:, 2], "qz": self.quaternion[:, 3],
+            "roll_rad": rpy[:, 0], "pitch_rad": rpy[:, 1], "yaw_rad": rpy[:, 2],
+            "cov_xx_rad2": cov[:, 0], "cov_yy_rad2": cov[:, 4], "cov_zz_rad2": cov[:, 8],
+            "bias_x_rad_s": self.gyro_bias_rad_s[:, 0], "bias_y_rad_s": self.gyro_bias_rad_s[:, 1],
+            "bias_z_rad_s": self.gyro_bias_rad_s[:, 2],
+            "bias_sigma_rad_s": self.gyro_bias_sigma_rad_s,
+            "clipped": self.clipped, "at_rest": self.at_rest, "phase": self.phase,
+            "mag_status": self.mag_status,
+        }
+        if self.velocity_aided is not None:
+            cols["velocity_aided"] = self.velocity_aided
+        return pd.DataFrame(cols, index=pd.Index(self.t_s, name="t_s"))
 
 
 def covariance_rows(extra: np.ndarray, t_s: np.ndarray, q: np.ndarray, params: FilterParams,

@@ -116,14 +116,20 @@ def explicit_from_values(fp: FilterParams, pp: PipelineParams) -> set[str]:
 
 def apply_px4_conventions(
     fp: FilterParams, pp: PipelineParams, explicit: Collection[str] | None = None,
-    log_parameters: Mapping[str, Any] | None = None,
+    log_parameters: Mapping[str, Any] | None = None, *,
+    from_log: Mapping[str, Any] | None = None,
+    declination_name: str = PX4_DECLINATION_PARAM,
 ) -> tuple[FilterParams, PipelineParams, list[str]]:
     """``(fp, pp, changed)``: the PX4 defaults (:data:`PX4_FILTER_DEFAULTS`,
     :data:`PX4_PIPELINE_DEFAULTS`, and :func:`log_defaults` of the log's own parameters)
     applied to every parameter not in ``explicit`` (None: the parameters that differ from the
-    schema default count as explicit); ``changed`` names the parameters set, ``name=value``."""
+    schema default count as explicit); ``changed`` names the parameters set, ``name=value``.
+    ``from_log``: the log's own defaults when they are not PX4's (an ArduPilot log: its
+    ``COMPASS_DEC``, named ``declination_name`` in ``changed``). The same frames hold for
+    ArduPilot, whose IMU is FRD and whose attitude is FRD → NED too."""
     given = explicit_from_values(fp, pp) if explicit is None else set(explicit)
-    from_log = log_defaults(log_parameters or {})
+    if from_log is None:
+        from_log = log_defaults(log_parameters or {})
     f_names = set(_defaults(FilterParams))
     f_changes = {k: v for k, v in {**PX4_FILTER_DEFAULTS, **from_log}.items()
                  if k in f_names and k not in given and getattr(fp, k) != v}
@@ -133,7 +139,7 @@ def apply_px4_conventions(
         fp = dataclasses.replace(fp, **f_changes)
     if p_changes:
         pp = dataclasses.replace(pp, **p_changes)
-    changed = [f"{k}={v:.6g} ({PX4_DECLINATION_PARAM} {math.degrees(v):.2f} deg)"
+    changed = [f"{k}={v:.6g} ({declination_name} {math.degrees(v):.2f} deg)"
                if k == "magnetic_declination_rad" else f"{k}={v}"
                for k, v in {**f_changes, **p_changes}.items()]
     return fp, pp, changed
