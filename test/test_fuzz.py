@@ -548,6 +548,13 @@ def valid_value(spec: ParamSpec) -> st.SearchStrategy:
         return st.sampled_from(list(spec.choices) + [c.upper() for c in spec.choices])
     if spec.kind == "str":  # a free string (tf_parent_frame): a frame id
         return st.sampled_from(["world", "map", "earth_ned", "uav1/world"])
+    if spec.kind == "float_list":  # the magnetometer calibration: a hard iron [T] up to twice
+        # the Earth's field, a soft iron within 20 % of the identity (det > 0); ints allowed
+        n, scale = (3, 1e-4) if spec.name == "mag_hard_iron_t" else (9, 0.2)
+        base = spec.default
+        return st.lists(st.floats(-scale, scale), min_size=n, max_size=n).map(
+            lambda d, base=base: [b + x for b, x in zip(base, d, strict=True)]) | st.just(
+            [int(b) for b in base])
     lo, hi = spec.minimum, spec.maximum
     assert lo is not None and hi is not None
     return st.one_of(
@@ -566,6 +573,11 @@ def invalid_value(spec: ParamSpec) -> st.SearchStrategy:
         return st.one_of(st.sampled_from([None, 1, True, "", "north", "ENUx"]))
     if spec.kind == "str":
         return st.sampled_from([None, 1, True, "", " world", "/world"])
+    if spec.kind == "float_list":  # wrong length, non-finite or non-number elements
+        n = len(spec.default)
+        return st.sampled_from([None, 1.0, "0 0 0", [0.0] * (n - 1), [0.0] * (n + 1),
+                                [math.nan] * n, [math.inf] + [0.0] * (n - 1), [True] * n,
+                                ["1.0"] * n])
     lo, hi = spec.minimum, spec.maximum
     assert lo is not None and hi is not None
     out = [st.floats(max_value=lo, exclude_max=not spec.minimum_exclusive, allow_nan=False),
