@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from cf_estimator.cli.base import CliError
-from cf_estimator.cli.bench_cmd.common import check_outputs, csv_list, write_json
+from cf_estimator.cli.bench_cmd.common import check_outputs, csv_list, families_option, write_json
 from cf_estimator.cli.common import load_params, note
 
 #: The ablation rows of the shipped mechanisms that have a parameter: name → overrides that
@@ -88,13 +88,7 @@ def run(args: Any) -> int:
     from cf_estimator.core.params import ParameterError
 
     check_outputs(args, "json")
-    families = csv_list(args.families)
-    bad = [f for f in families if f not in ablation.FAMILIES]
-    if bad or not families:
-        raise CliError(f"--families: unknown {bad[0]!r}; valid: {', '.join(ablation.FAMILIES)}"
-                       if bad else "--families is empty", 2)
-    if args.jobs < 1:
-        raise CliError("--jobs must be >= 1", 2)
+    families = families_option(args, ablation.FAMILIES)
     if not Path(args.data).is_dir():
         raise CliError(f"--data: {args.data} is not a directory", 2)
     base_params, _ = load_params(args.params)

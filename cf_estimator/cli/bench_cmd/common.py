@@ -20,6 +20,18 @@ def csv_list(text: str) -> list[str]:
     return [t.strip() for t in text.split(",") if t.strip()]
 
 
+def families_option(args: Any, valid: tuple[str, ...]) -> list[str]:
+    """``--families`` as a list, each one of ``valid``, and ``--jobs`` ≥ 1 (CliError(2) if not)."""
+    families = csv_list(args.families)
+    bad = [f for f in families if f not in valid]
+    if bad or not families:
+        raise CliError(f"--families: unknown {bad[0]!r}; valid: {', '.join(valid)}"
+                       if bad else "--families is empty", 2)
+    if args.jobs < 1:
+        raise CliError("--jobs must be >= 1", 2)
+    return families
+
+
 def add_peers_option(parser: Any) -> None:
     """``--peers``, the same in every bench command."""
     parser.add_argument("--peers", default="all", metavar="LIST",

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from cf_estimator.cli.base import CliError
-from cf_estimator.cli.bench_cmd.common import check_outputs, csv_list, write_json
+from cf_estimator.cli.bench_cmd.common import check_outputs, families_option, write_json
 from cf_estimator.cli.common import load_params, note
 
 
@@ -54,13 +54,7 @@ def run(args: Any) -> int:
     from cf_estimator.bench import cross
 
     check_outputs(args, "json")
-    families = csv_list(args.families)
-    bad = [f for f in families if f not in cross.FAMILIES]
-    if bad or not families:
-        raise CliError(f"--families: unknown {bad[0]!r}; valid: {', '.join(cross.FAMILIES)}"
-                       if bad else "--families is empty", 2)
-    if args.jobs < 1:
-        raise CliError("--jobs must be >= 1", 2)
+    families = families_option(args, cross.FAMILIES)
     if not Path(args.data).is_dir() and not set(families) <= set(cross.SIMULATED):
         raise CliError(f"--data: {args.data} is not a directory", 2)
     from cf_estimator.bench.consistency import Floors
