@@ -105,3 +105,18 @@ def test_the_cli_refuses_a_variant_of_an_unknown_parameter(tmp_path):
         timeout=120)
     assert run.returncode == 2 and "not a filter parameter" in run.stderr
     assert "Traceback" not in run.stderr
+
+
+def test_the_autopilot_family_scores_a_real_log_against_its_own_attitude():
+    from conftest import DATA_ROOT
+
+    from cf_estimator.core.params import FilterParams
+
+    log = DATA_ROOT / "ardupilot" / "dronekit_log171.bin"
+    if not log.is_file():
+        pytest.skip(f"ArduPilot log {log} not available (expected in ../shared/data/ardupilot)")
+    (row,) = ablation._autopilot_task((str(log), FilterParams()))
+    assert row[0] == "autopilot" and row[1] == log.name
+    # the shipped defaults follow ArduPilot's own ATT within a few degrees up to the flip; a
+    # wrong frame (ENU against NED) or the crash's spin scored would be tens of degrees
+    assert 0.5 < row[2] < 5.0

@@ -13,6 +13,10 @@ Families (the score of one recording; lower is better):
 - ``phantom4``, ``phantom4_horizontal``: inclination RMS after 10 s [deg], per recording;
 - ``broad_<group>``: BROAD 6-D inclination RMSE per trial [deg], one family per trial group
   (a trial is in several groups); ``broad9d``: the 9-D total RMSE per trial [deg];
+- ``autopilot``: the PX4 ulogs (``ulogs/``) and ArduPilot logs (``ardupilot/``), 6-D, against
+  the autopilot's own attitude (vehicle_attitude, ATT) at its stamps, inclination RMS from
+  AUTOPILOT_SETTLE_S after the first IMU sample to the end worth scoring (before a crash)
+  [deg];
 - ``multirotor``: the simulated in-air multirotor cases (zig-zags with the Phantom DOTs' bias,
   and with a de-biased gyro; figure-8s and tight figure-8s on a de-biased gyro), inclination
   RMS after 10 s [deg], one recording per case and seed;
@@ -34,6 +38,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,7 +50,7 @@ from cf_estimator.core.params import FilterParams
 
 #: Recording families, in report order (``broad_<group>`` families are added per group found).
 FAMILIES = ("euroc", "euroc_midair", "phantom4", "phantom4_horizontal", "broad", "broad9d",
-            "multirotor", "handheld", "thesis", "compass")
+            "autopilot", "multirotor", "handheld", "thesis", "compass")
 MIDAIR_STARTS_S = (20.0, 40.0, 60.0)
 #: (label, scenario, rate [Hz] or None, options): the simulated multirotor recordings.
 MULTIROTOR_CASES: tuple[tuple[str, str, float | None, dict[str, Any]], ...] = (
@@ -57,12 +62,15 @@ MULTIROTOR_CASES: tuple[tuple[str, str, float | None, dict[str, Any]], ...] = (
 MULTIROTOR_SEEDS = (0, 1, 2)
 THESIS_CASES = ("impacts", "vibration", "acceleration")
 HANDHELD_SEEDS = (0, 1, 2, 3, 4)
+#: Start of the autopilot logs' scoring after their first IMU sample [s]: the shared ulogs are
+#: 6-10 s long (the filter's start-up phase is 2 s).
+AUTOPILOT_SETTLE_S = 2.0
 COMPASS_FRACTIONS = (0.3, 0.5, 1.0)
 #: The families the leave-one-family-out verdict holds out (BROAD by its two disjoint groups and
 #: 9-D; the other BROAD groups overlap these and are reported only).
 VERDICT_FAMILIES = ("euroc", "euroc_midair", "phantom4", "phantom4_horizontal",
-                    "broad_undisturbed", "broad_disturbed", "broad9d", "multirotor", "handheld",
-                    "thesis", "compass")
+                    "broad_undisturbed", "broad_disturbed", "broad9d", "autopilot", "multirotor",
+                    "handheld", "thesis", "compass")
 #: A delta beyond this many paired standard errors is a change, not noise.
 NOISE_SE = 2.0
 #: Requirements a family's every recording must meet (the thesis's ±90' under impacts,
@@ -112,6 +120,36 @@ def _broad_task(args: tuple) -> list[tuple[str, str, float]]:
     out = [("broad9d", trial.name, m9)]
     out += [(f"broad_{g}", trial.name, m6) for g in broad.trial_groups(trial.name, info)]
     return out
+
+
+def _autopilot_task(args: tuple) -> list[tuple[str, str, float]]:
+    from cf_estimator.bag.io import BagError
+    from cf_estimator.bag.logarrays import log_arrays
+    from cf_estimator.core.batch import estimate
+    from cf_estimator.metrics import inclination_error_deg
+
+    path, params = args
+    try:
+        log = log_arrays(path)
+    except BagError:
+        return []
+    if log.reference_topic is None or log.t_s.shape[0] < 2:
+        return []
+    p = dataclasses.replace(params, use_mag=False, world_frame="ned")
+    with warnings.catch_warnings():  # a crash's spin past the gyro's range is part of the log
+        warnings.simplefilter("ignore")
+        q = estimate(log.gyro_rad_s, log.accel_m_s2, None, timestamps_s=log.t_s,
+                     params=p).quaternion
+    # our estimate at each of the autopilot's stamps: the last IMU row at or before it
+    row = np.searchsorted(log.t_s, log.reference_t_s, side="right") - 1
+    until = math.inf if log.scored_until_s is None else log.scored_until_s
+    keep = ((row >= 0) & (log.reference_t_s >= log.t_s[0] + AUTOPILOT_SETTLE_S)
+            & (log.reference_t_s <= until))
+    if not np.any(keep):
+        return []
+    e = inclination_error_deg(q[row[keep]], log.reference_q_wxyz[keep])
+    e = e[np.isfinite(e)]
+    return [("autopilot", Path(path).name, float(np.sqrt(np.mean(e * e))))] if e.size else []
 
 
 def _multirotor_task(args: tuple) -> list[tuple[str, str, float]]:
@@ -207,7 +245,8 @@ def _run(task: tuple) -> list[tuple[str, str, float]]:
 
 
 _WORKERS: dict[str, Callable[[tuple], list[tuple[str, str, float]]]] = {
-    "flight": _flight_task, "broad": _broad_task, "multirotor": _multirotor_task,
+    "flight": _flight_task, "broad": _broad_task, "autopilot": _autopilot_task,
+    "multirotor": _multirotor_task,
     "handheld": _handheld_task, "thesis": _thesis_task, "compass": _compass_task,
 }
 
@@ -227,6 +266,10 @@ def tasks_for(data: str | Path, params: FilterParams, families: Sequence[str] = 
     if want & {"broad", "broad9d"} and (root / "broad").is_dir():
         info = broad.read_trial_info(root / "broad")
         tasks += [("broad", (str(p), info, params)) for p in broad.list_trials(root / "broad")]
+    if "autopilot" in want:
+        logs = [p for sub in ("ulogs", "ardupilot") if (root / sub).is_dir()
+                for p in sorted((root / sub).iterdir()) if p.suffix.lower() in (".ulg", ".bin")]
+        tasks += [("autopilot", (str(p), params)) for p in logs]
     if "multirotor" in want:
         tasks += [("multirotor", (label, name, rate, opts, seed, params))
                   for label, name, rate, opts in MULTIROTOR_CASES for seed in MULTIROTOR_SEEDS]
