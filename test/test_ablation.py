@@ -71,8 +71,17 @@ def test_leave_one_family_out_takes_a_variant_that_wins_and_loses_nowhere():
 
 
 def test_overlapping_broad_groups_and_single_recordings_do_not_vote():
-    rows = [_row("broad_rotation", 9), _row("broad_combined", 9, n=1), _row("euroc", -3)]
+    rows = [_row("broad_rotation", 9), _row("broad_combined", 9, n=1), _row("euroc", -3),
+            _row("phantom4", -3)]
     assert ablation.verdict(rows) == ("variant", [])
+
+
+def test_a_variant_the_other_families_never_choose_is_not_taken_for_its_one_win():
+    # better on one family, worse beyond the noise on two: without any family held out the
+    # rest do not choose it, so no family is a 'loser' - and the base must still stay
+    rows = [_row("handheld", -4), _row("phantom4", 5), _row("phantom4_horizontal", 5),
+            _row("euroc", 0.0)]
+    assert ablation.verdict(rows)[0] == "base"
 
 
 def test_overrides_take_the_parameter_types():

@@ -369,23 +369,26 @@ def ordered(scores: Iterable[str]) -> list[str]:
 
 
 def verdict(rows: Sequence[Paired]) -> tuple[str, list[str]]:
-    """Leave one family out over :data:`VERDICT_FAMILIES`: ('variant', []) when the variant,
-    chosen on the other families, never loses beyond the noise on the held-out one and wins
-    somewhere; otherwise ('base', [families where the variant, chosen without them, loses
-    beyond the noise]). Families of one recording (no paired noise) do not vote."""
+    """Leave one family out over :data:`VERDICT_FAMILIES` → (choice, losers).
+
+    For each family F the variant is chosen or not on the other families (their paired
+    z-scores summed: negative = the variant wins there) and checked on F. 'variant' when it
+    is chosen without every family and no held-out family loses beyond the noise; 'variant
+    (neutral: fewer knobs)' when no family changes beyond the noise at all; otherwise 'base',
+    with the families on which the variant, chosen without them, loses. Families of one
+    recording (no paired noise) do not vote."""
     z = {r.family: 10.0 if r.broken else max(-10.0, min(10.0, r.z)) for r in rows
          if r.n > 1 and r.family in VERDICT_FAMILIES}
-    losers = []
-    wins = False
+    if not any(abs(v) > NOISE_SE for v in z.values()):
+        return "variant (neutral: fewer knobs)", []
+    losers, always_chosen = [], True
     for fam in z:
-        chosen = sum(v for f, v in z.items() if f != fam) < 0.0  # the others pick the variant
+        chosen = sum(v for f, v in z.items() if f != fam) < 0.0
+        always_chosen = always_chosen and chosen
         if chosen and z[fam] > NOISE_SE:
             losers.append(fam)
-        wins = wins or z[fam] < -NOISE_SE
-    if not losers and wins:
+    if always_chosen and not losers:
         return "variant", []
-    if not losers and not any(v > NOISE_SE for v in z.values()):
-        return "variant (neutral: fewer knobs)", []
     return "base", losers
 
 
