@@ -85,6 +85,10 @@ setup(
         # the range bag/io.py is tested with (ROSBAGS_TESTED: its direct mcap path writes into
         # rosbags' McapWriter; 0.10 lacks the public StoragePlugin)
         "rosbags>=0.11,<0.12",
+        # truncated mcap bags read forward without their summary (bag/salvage.py): its
+        # StreamReader; lz4 (a rosbags dependency too) for the chunk a cut bag ends in
+        "mcap>=1.1,<2",
+        "lz4",
         "matplotlib",
         "h5py",
         "tqdm",

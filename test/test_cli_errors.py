@@ -91,9 +91,9 @@ def test_truncated_ros1_bag(good_bag, tmp_path, capsys):
     _truncate(full, tmp_path / "cut.bag")
     full.unlink()
     rc, _, err = run_cli(capsys, "replay", tmp_path / "cut.bag", "-o", tmp_path / "out")
-    assert rc == 1
-    assert_one_error_line(err, "cut.bag")
-    assert_nothing_left(tmp_path, "cut.bag")
+    # replayed as far as readable, said in one line (test/test_truncated_bags.py)
+    assert rc == 0 and "Traceback" not in err
+    assert [ln for ln in err.splitlines() if "truncated ROS 1 bag" in ln]
 
 
 def test_truncated_mcap_bag(good_bag, tmp_path, capsys):
@@ -102,9 +102,8 @@ def test_truncated_mcap_bag(good_bag, tmp_path, capsys):
     (cut / "metadata.yaml").write_bytes((good_bag / "metadata.yaml").read_bytes())
     _truncate(good_bag / f"{good_bag.name}.mcap", cut / f"{good_bag.name}.mcap")
     rc, _, err = run_cli(capsys, "replay", cut, "-o", tmp_path / "out")
-    assert rc == 1
-    assert_one_error_line(err, "cut")
-    assert_nothing_left(tmp_path, "cut")
+    assert rc == 0 and "Traceback" not in err
+    assert [ln for ln in err.splitlines() if "truncated mcap bag" in ln]
 
 
 def test_corrupt_message_midway_leaves_no_output(good_bag, tmp_path, capsys):

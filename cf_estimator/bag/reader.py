@@ -79,6 +79,9 @@ class InputBag:
             (TopicInfo(t, m, n) for (t, m), n in counts.items()), key=lambda i: i.topic
         )
         self.is_ros2: bool = bool(reader.is2)
+        #: the bag's end is missing: read as far as readable (:mod:`cf_estimator.bag.salvage`)
+        self.truncated = False
+        self.notes: list[str] = []  #: what the reader had to say (one line each)
 
     # -- context -------------------------------------------------------------------------------
     def __enter__(self) -> InputBag:
@@ -468,10 +471,23 @@ def open_bag(path: str | os.PathLike[str], *, ulog_instance: int | None = None) 
     why = _looks_like_bag(p)
     if why is not None:
         raise BagError(f"{p}: {why}", 2 if not p.exists() else 1)
-    try:
-        reader = AnyReader([p], default_typestore=typestore())
-        reader.open()
-    except Exception as exc:  # noqa: BLE001 - AnyReaderError, ReaderError, sqlite, yaml, OSError...
-        kind = "ROS 1 bag" if p.suffix == ".bag" else "ROS 2 bag"
-        raise BagError(f"{p}: not a readable {kind}: {one_line(exc)}") from exc
-    return InputBag(p, reader)
+    from cf_estimator.bag import salvage
+
+    # sqlite3 opens even cut short (a page missing is found while reading): its header says
+    cut = salvage.truncation(p) if p.is_dir() and not any(p.glob("*.mcap")) else None
+    if cut is None:
+        try:
+            reader = AnyReader([p], default_typestore=typestore())
+            reader.open()
+        except Exception as exc:  # noqa: BLE001 - AnyReaderError, ReaderError, sqlite, yaml...
+            cut = salvage.truncation(p)
+            if cut is None:
+                kind = "ROS 1 bag" if p.suffix == ".bag" else "ROS 2 bag"
+                raise BagError(f"{p}: not a readable {kind}: {one_line(exc)}") from exc
+        else:
+            return InputBag(p, reader)
+    salvaged, note = salvage.open_truncated(p, cut)
+    bag = InputBag(p, salvaged)  # type: ignore[arg-type]
+    bag.truncated = True
+    bag.notes.append(note)
+    return bag

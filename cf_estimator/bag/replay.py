@@ -760,6 +760,8 @@ def replay_variants(
         if px4_in is not None:
             variants = px4_in.variants
         topics = _select_topics(bag, opts, px4_in)
+        # a truncated bag read as far as readable (bag/salvage.py): said once, in the warnings
+        in_notes = list(getattr(bag, "notes", ())) if px4_in is None else []
         total = bag.count(topics.names)
         in_format = bag.format
         runs: list[_Run] = []
@@ -811,6 +813,8 @@ def replay_variants(
     try:
         results = [_result(r, in_path, in_format, topics, reading, opts, px4_in, wall)
                    for r in runs]
+        for res in results:
+            res.summary["warnings"][:0] = in_notes
     except BaseException:
         for r in runs:
             r.abort()
