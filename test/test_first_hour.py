@@ -144,18 +144,18 @@ def test_tune_never_searches_a_disabled_recovery_and_accepts_no_limits():
 def test_bench_skips_missing_peers_with_one_note(tmp_path, capsys, monkeypatch):
     real = peers_mod._require
 
-    def only_madgwick_missing(peer):
-        if peer == "madgwick":
+    def only_fusion_missing(peer):
+        if peer == "fusion":
             raise peers_mod.PeerUnavailable("missing")
         return real(peer)
 
-    monkeypatch.setattr(peers_mod, "_require", only_madgwick_missing)
-    args = argparse.Namespace(peers="madgwick")
+    monkeypatch.setattr(peers_mod, "_require", only_fusion_missing)
+    args = argparse.Namespace(peers="fusion")
     from cf_estimator.cli.bench_cmd.common import available_peers as _available_peers
 
     assert _available_peers(args) == []
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "skipped: madgwick (PyPI ahrs)" in err[0]
+    assert len(err) == 1 and "skipped: fusion (PyPI imufusion)" in err[0]
     assert _available_peers(argparse.Namespace(peers="none")) == []
     assert capsys.readouterr().err == ""
 

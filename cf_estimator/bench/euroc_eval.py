@@ -137,7 +137,7 @@ def register(algorithm: Algorithm) -> None:
 
 register(Algorithm("cf_estimator", _ours_online, ours=True))
 register(Algorithm("cf_estimator_offline", _ours_offline, ours=True))
-for _name, _package in (("vqf", "vqf"), ("vqf_offline", "vqf"), ("madgwick", "ahrs"),
+for _name, _package in (("vqf", "vqf"), ("vqf_offline", "vqf"), ("madgwick", None),
                         ("fusion", "imufusion"), ("complementary", None), ("riann", "riann")):
     register(Algorithm(_name, _peer(_name), _package))
 register(Algorithm("onboard", _onboard, recorded=True))

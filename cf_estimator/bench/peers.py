@@ -14,7 +14,8 @@ filter and the BROAD reference. Units and frames of each peer (see docs/peers.md
   rate set to the recording's; ``Bias`` at its defaults corrects every gyro sample before the
   AHRS update): gyro **deg/s**, acc **g**, mag any; quaternion (w, x, y, z) sensor-to-earth in
   **NWU** → q_ENU = Rz(+90°) ⊗ q. Starts at identity (its 3 s start-up gain ramp).
-- ``madgwick`` (``ahrs`` 0.4 ``ahrs.filters.Madgwick`` at the gain the ROS package
+- ``madgwick`` (``ahrs`` 0.4 ``ahrs.filters.Madgwick``, ported to plain floats and held equal
+  to it by a test, at the gain the ROS package
   imu_filter_madgwick ships, ``gain: 0.1``, ``zeta: 0.0`` (no gyro-drift term), the same gain
   for the IMU and MARG updates; ahrs' own defaults, 0.033 IMU / 0.041 MARG, are not what a ROS
   user runs): gyro rad/s, acc and mag any unit (normalised); quaternion (w, x, y, z)
@@ -53,7 +54,7 @@ Q_ENU_FROM_NWU = np.array([math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5)])
 
 PEERS = ("vqf", "fusion", "madgwick", "complementary")
 #: peer → PyPI package (None: ported here, always available).
-PEER_PACKAGES: dict[str, str | None] = {"vqf": "vqf", "fusion": "imufusion", "madgwick": "ahrs",
+PEER_PACKAGES: dict[str, str | None] = {"vqf": "vqf", "fusion": "imufusion", "madgwick": None,
                                         "complementary": None}
 #: imu_filter_madgwick's ROS defaults (its ``gain`` and ``zeta`` parameters).
 MADGWICK_ROS_GAIN = 0.1
@@ -207,30 +208,96 @@ def initial_nwu(acc0: np.ndarray, mag0: np.ndarray | None) -> np.ndarray:
     return quat.multiply(quat.conjugate(Q_ENU_FROM_NWU), q_enu)
 
 
-def run_madgwick(gyro: np.ndarray, acc: np.ndarray, mag: np.ndarray | None, rate_hz: float
-                 ) -> np.ndarray:
-    """Madgwick (``ahrs`` package) at imu_filter_madgwick's ROS default gain 0.1 (zeta 0),
-    started from the first sample."""
-    _require("madgwick")
-    from ahrs.filters import Madgwick
-
+def run_madgwick(gyro: np.ndarray, acc: np.ndarray, mag: np.ndarray | None, rate_hz: float,
+                 gain: float = MADGWICK_ROS_GAIN) -> np.ndarray:
+    """Madgwick at imu_filter_madgwick's ROS default gain 0.1 (zeta 0), started from the first
+    sample: ``ahrs.filters.Madgwick``'s ``updateIMU``/``updateMARG`` (ahrs 0.4), ported to
+    plain floats (:func:`_madgwick_step`; the same operations, held equal to ahrs sample for
+    sample by test/test_fair_peers.py) — ahrs' NumPy per sample costs 100–160 µs, a BROAD
+    campaign minutes. Returns q_ENU_from_sensor (N, 4)."""
     g = np.asarray(gyro, dtype=float)
     a = np.asarray(acc, dtype=float)
     n = g.shape[0]
     m = None if mag is None else np.asarray(mag, dtype=float)
-    filt = Madgwick(frequency=rate_hz, gain=MADGWICK_ROS_GAIN)
-    filt.gain = MADGWICK_ROS_GAIN  # ahrs picks gain_imu/gain_marg otherwise; one gain, as ROS
-    first_mag = m[0] if m is not None and np.all(np.isfinite(m[0])) else None
-    q = initial_nwu(a[0], first_mag)
+    has_mag = (np.zeros(n, dtype=bool) if m is None
+               else np.all(np.isfinite(m), axis=1))
+    q = tuple(float(c) for c in initial_nwu(a[0], m[0] if has_mag[0] else None))
     out = np.empty((n, 4))
     out[0] = q
+    dt = 1.0 / rate_hz
+    gl, al = g.tolist(), a.tolist()
+    ml = m.tolist() if m is not None else None
     for i in range(1, n):
-        if m is not None and np.all(np.isfinite(m[i])):
-            q = filt.updateMARG(q, g[i], a[i], m[i])
-        else:
-            q = filt.updateIMU(q, g[i], a[i])
+        q = _madgwick_step(q, gl[i], al[i], ml[i] if has_mag[i] else None, gain, dt)
         out[i] = q
     return quat.multiply(Q_ENU_FROM_NWU, out)
+
+
+def _madgwick_step(q: tuple[float, float, float, float], gyr: list[float], acc: list[float],
+                   mag: list[float] | None, beta: float, dt: float
+                   ) -> tuple[float, float, float, float]:
+    """One ``updateMARG`` (``mag`` given, non-zero) or ``updateIMU`` of ahrs' Madgwick
+    (its eqs. 12, 25/31, 26/32, 33, 34, 45, 46, 13), NWU, q = q_NWU_from_sensor."""
+    qw, qx, qy, qz = q
+    nq = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)  # ahrs' Quaternion(q) normalises
+    qw, qx, qy, qz = qw / nq, qx / nq, qy / nq, qz / nq
+    gx, gy, gz = gyr
+    if gx == 0.0 and gy == 0.0 and gz == 0.0:
+        return (qw, qx, qy, qz)
+    if mag is not None and mag[0] == 0.0 and mag[1] == 0.0 and mag[2] == 0.0:
+        mag = None
+    # qDot = 0.5 * q ⊗ (0, gyr)
+    dw = 0.5 * (-qx * gx - qy * gy - qz * gz)
+    dx = 0.5 * (qw * gx + qy * gz - qz * gy)
+    dy = 0.5 * (qw * gy - qx * gz + qz * gx)
+    dz = 0.5 * (qw * gz + qx * gy - qy * gx)
+    ax, ay, az = acc
+    an = math.sqrt(ax * ax + ay * ay + az * az)
+    if an > 0.0:
+        ax, ay, az = ax / an, ay / an, az / an
+        f0 = 2.0 * (qx * qz - qw * qy) - ax
+        f1 = 2.0 * (qw * qx + qy * qz) - ay
+        f2 = 2.0 * (0.5 - qx * qx - qy * qy) - az
+        # J^T f of the gravity rows
+        sw = -2.0 * qy * f0 + 2.0 * qx * f1
+        sx = 2.0 * qz * f0 + 2.0 * qw * f1 - 4.0 * qx * f2
+        sy = -2.0 * qw * f0 + 2.0 * qz * f1 - 4.0 * qy * f2
+        sz = 2.0 * qx * f0 + 2.0 * qy * f1
+        fn2 = f0 * f0 + f1 * f1 + f2 * f2
+        if mag is not None:
+            mn = math.sqrt(mag[0] * mag[0] + mag[1] * mag[1] + mag[2] * mag[2])
+            mx, my, mz = mag[0] / mn, mag[1] / mn, mag[2] / mn
+            # h = q ⊗ (0, m) ⊗ q*: the field in the earth frame
+            pw = -qx * mx - qy * my - qz * mz
+            px = qw * mx + qy * mz - qz * my
+            py = qw * my - qx * mz + qz * mx
+            pz = qw * mz + qx * my - qy * mx
+            hx = -pw * qx + px * qw - py * qz + pz * qy
+            hy = -pw * qy + px * qz + py * qw - pz * qx
+            hz = -pw * qz - px * qy + py * qx + pz * qw
+            bx = math.sqrt(hx * hx + hy * hy)
+            bz = hz
+            f3 = 2.0 * bx * (0.5 - qy * qy - qz * qz) + 2.0 * bz * (qx * qz - qw * qy) - mx
+            f4 = 2.0 * bx * (qx * qy - qw * qz) + 2.0 * bz * (qw * qx + qy * qz) - my
+            f5 = 2.0 * bx * (qw * qy + qx * qz) + 2.0 * bz * (0.5 - qx * qx - qy * qy) - mz
+            sw += -2.0 * bz * qy * f3 + (-2.0 * bx * qz + 2.0 * bz * qx) * f4 \
+                + 2.0 * bx * qy * f5
+            sx += 2.0 * bz * qz * f3 + (2.0 * bx * qy + 2.0 * bz * qw) * f4 \
+                + (2.0 * bx * qz - 4.0 * bz * qx) * f5
+            sy += (-4.0 * bx * qy - 2.0 * bz * qw) * f3 + (2.0 * bx * qx + 2.0 * bz * qz) * f4 \
+                + (2.0 * bx * qw - 4.0 * bz * qy) * f5
+            sz += (-4.0 * bx * qz + 2.0 * bz * qx) * f3 + (-2.0 * bx * qw + 2.0 * bz * qy) * f4 \
+                + 2.0 * bx * qx * f5
+            fn2 += f3 * f3 + f4 * f4 + f5 * f5
+        if fn2 > 0.0:
+            sn = math.sqrt(sw * sw + sx * sx + sy * sy + sz * sz)
+            dw -= beta * sw / sn
+            dx -= beta * sx / sn
+            dy -= beta * sy / sn
+            dz -= beta * sz / sn
+    qw, qx, qy, qz = qw + dw * dt, qx + dx * dt, qy + dy * dt, qz + dz * dt
+    nq = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+    return (qw / nq, qx / nq, qy / nq, qz / nq)
 
 
 # -- imu_complementary_filter (port) ----------------------------------------------------------
