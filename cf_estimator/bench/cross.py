@@ -38,8 +38,14 @@ offline (its own offline mode). Rows (inclination [deg] unless marked):
   (:func:`~cf_estimator.bench.broad.optical_velocity`; handheld motion up to 8 g, 9-D total
   and 6-D inclination, online only: the one aided family with a compass).
 
-Families whose data directory is missing are left out (a note says so). The defaults are chosen
-so that no row gets worse (BENCHMARKS.md "How the shipped defaults were chosen").
+Families whose data directory is missing are left out (a note says so). A default changes only
+when no row gets worse beyond its noise (docs/decisions/0002-ablation-held-out-by-family.md).
+
+``peers`` (``bench report``; ``bench cross`` itself prints our two columns and VQF's) adds
+columns for the other peers of :mod:`cf_estimator.bench.peers` — x-io Fusion, Madgwick,
+imu_complementary_filter — at the settings their authors give, on every row a peer can run
+(not the aided and consistency rows, nor the learned-bias rows: ours and VQF's only), and
+``onboard`` (the Xsens DOTs' own filter, recorded) on the phantom4 rows.
 """
 
 from __future__ import annotations
@@ -113,27 +119,39 @@ def standard_error(values: Iterable[float]) -> float:
     return statistics.stdev(vals) / math.sqrt(len(vals))
 
 
+def _runnable(peers: Sequence[str]) -> list[str]:
+    """The peers among ``peers`` that run on arrays (:func:`cf_estimator.bench.peers.runners`):
+    not a peer's offline mode (run beside its online one) nor a recorded filter."""
+    from cf_estimator.bench.peers import PEERS
+
+    return [p for p in peers if p in PEERS]
+
+
 @dataclass
 class CrossResult:
-    """The rows in table order, and notes (families left out, peers missing)."""
+    """The rows in table order, the columns (ours, VQF's, then any other peers asked for), and
+    notes (families left out, peers missing)."""
 
     rows: list[Row] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    columns: list[str] = field(default_factory=lambda: list(COLUMNS))
 
     def to_json(self) -> dict:
         """``{"columns", "rows": [{family, label, unit, values, noise}], "notes"}`` (NaN → null)."""
         def clean(v: float) -> float | None:
             return None if not math.isfinite(v) else round(float(v), 4)
 
-        return {"columns": list(COLUMNS), "notes": list(self.notes),
+        cols = self.columns
+        return {"columns": list(cols), "notes": list(self.notes),
                 "rows": [{"family": r.family, "label": r.label, "unit": r.unit,
-                          "values": {c: clean(r.values.get(c, math.nan)) for c in COLUMNS},
-                          "noise": {c: clean(r.noise.get(c, math.nan)) for c in COLUMNS}}
+                          "values": {c: clean(r.values.get(c, math.nan)) for c in cols},
+                          "noise": {c: clean(r.noise.get(c, math.nan)) for c in cols}}
                          for r in self.rows]}
 
 
 def _euroc_rows(root: Path, params: FilterParams, peers: Sequence[str], jobs: int,
-                family: str, label: str, midair: bool) -> list[Row]:
+                family: str, label: str, midair: bool,
+                columns: Sequence[str] = COLUMNS) -> list[Row]:
     from cf_estimator.bench import euroc
     from cf_estimator.bench import euroc_eval as ev
 
@@ -146,24 +164,25 @@ def _euroc_rows(root: Path, params: FilterParams, peers: Sequence[str], jobs: in
                                for per in found.flights.values()])
 
     mean = Row(family, f"{label}{start}, after 10 s: mean", "deg",
-               {c: res.mean(c, "inclination_rms_deg") for c in COLUMNS},
-               {c: noise(res, c, "inclination_rms_deg") for c in COLUMNS})
+               {c: res.mean(c, "inclination_rms_deg") for c in columns},
+               {c: noise(res, c, "inclination_rms_deg") for c in columns})
     rows = [mean]
     if not midair:
         rows.append(Row(family, f"{label}, after 10 s: worst recording", "deg",
                         {c: max(per.get(c, {}).get("inclination_rms_deg", math.nan)
-                                for per in res.flights.values()) for c in COLUMNS}))
+                                for per in res.flights.values()) for c in columns}))
         return rows
     for start in MIDAIR_STARTS_S:
         mid = ev.run_midair(flights, params, start, peers, jobs=jobs)
         for key, window in zip(ev.MIDAIR_SCORES, ("2-12 s", "12 s-end"), strict=True):
             rows.append(Row(family, f"{label}, mid-air start {start:g} s: {window}", "deg",
-                            {c: mid.mean(c, key) for c in COLUMNS},
-                            {c: noise(mid, c, key) for c in COLUMNS}))
+                            {c: mid.mean(c, key) for c in columns},
+                            {c: noise(mid, c, key) for c in columns}))
     return rows
 
 
-def _broad_rows(root: Path, params: FilterParams, peers: Sequence[str], jobs: int) -> list[Row]:
+def _broad_rows(root: Path, params: FilterParams, peers: Sequence[str], jobs: int,
+                columns: Sequence[str] = COLUMNS) -> list[Row]:
     from cf_estimator.bench import broad
     from cf_estimator.bench.evaluate import run_broad
 
@@ -178,13 +197,13 @@ def _broad_rows(root: Path, params: FilterParams, peers: Sequence[str], jobs: in
     for group, members in res.group_members().items():
         rows.append(Row("broad", f"BROAD {group} ({len(members)}): 6-D inclination", "deg",
                         {c: res.group_mean(members, f"{c}_6d", "inclination_rmse_deg")
-                         for c in COLUMNS},
-                        {c: noise(members, f"{c}_6d", "inclination_rmse_deg") for c in COLUMNS}))
+                         for c in columns},
+                        {c: noise(members, f"{c}_6d", "inclination_rmse_deg") for c in columns}))
     for group, members in res.group_members().items():
         rows.append(Row("broad", f"BROAD {group} ({len(members)}): 9-D total", "deg",
                         {c: res.group_mean(members, f"{c}_9d", "total_rmse_deg")
-                         for c in COLUMNS},
-                        {c: noise(members, f"{c}_9d", "total_rmse_deg") for c in COLUMNS}))
+                         for c in columns},
+                        {c: noise(members, f"{c}_9d", "total_rmse_deg") for c in columns}))
     return rows
 
 
@@ -212,6 +231,10 @@ def _compass_case(args: tuple[float, int, FilterParams, tuple[str, ...], Floors]
         qs["vqf"] = peer_mod.run_vqf(c.gyro_rad_s, c.accel_m_s2, c.mag_T, c.rate_hz)["9d"]
         qs["vqf_offline"] = peer_mod.run_vqf_offline(c.gyro_rad_s, c.accel_m_s2, c.mag_T,
                                                      c.rate_hz)["9d"]
+    runners = peer_mod.runners()
+    for p in _runnable(peers):
+        if p != "vqf":
+            qs[p] = runners[p](c.gyro_rad_s, c.accel_m_s2, c.mag_T, c.rate_hz, ("9d",))["9d"]
     out = {}
     for col, q in qs.items():
         e = heading_error_deg(q, c.q_true)[c.magnet_on]
@@ -222,7 +245,7 @@ def _compass_case(args: tuple[float, int, FilterParams, tuple[str, ...], Floors]
 
 
 def _compass_rows(params: FilterParams, peers: Sequence[str], jobs: int,
-                  floors: Floors) -> list[Row]:
+                  floors: Floors, columns: Sequence[str] = COLUMNS) -> list[Row]:
     import numpy as np
 
     from cf_estimator.bench.parallel import run_tasks
@@ -234,7 +257,7 @@ def _compass_rows(params: FilterParams, peers: Sequence[str], jobs: int,
     for fraction in COMPASS_FRACTIONS:
         runs = [out for f, out in found if f == fraction]
         for i, what in enumerate(("peak", "RMS")):
-            cols = [c for c in COLUMNS if all(c in r for r in runs)]
+            cols = [c for c in columns if all(c in r for r in runs)]
             rows.append(Row("compass", f"magnet {fraction:g}x on a turning sensor: heading {what}",
                             "deg", {c: sum(r[c][i] for r in runs) / len(runs) for c in cols},
                             {c: standard_error([r[c][i] for r in runs]) for c in cols}))
@@ -276,6 +299,10 @@ def _multirotor_case(args: tuple[str, float | None, dict[str, float], int, Filte
         vqf = peer_mod.run_vqf(g, a, None, sc.rate_hz)
         qs["vqf"], bias["vqf"] = vqf["6d"], vqf["bias"][-1]
         qs["vqf_offline"] = peer_mod.run_vqf_offline(g, a, None, sc.rate_hz)["6d"]
+    runners = peer_mod.runners()
+    for p in _runnable(peers):
+        if p != "vqf":
+            qs[p] = runners[p](g, a, None, sc.rate_hz, ("6d",))["6d"]
     after = t >= SETTLE_S
     out: dict[str, tuple[float, ...]] = {}
     for col, q in qs.items():
@@ -287,7 +314,8 @@ def _multirotor_case(args: tuple[str, float | None, dict[str, float], int, Filte
     return out
 
 
-def _multirotor_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> list[Row]:
+def _multirotor_rows(params: FilterParams, peers: Sequence[str], jobs: int,
+                     columns: Sequence[str] = COLUMNS) -> list[Row]:
     from cf_estimator.bench.parallel import run_tasks
 
     work = [(name, rate, kwargs, seed, params, tuple(peers))
@@ -300,7 +328,7 @@ def _multirotor_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> l
         for i, (what, unit) in enumerate((("inclination RMS after 10 s", "deg"),
                                           ("inclination peak after 10 s", "deg"),
                                           ("learned-bias error at the end", "deg/s"))):
-            cols = [c for c in COLUMNS if all(len(r.get(c, ())) > i for r in runs)]
+            cols = [c for c in columns if all(len(r.get(c, ())) > i for r in runs)]
             rows.append(Row("multirotor", f"simulated {label}: {what}", unit,
                             {c: sum(r[c][i] for r in runs) / n for c in cols},
                             {c: standard_error([r[c][i] for r in runs]) for c in cols}))
@@ -382,14 +410,15 @@ def _broad_aided(args: tuple[Path, FilterParams]) -> tuple[float, float]:
             metrics.rmse_deg(q["6d"], trial.quat_ref, trial.movement)["inclination_rmse_deg"])
 
 
-def _scenario_rows(params: FilterParams, peers: Sequence[str], jobs: int) -> list[Row]:
+def _scenario_rows(params: FilterParams, peers: Sequence[str], jobs: int,
+                   columns: Sequence[str] = COLUMNS) -> list[Row]:
     from cf_estimator.bench.scenarios import run_scenarios
 
-    found = run_scenarios(SCENARIOS, params, [p for p in peers if p == "vqf"], jobs=jobs)
+    found = run_scenarios(SCENARIOS, params, _runnable(peers), jobs=jobs)
     rows = []
     for name in SCENARIOS:
         values = {r["algorithm"]: r["peak_arcmin"] for r in found
-                  if r["scenario"] == name and r["algorithm"] in COLUMNS}
+                  if r["scenario"] == name and r["algorithm"] in columns}
         rows.append(Row("scenarios", f"thesis {name}: peak (limit 90')", "arcmin", values))
     return rows
 
@@ -424,10 +453,11 @@ def _consistency_rows(folder: Path, family: str, label: str, params: FilterParam
 
 def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = FAMILIES,
               jobs: int = 1, progress: Callable[[str], None] | None = None,
-              floors: Floors | None = None) -> CrossResult:
+              floors: Floors | None = None, peers: Sequence[str] = ()) -> CrossResult:
     """The table over the families below ``data`` (``euroc/``, ``phantom4/``, ``broad/``);
     ``floors``: the covariance model's, for the consistency rows (default: the shipped
-    ones)."""
+    ones); ``peers``: more columns beside VQF's (module docstring: ``fusion``, ``madgwick``,
+    ``complementary``, ``onboard``; those not installed are left out with a note)."""
     from cf_estimator.bench.consistency import Floors
     from cf_estimator.bench.euroc_eval import select_peers
 
@@ -435,20 +465,29 @@ def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = 
 
     root = Path(data)
     result = CrossResult()
+    extra = [p for p in dict.fromkeys(peers) if p not in ("vqf", "vqf_offline")]
     peers, missing = select_peers(["vqf"])  # vqf and vqf_offline, if installed
     if missing:
         result.notes.append("VQF not installed (pip install vqf): its columns are empty")
+    if extra:
+        more, gone = select_peers(extra)
+        if gone:
+            result.notes.append(f"peers not installed, their columns left out: {', '.join(gone)}")
+        result.columns += more
+        peers = peers + more
+    cols = result.columns
+    runs_on_arrays = [p for p in peers if p != "onboard"]
     for family in families:
         if progress:
             progress(family)
         if family == "scenarios":
-            result.rows += _scenario_rows(params, peers, jobs)
+            result.rows += _scenario_rows(params, runs_on_arrays, jobs, cols)
             continue
         if family == "compass":
-            result.rows += _compass_rows(params, peers, jobs, floors)
+            result.rows += _compass_rows(params, runs_on_arrays, jobs, floors, cols)
             continue
         if family == "multirotor":
-            result.rows += _multirotor_rows(params, peers, jobs)
+            result.rows += _multirotor_rows(params, runs_on_arrays, jobs, cols)
             continue
         if family == "aided":
             rows, notes = _aided_rows(root, params, jobs)
@@ -460,17 +499,17 @@ def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = 
             result.notes.append(f"{family}: {folder} not found, left out")
             continue
         if family == "euroc":
-            result.rows += _euroc_rows(folder, params, peers, jobs, "euroc", "EuRoC MH",
-                                       midair=True)
+            result.rows += _euroc_rows(folder, params, runs_on_arrays, jobs, "euroc",
+                                       "EuRoC MH", midair=True, columns=cols)
             result.rows += _consistency_rows(folder, family, "EuRoC MH", params, jobs, floors)
         elif family in ("phantom4", "phantom4_horizontal"):
             label = "phantom4" if family == "phantom4" else "phantom4 horizontal"
             result.rows += _euroc_rows(folder, params, peers, jobs, family, label,
-                                       midair=False)
+                                       midair=False, columns=cols)
             result.rows += _consistency_rows(folder, family, label, params, jobs, floors)
         elif family == "broad":
             # BROAD's evaluation runs VQF's offline mode with VQF itself
-            result.rows += _broad_rows(folder, params, [p for p in peers if p == "vqf"], jobs)
+            result.rows += _broad_rows(folder, params, _runnable(peers), jobs, cols)
             result.rows += _consistency_rows(folder, family, "BROAD all", params, jobs,
                                              floors)
         else:
@@ -479,13 +518,14 @@ def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = 
 
 
 def format_table(result: CrossResult) -> str:
-    """Rows × the four columns, two decimals (arcmin, s and % one), '-' where not applicable."""
+    """Rows × the columns, two decimals (arcmin, s and % one), '-' where not applicable."""
     w = max([len(r.label) for r in result.rows] + [6])
-    cw = max(len(c) for c in COLUMNS)
-    lines = [f"  {'row':<{w}}  {'unit':<6}" + "".join(f"  {c:>{cw}}" for c in COLUMNS)]
+    cols = result.columns
+    cw = max(len(c) for c in cols)
+    lines = [f"  {'row':<{w}}  {'unit':<6}" + "".join(f"  {c:>{cw}}" for c in cols)]
     for r in result.rows:
         cells = []
-        for c in COLUMNS:
+        for c in cols:
             v = r.values.get(c, math.nan)
             text = "-" if not math.isfinite(v) else (f"{v:.1f}" if r.unit in ("arcmin", "s", "%")
                                                      else f"{v:.2f}")

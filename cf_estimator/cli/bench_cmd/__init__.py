@@ -1,5 +1,5 @@
-"""``cf-estimator bench broad|euroc|scenarios|speed|cross|sustained|fleet|ablate``: accuracy and
-speed versus the peers, and the ablation of our own mechanisms.
+"""``cf-estimator bench broad|euroc|scenarios|speed|cross|sustained|fleet|ablate|report``: accuracy
+and speed versus the peers, the ablation of our own mechanisms, and the report (BENCHMARKS.md).
 
 ``bench broad --data DIR`` scores our filter (and ``--peers``) on BROAD trial files: per-group
 tables of total/heading/inclination RMSE [deg] over the movement samples, 9-D and 6-D, and
@@ -20,6 +20,7 @@ from cf_estimator.cli.bench_cmd import (
     cross,
     euroc,
     fleet,
+    report,
     scenarios,
     speed,
     sustained,
@@ -31,7 +32,7 @@ def register(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "bench", help="accuracy and speed benchmarks vs peers, and ablations (bench broad, euroc, "
         "scenarios, ablate, "
-        "speed, cross, sustained, fleet)",
+        "speed, cross, sustained, fleet, report)",
         description="Benchmarks of the filter against VQF, x-io Fusion and Madgwick.",
     )
     sub = p.add_subparsers(dest="bench_command", required=True, metavar="BENCHMARK")
@@ -43,3 +44,4 @@ def register(subparsers: Any) -> None:
     cross.add_parser(sub)
     sustained.add_parser(sub)
     fleet.add_parser(sub)
+    report.add_parser(sub)
