@@ -1,10 +1,10 @@
 """A documented ``cf-estimator`` command, run once per test session and shared by every test.
 
-The docs' quoted outputs (test/test_doc_outputs.py) and the guards that read the same run's
-files (test/test_cross_table.py reads ``bench cross --json``) ask here: the first asker runs the
+The docs' quoted outputs (test/test_doc_outputs.py) and the guards that read a run's files
+(test/test_cross_table.py reads ``bench cross --json``) ask here: the first asker runs the
 command as a user would — in a fresh directory ``work/`` beside a link ``shared`` to
 ``../shared`` — and later askers get the same run (exit code, stdout, the directory with the
-files it wrote). ``bench cross`` (about a minute) therefore runs once, not once per test file.
+files it wrote). A command asked for by several test files runs once.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from cf_estimator.cli.main import main
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
-#: The cross-dataset table as BENCHMARKS.md quotes it (its marker names this command).
+#: The cross-dataset table the guards of test/test_cross_table.py run (ours and VQF only).
 CROSS_COMMAND = "cf-estimator bench cross --data ../shared/data --json cross.json"
 
 

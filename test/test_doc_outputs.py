@@ -1,12 +1,16 @@
-"""Every command output README.md, docs/replay.md and BENCHMARKS.md quote is what it prints today.
+"""Every command output README.md and docs/replay.md quote is what it prints today.
+
+BENCHMARKS.md quotes no command output: it is rendered from the committed results
+(test/test_benchmarks_report.py holds it equal to that rendering; ``cf-estimator bench report``
+regenerates both).
 
 A quoted example is a fenced block whose first line is ``$ cf-estimator ...`` (then its output,
 then maybe more ``$`` lines), or a block right after ``<!-- output of: cf-estimator ... -->``
 (an excerpt of that command's output). Each example runs in a fresh directory next to a link to
 ``../shared`` (examples reading ``../shared/data`` are skipped when it is absent); its quoted
 lines must appear, in order and contiguously, in what the command prints. A single-command
-example runs once per session (test/cli_runs.py), shared with the tests that read the same
-run's files (the cross-dataset table's guards read its ``--json``). Only wall-clock
+example runs once per session (test/cli_runs.py), shared with any test that reads the same
+run's files. Only wall-clock
 figures are masked (``N messages/s (T s)``, ``done in T s``, tune's ``(T s)`` per pass):
 everything else is deterministic.
 
@@ -24,7 +28,7 @@ from cli_runs import REPO, SHARED, run_documented
 
 from cf_estimator.cli.main import main
 
-DOCS = (REPO / "README.md", REPO / "docs" / "replay.md", REPO / "BENCHMARKS.md")
+DOCS = (REPO / "README.md", REPO / "docs" / "replay.md")
 MARKER = re.compile(r"<!-- output of: (cf-estimator .*?) -->")
 MASKS = (
     (re.compile(r"\d+ messages/s \([\d.]+ s\)"), "<N> messages/s (<T> s)"),
