@@ -99,9 +99,11 @@ setup(
         "pymavlink",
     ],
     extras_require={
-        # vqf: the peer the bench tests run; dask[distributed]: the LocalCluster (loopback) tests;
+        # vqf, imufusion: the peers the bench tests run (test_fair_peers.py: Fusion's recommended
+        # set-up at work); dask[distributed]: the LocalCluster (loopback) tests;
         # pytest-timeout: a hung test fails after 10 minutes (pyproject: timeout), not at CI's limit
-        "test": ["pytest", "pytest-timeout", "hypothesis", "ruff", "vqf", "dask[distributed]"],
+        "test": ["pytest", "pytest-timeout", "hypothesis", "ruff", "vqf", "imufusion",
+                 "dask[distributed]"],
         # --cluster ADDRESS|local:N on replay, tune and bench (docs/cluster.md)
         "cluster": ["dask[distributed]"],
         # riann: RIANN on ONNX Runtime (~80 MB installed, no torch); its weights ship inside
