@@ -133,9 +133,10 @@ def _autopilot(root: Path, params: FilterParams | None) -> list[dict]:
                            options=ReplayOptions(progress=False)).summary
             ref = s.get("reference") or {}
             rms, peak = ref.get("rmse_deg", {}), ref.get("max_deg", {})
+            log = s.get("px4") or s.get("ardupilot") or {}
             rows.append({"log": path.name, "autopilot": autopilot, "reference": ref.get("topic"),
                          "imu_rate_hz": s.get("imu_rate_hz"), "imu_s": s.get("duration_s"),
-                         "log_s": s.get("bag_duration_s"),
+                         "log_s": log.get("log_duration_s", s.get("bag_duration_s")),
                          "samples_scored": ref.get("samples_scored"),
                          "heading_alignment": ref.get("heading_alignment"),
                          "inclination_rms_deg": rms.get("inclination"),
