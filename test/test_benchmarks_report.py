@@ -14,6 +14,7 @@ import json
 from pathlib import Path
 
 import pytest
+from conftest import DATA_ROOT
 
 from cf_estimator.bench import report
 from cf_estimator.cli.main import main
@@ -157,10 +158,9 @@ def test_bench_report_writes_the_results_and_their_rendering(tmp_path, capsys, m
 
 
 def test_the_autopilot_rows_are_the_replays_agreement():
-    data = REPO.parent / "shared" / "data"
-    if not (data / "ulogs").is_dir():
-        pytest.skip(f"{data} not available")
-    rows = {r["log"]: r for r in report._autopilot(data, None)}
+    if not (DATA_ROOT / "ulogs").is_dir():
+        pytest.skip(f"{DATA_ROOT} not available")
+    rows = {r["log"]: r for r in report._autopilot(DATA_ROOT, None)}
     sitl = rows["sample_px4_events.ulg"]
     assert sitl["autopilot"] == "PX4" and sitl["reference"] == "vehicle_attitude"
     assert sitl["samples_scored"] > 500 and sitl["inclination_rms_deg"] < 0.5

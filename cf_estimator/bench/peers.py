@@ -212,7 +212,7 @@ def run_madgwick(gyro: np.ndarray, acc: np.ndarray, mag: np.ndarray | None, rate
                  gain: float = MADGWICK_ROS_GAIN) -> np.ndarray:
     """Madgwick at imu_filter_madgwick's ROS default gain 0.1 (zeta 0), started from the first
     sample: ``ahrs.filters.Madgwick``'s ``updateIMU``/``updateMARG`` (ahrs 0.4), ported to
-    plain floats (:func:`_madgwick_step`; the same operations, held equal to ahrs sample for
+    plain floats (:func:`madgwick_step`; the same operations, held equal to ahrs sample for
     sample by test/test_fair_peers.py) — ahrs' NumPy per sample costs 100–160 µs, a BROAD
     campaign minutes. Returns q_ENU_from_sensor (N, 4)."""
     g = np.asarray(gyro, dtype=float)
@@ -228,12 +228,12 @@ def run_madgwick(gyro: np.ndarray, acc: np.ndarray, mag: np.ndarray | None, rate
     gl, al = g.tolist(), a.tolist()
     ml = m.tolist() if m is not None else None
     for i in range(1, n):
-        q = _madgwick_step(q, gl[i], al[i], ml[i] if has_mag[i] else None, gain, dt)
+        q = madgwick_step(q, gl[i], al[i], ml[i] if has_mag[i] else None, gain, dt)
         out[i] = q
     return quat.multiply(Q_ENU_FROM_NWU, out)
 
 
-def _madgwick_step(q: tuple[float, float, float, float], gyr: list[float], acc: list[float],
+def madgwick_step(q: tuple[float, float, float, float], gyr: list[float], acc: list[float],
                    mag: list[float] | None, beta: float, dt: float
                    ) -> tuple[float, float, float, float]:
     """One ``updateMARG`` (``mag`` given, non-zero) or ``updateIMU`` of ahrs' Madgwick

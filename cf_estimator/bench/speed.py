@@ -55,26 +55,35 @@ def per_sample_rates(n: int = 20000, peers: tuple[str, ...] = ("vqf", "fusion", 
             v.update(gyro[i], acc[i], mag[i])
             v.getQuat9D()
         out["vqf"] = n / (time.perf_counter() - t0)
-    if "fusion" in peers:
+    if "fusion" in peers:  # as the bench runs it: the offset module, then the AHRS update
         import imufusion
 
+        from cf_estimator.bench.peers import FUSION_SETTINGS as fs
+
         ah = imufusion.Ahrs()
-        ah.set_sample_period(dt)
+        ah.set_settings(imufusion.AhrsSettings(
+            sample_rate=float(rate_hz), convention=imufusion.CONVENTION_NWU, gain=fs["gain"],
+            gyroscope_range=fs["gyroscope_range_deg_s"],
+            acceleration_rejection=fs["acceleration_rejection_deg"],
+            magnetic_rejection=fs["magnetic_rejection_deg"],
+            rejection_timeout=fs["rejection_timeout_s"]))
+        bias = imufusion.Bias()
+        bias.set_settings(imufusion.BiasSettings(sample_rate=float(rate_hz)))
         gd, ag = np.degrees(gyro), acc / 9.80665
         t0 = time.perf_counter()
         for i in range(n):
-            ah.update(gd[i], ag[i], mag[i])
+            ah.update(bias.update(gd[i]), ag[i], mag[i])
             ah.get_quaternion()
         out["fusion"] = n / (time.perf_counter() - t0)
-    if "madgwick" in peers:
-        from ahrs.filters import Madgwick
+    if "madgwick" in peers:  # the bench's float port of ahrs' Madgwick, gain 0.1
+        from cf_estimator.bench.peers import MADGWICK_ROS_GAIN, madgwick_step
 
-        mw = Madgwick(frequency=rate_hz, gain=0.1)  # imu_filter_madgwick's default
-        q = np.array([1.0, 0.0, 0.0, 0.0])
-        m = min(n, 5000)  # pure Python: fewer samples are enough
+        q = (1.0, 0.0, 0.0, 0.0)
+        m = min(n, 20000)
+        gl, al, ml = gyro.tolist(), acc.tolist(), mag.tolist()
         t0 = time.perf_counter()
         for i in range(m):
-            q = mw.updateMARG(q, gyro[i], acc[i], mag[i])
+            q = madgwick_step(q, gl[i], al[i], ml[i], MADGWICK_ROS_GAIN, dt)
         out["madgwick"] = m / (time.perf_counter() - t0)
     if "complementary" in peers:  # the port runs a whole array (one Python loop inside)
         from cf_estimator.bench.peers import run_complementary
