@@ -51,7 +51,7 @@ def test_the_zigzags_accelerate_most_of_the_time_from_the_first_sample(flights):
 
 
 def test_the_in_flight_bias_learning_is_what_fails_as_on_the_real_flights(flights):
-    """The failure found on the real flights (docs/decisions/0005-*.md): the
+    """The failure found on the real flights (docs/decisions/0006-*.md): the
     learned bias is wrong by tenths of a degree per second, and the same loop with the right
     bias and no learning is far better (real horizontal campaign: 2.26 deg against 5.37; the
     real side is checked live in the ranking test below)."""
