@@ -1,4 +1,5 @@
-"""Every command output README.md, docs/replay.md and BENCHMARKS.md quote is what it prints today.
+"""Every command output README.md, docs/replay.md, docs/tuning.md and BENCHMARKS.md quote is what
+it prints today.
 
 A quoted example is a fenced block whose first line is ``$ cf-estimator ...`` (then its output,
 then maybe more ``$`` lines), or a block right after ``<!-- output of: cf-estimator ... -->``
@@ -24,7 +25,8 @@ from cli_runs import REPO, SHARED, run_documented
 
 from cf_estimator.cli.main import main
 
-DOCS = (REPO / "README.md", REPO / "docs" / "replay.md", REPO / "BENCHMARKS.md")
+DOCS = (REPO / "README.md", REPO / "docs" / "replay.md", REPO / "docs" / "tuning.md",
+        REPO / "BENCHMARKS.md")
 MARKER = re.compile(r"<!-- output of: (cf-estimator .*?) -->")
 MASKS = (
     (re.compile(r"\d+ messages/s \([\d.]+ s\)"), "<N> messages/s (<T> s)"),
