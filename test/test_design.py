@@ -503,3 +503,29 @@ def test_console_entry_point_error_is_one_line():
     assert proc.stdout == ""
     assert proc.stderr.strip().splitlines() == [
         "cf-estimator: error: --accel-g and --accel-duration go together (give both or neither)"]
+
+
+def test_cli_names_where_the_shipped_loop_departs_from_w_s(capsys):
+    """``design`` says which loop runs where W(s) = k1 + k2/s does not (issue 50 item 5), and
+    its figures are the step's: the learning raise at full bias uncertainty is bias.py's."""
+    from types import SimpleNamespace
+
+    from cf_estimator.core import bias
+    from cf_estimator.core.ops import FloatOps
+    from cf_estimator.core.state import StepState
+
+    assert main(["design", "--json"]) == 0
+    rows = {r["when"]: r["loop"] for r in json.loads(capsys.readouterr().out)["shipped_loop"]}
+    assert set(rows) == {"start-up, rest, recovery", "bias uncertain (no still phase)",
+                         "velocity swing sigma_V", "clip", "aperiodic unit"}
+    p = FilterParams()
+    s = StepState(0.0, False)
+    s.bias_var = p.bias_prior_sigma_rad_s ** 2  # no still phase yet: the whole prior
+    s.pv_var = 1e-12  # no velocity swing
+    view = SimpleNamespace(**{f: getattr(p, f) for f in p.__dataclass_fields__})
+    k1, k2 = bias.learning_gains(s, view, FloatOps)
+    assert k2 == pytest.approx(p.bias_learning_k2)
+    assert f"2*sqrt(k2) = {k1:.3g} 1/s" in rows["bias uncertain (no still phase)"]
+    assert f"startup_k1 = {p.startup_k1:g} 1/s" in rows["start-up, rest, recovery"]
+    assert main(["design"]) == 0
+    assert "where the shipped filter departs from this W(s)" in capsys.readouterr().out

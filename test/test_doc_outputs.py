@@ -1,4 +1,5 @@
-"""Every command output README.md and docs/replay.md quote is what it prints today.
+"""Every command output README.md, docs/replay.md and docs/tuning.md quote is what it
+prints today.
 
 BENCHMARKS.md quotes no command output: it is rendered from the committed results
 (test/test_benchmarks_report.py holds it equal to that rendering; ``cf-estimator bench report``
@@ -28,7 +29,7 @@ from cli_runs import REPO, SHARED, run_documented
 
 from cf_estimator.cli.main import main
 
-DOCS = (REPO / "README.md", REPO / "docs" / "replay.md")
+DOCS = (REPO / "README.md", REPO / "docs" / "replay.md", REPO / "docs" / "tuning.md")
 MARKER = re.compile(r"<!-- output of: (cf-estimator .*?) -->")
 MASKS = (
     (re.compile(r"\d+ messages/s \([\d.]+ s\)"), "<N> messages/s (<T> s)"),

@@ -45,7 +45,8 @@ SHIPPED = REPO / "config" / "cf_estimator.yaml"
 #: Diagnostics values that are not numbers (every other value must parse as a float).
 TEXT_KEYS = {"world_frame", "filter_backend", "initialized", "phase", "at_rest", "use_mag",
              "heading_referenced", "gyro_bias_converged", "heading_rate_unverified",
-             "heading_recovering", "heading_source", "mag_disturbance", "mag_stopped"}
+             "heading_recovering", "heading_source", "mag_disturbance", "mag_stopped",
+             "bias_hypothesis"}
 
 
 def _graph(domain_id: int):

@@ -19,6 +19,7 @@ from typing import Any
 from cf_estimator.cli.base import CliError, finite_float
 from cf_estimator.core import design, thesis
 from cf_estimator.core.params import FilterParams
+from cf_estimator.core.step import LOOP_LAG_FRACTION
 
 #: Ryzhkov & Karpenko's example initial error [rad] for the clipped recovery time.
 PAPER_INITIAL_ERROR_RAD = 0.1
@@ -193,6 +194,7 @@ def compute(args: argparse.Namespace) -> dict[str, Any]:
         out.update(_angle("vibration_approx", design.vibration_approx_rad(k1, a, fr)))
     if args.bias is not None or args.saturation is not None:
         out["saturation_guidance"] = _guidance(args, k1, k2)
+    out["shipped_loop"] = shipped_loop()
     if args.thesis:
         rows = thesis.thesis_check(k1, k2, saturation, t_ap)
         out["thesis"] = {
@@ -294,7 +296,41 @@ def render(out: dict[str, Any]) -> str:
             lines.append(f"  {c['name']:18}{c['peak_arcmin']:9.2f}' <= {c['limit_arcmin']:g}'  "
                          f"{verdict}  {c['description']} [{c['method']}]")
         lines.append(f"  overall: {'PASS' if th['passed'] else 'FAIL'}")
+    lines += ["", "where the shipped filter departs from this W(s) (shipped parameters; the "
+              "formulas above hold in steady flight, bias learned, small velocity swing)"]
+    lines += [f"  {row['when']:33}{row['loop']}" for row in out["shipped_loop"]]
     return "\n".join(lines)
+
+
+def shipped_loop(p: FilterParams = SHIPPED) -> list[dict[str, str]]:
+    """Where the loop that ships is not W(s) = k1 + k2/s with the clip and the thesis's
+    aperiodic unit (core/step.py, core/bias.py): each condition and the loop it runs then."""
+    k2_raised = p.bias_learning_k2
+    k1_raised = max(p.k1, 2.0 * math.sqrt(k2_raised))
+    return [
+        {"when": "start-up, rest, recovery",
+         "loop": f"k1 = startup_k1 = {p.startup_k1:g} 1/s, no clip, no aperiodic unit, no bias "
+                 f"learning (start-up: {p.startup_duration_s:g} s; in motion the running mean "
+                 "of the accelerometer)"},
+        {"when": "bias uncertain (no still phase)",
+         "loop": f"k2 raised towards bias_learning_k2 = {k2_raised:g} 1/s^2 and k1 to at least "
+                 f"2*sqrt(k2) = {k1_raised:.3g} 1/s (critically damped, n = "
+                 f"{math.sqrt(k2_raised):.3g} rad/s), fading as the bias is learned; the "
+                 "published attitude may come from the twin without it (two bias hypotheses, "
+                 "docs/filter.md)"},
+        {"when": "velocity swing sigma_V",
+         "loop": "k1 lowered to sqrt(d/sigma_V), d the gyro's drift rate (bias estimate's error "
+                 "+ 1 % of the rotation rate), never above k1"},
+        {"when": "clip",
+         "loop": f"{p.saturation_limit_rad:g} rad only under a linear acceleration with the "
+                 f"gyro below rotation_threshold_rad_s = {p.rotation_threshold_rad_s:g} rad/s; "
+                 "otherwise none"},
+        {"when": "aperiodic unit",
+         "loop": f"T = {p.aperiodic_time_constant_s:g} s capped at {LOOP_LAG_FRACTION:g}/k1 "
+                 "(running k1) outside the clip; a share aperiodic_prefilter = "
+                 f"{p.aperiodic_prefilter:g} of each correction also turns its memory (0: the "
+                 "thesis's unit, 1: a pre-filter of the specific force)"},
+    ]
 
 
 def run(args: argparse.Namespace) -> int:

@@ -71,7 +71,7 @@
 #define REST_MIN_VARIANCE 1e-12
 #define SQRT3 1.7320508075688772
 #define BIAS_LEARNING_MIN_K1 1e-3
-#define EXTRA_COLUMNS 19
+#define EXTRA_COLUMNS 20
 #define GYRO_LIMIT_RAD_S 1e9 /* filter.GYRO_LIMIT_RAD_S */
 /* extra columns: e(3), b(3), clipped, phase, at_rest, mag_status, the bias estimate's error
  * sigma sqrt(bias_err_var) (bias.error_sigma), l_x, l_y (the aperiodic unit's world-frame state,
@@ -79,7 +79,8 @@
  * last error, 0 when no sample was used), noise_a2 (the stillness blocks' accelerometer noise):
  * what the covariance model (core/covariance.py) reads; then the gyro-bias estimate
  * b - up*z_m (3, filter.gyro_bias_rad_s): what the replay samples; loop_k1 (the loop's running
- * gain), which the covariance model reads too */
+ * gain), which the covariance model reads too; pv_var (the velocity swing: the evidence
+ * filter.py weighs the bias hypotheses by) */
 
 /* ------------------------------------------------------------------------------------------ */
 typedef struct {
@@ -1048,6 +1049,7 @@ static PyObject *State_run(StateObject *self, PyObject *args)
             x[16] = s->by - s->z_m * upy;
             x[17] = s->bz - s->z_m * upz;
             x[18] = s->loop_k1;
+            x[19] = s->pv_var;
         }
     }
     Py_END_ALLOW_THREADS

@@ -13,9 +13,10 @@ through :meth:`ComplementaryFilter.status`.
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from types import SimpleNamespace
 from typing import Any
 
@@ -58,6 +59,13 @@ def step_params(params: FilterParams) -> SimpleNamespace:
 #: Largest gyro component [rad/s] the filter accepts (far beyond any sensor; keeps every
 #: intermediate of the step finite).
 GYRO_LIMIT_RAD_S = 1e9
+#: Evidence ratio [1] between the two bias hypotheses (:class:`ComplementaryFilter`): the one
+#: that learns no bias in flight is published while the velocity swing it implies has a mean
+#: square at most 1/EVIDENCE_RATIO of the learning one's. A wrong attitude makes the implied
+#: velocity grow (g·tilt error, integrated) while a manoeuvre's stays bounded; with about 4
+#: degrees of freedom per window, a ratio of 2 is where chance stops explaining the difference
+#: for one window in four. Measured: ``bench ablate`` (docs/decisions/0003).
+EVIDENCE_RATIO = 2.0
 
 
 def valid_vector(v: Vector | None) -> bool:
@@ -127,6 +135,10 @@ class FilterStatus:
     #: rest, so the heading rate is not verified until a later still phase or a magnetometer
     heading_rate_unverified: bool = False
     heading_recovering: bool = False  #: the heading channel is in its recovery (quick) mode
+    #: the published bias hypothesis: 'in_flight' (a bias is learned in flight) or 'rest_only'
+    #: (the evidence says the gyro has none to learn beyond rest and the nominal k2: a
+    #: firmware-de-biased gyro; :class:`ComplementaryFilter`)
+    bias_hypothesis: str = "in_flight"
     #: what the heading rests on: 'magnetometer' (the last sample was used), 'gyro' (the field
     #: is disturbed: off the reference, turned when the body did not, or not yet settled back;
     #: the heading integrates the gyro alone), 'none' (no heading reference: 6-D or no sample)
@@ -145,8 +157,9 @@ class FilterStatus:
 #: sample) and the stillness blocks' accelerometer noise noise_a2 [(m/s²)²]: what
 #: core/covariance.py reads; then the gyro-bias estimate (3, rad/s, sensor:
 #: :attr:`ComplementaryFilter.gyro_bias_rad_s`, b minus the heading channel's rate on the
-#: sensor axes): what the replay samples; and the loop's running gain loop_k1 [1/s].
-EXTRA_COLUMNS = 19
+#: sensor axes): what the replay samples; the loop's running gain loop_k1 [1/s]; and the
+#: velocity swing pv_var [rad²·s²], the evidence the bias hypotheses are weighed by.
+EXTRA_COLUMNS = 20
 
 
 class Extra:
@@ -165,6 +178,7 @@ class Extra:
     NOISE_A2 = 14
     GYRO_BIAS = slice(15, 18)  #: the gyro-bias estimate (3)
     LOOP_K1 = 18
+    PV_VAR = 19  #: the velocity swing over g, mean square (bias.observe_velocity_swing)
 
 
 def state_extras(s: Any) -> tuple:
@@ -172,7 +186,8 @@ def state_extras(s: Any) -> tuple:
     same columns in ``State.run``)."""
     bx, by, bz = gyro_bias_of(s)
     return (s.ex, s.ey, s.ez, s.bx, s.by, s.bz, s.clipped, s.phase, s.at_rest, s.mag_status,
-            bias_error_sigma(s), s.lx, s.ly, s.yaw_error_rad, s.noise_a2, bx, by, bz, s.loop_k1)
+            bias_error_sigma(s), s.lx, s.ly, s.yaw_error_rad, s.noise_a2, bx, by, bz, s.loop_k1,
+            s.pv_var)
 
 
 def gyro_bias_of(s: Any) -> tuple[float, float, float]:
@@ -191,6 +206,16 @@ def bias_error_sigma(s: Any) -> float:
 class ComplementaryFilter:
     """Compensation-scheme attitude filter (seeds 000/003/004); see module docstrings.
 
+    Two hypotheses about the gyro run side by side, the same compensation scheme in both: it
+    has a bias to learn in flight (``bias_learning_k2``), or it has none beyond what rest and
+    the nominal k2 find (a gyro its firmware de-biased). Each implies a velocity: the
+    accelerometer's disagreement integrated in the world frame (``pv_var``, the swing over g,
+    bias.observe_velocity_swing). A real bias left unlearned makes that velocity grow without
+    bound; a bias learned from a manoeuvre (a false one) does the same to the other. The
+    output is the learning hypothesis unless the other explains the swing EVIDENCE_RATIO times
+    better (:meth:`_choose`); every input, outside correction and parameter goes to both.
+    With ``bias_learning_k2`` 0 they are the same and one runs.
+
     ``backend``: 'compiled' (the C twin of the step, default when built) or 'python' (the
     reference in :mod:`cf_estimator.core.step`); see :mod:`cf_estimator.core.kernel`.
     """
@@ -204,9 +229,12 @@ class ComplementaryFilter:
     ):
         self.backend = resolve_backend(backend)
         self._kernel_params: Any = None
-        self.set_params(params if params is not None else FilterParams())
-        self._state = self._new_state()
+        self._null_kernel_params: Any = None
+        self._null: Any = None
+        self._learning: Any = self._new_state()
+        self._state: Any = self._learning  # the published hypothesis
         self._initialized = False
+        self.set_params(params if params is not None else FilterParams())
         if initial_orientation is not None:
             self.initialize(initial_orientation)
 
@@ -214,17 +242,26 @@ class ComplementaryFilter:
     # parameter objects are rebuilt on arrival)
     def __getstate__(self) -> dict[str, Any]:
         d = self.__dict__.copy()
-        d["_kernel_params"] = None
-        d["_state"] = {k: getattr(self._state, k) for k in StepState.FIELDS}
+        d["_kernel_params"] = d["_null_kernel_params"] = None
+        d["_learning"] = {k: getattr(self._learning, k) for k in StepState.FIELDS}
+        d["_null"] = (None if self._null is None
+                      else {k: getattr(self._null, k) for k in StepState.FIELDS})
+        d["_state"] = self._state is self._null
         return d
 
     def __setstate__(self, d: dict[str, Any]) -> None:
-        fields = d.pop("_state")
+        learning, null, published_null = d.pop("_learning"), d.pop("_null"), d.pop("_state")
         self.__dict__.update(d)
+        self._learning, self._null = self._new_state(), None
+        self._state = self._learning
         self.set_params(self._params)
-        self._state = self._new_state()
-        for k, v in fields.items():
-            setattr(self._state, k, v)
+        for k, v in learning.items():
+            setattr(self._learning, k, v)
+        if null is not None and self._null is not None:
+            for k, v in null.items():
+                setattr(self._null, k, v)
+            if published_null:
+                self._state = self._null
 
     # -- parameters --------------------------------------------------------------------------
     @property
@@ -240,6 +277,16 @@ class ComplementaryFilter:
         self._view = step_params(params)
         if self.backend == "compiled":
             self._kernel_params = compiled_kernel.Params(self._view)  # type: ignore[union-attr]
+        # the hypothesis without in-flight learning: the same filter with bias_learning_k2 0
+        self._null_view = step_params(replace(params, bias_learning_k2=0.0))
+        if self.backend == "compiled":
+            self._null_kernel_params = compiled_kernel.Params(  # type: ignore[union-attr]
+                self._null_view)
+        if params.bias_learning_k2 <= 0.0:
+            self._null = None
+            self._state = self._learning
+        elif self._null is None:  # from now on: it starts where the learning one is
+            self._null = self._learning.copy()
 
     def _new_state(self) -> Any:
         if self.backend == "compiled":
@@ -260,8 +307,20 @@ class ComplementaryFilter:
 
     def reset(self) -> None:
         """Forget everything: the next valid accelerometer sample initialises again."""
-        self._state = self._new_state()
+        self._learning = self._state = self._new_state()
+        self._null = None if self._params.bias_learning_k2 <= 0.0 else self._new_state()
         self._initialized = False
+
+    def _hypotheses(self) -> tuple[Any, ...]:
+        return (self._learning,) if self._null is None else (self._learning, self._null)
+
+    def _choose(self) -> bool:
+        """Publish the hypothesis the evidence favours (see the class docstring); True: the one
+        without in-flight learning."""
+        null = self._null is not None and (EVIDENCE_RATIO * self._null.pv_var
+                                           < self._learning.pv_var)
+        self._state = self._null if null else self._learning
+        return null
 
     def initialize(self, q_world_from_sensor: Vector, *, heading_known: bool = True) -> None:
         """Start from a given attitude (in this filter's world frame); starts the start-up phase."""
@@ -269,10 +328,10 @@ class ComplementaryFilter:
         if self._params.world_frame == "ned":
             q = quat.ned_to_enu(q)
         self.reset()
-        s = self._state
-        s.qw, s.qx, s.qy, s.qz = (float(c) for c in q)
-        s.heading_initialized = heading_known
-        s.phase = PHASE_STARTUP
+        for s in self._hypotheses():
+            s.qw, s.qx, s.qy, s.qz = (float(c) for c in q)
+            s.heading_initialized = heading_known
+            s.phase = PHASE_STARTUP
         self._initialized = True
 
     def correct_heading(self, turn_rad: float) -> None:
@@ -281,7 +340,8 @@ class ComplementaryFilter:
         heading offset, 6-D)."""
         if turn_rad:
             up = -1.0 if self._params.world_frame == "ned" else 1.0  # the state is ENU inside
-            turn_heading(self._state, up * float(turn_rad), FloatOps)
+            for s in self._hypotheses():
+                turn_heading(s, up * float(turn_rad), FloatOps)
 
     def realign(self, tilt_rad: Vector, bias_rad_s: Vector) -> None:
         """Take an outside estimate of tilt and gyro bias (velocity aiding's in-motion
@@ -298,33 +358,36 @@ class ComplementaryFilter:
                              f"{rot.tolist()!r} and {bias.tolist()!r}")
         if self._params.world_frame == "ned":  # the state is ENU inside
             rot = np.array([rot[1], rot[0], -rot[2]])
-        s = self._state
-        q = quat.normalize(quat.multiply(quat.exp(rot), [s.qw, s.qx, s.qy, s.qz]))
-        s.qw, s.qx, s.qy, s.qz = (float(c) for c in q)
-        s.bx, s.by, s.bz = (float(c) for c in bias)
-        s.lx = s.ly = s.lz = 0.0
-        for field in LAGGED_ROTATION:
-            setattr(s, field.name, 0.0)  # the unit's R̄ starts again with it (learning_input)
+        for s in self._hypotheses():
+            q = quat.normalize(quat.multiply(quat.exp(rot), [s.qw, s.qx, s.qy, s.qz]))
+            s.qw, s.qx, s.qy, s.qz = (float(c) for c in q)
+            s.bx, s.by, s.bz = (float(c) for c in bias)
+            s.lx = s.ly = s.lz = 0.0
+            for field in LAGGED_ROTATION:
+                setattr(s, field.name, 0.0)  # the unit's R̄ starts again (learning_input)
 
     def set_aided(self, aided: bool) -> None:
         """Say whether the next update's accelerometer sample is velocity-aided (the vehicle's
         acceleration taken out): the aperiodic unit then only averages vibration
         (AIDED_LAG_TIME_CONSTANT_S instead of aperiodic_time_constant_s)."""
-        self._state.aided = bool(aided)
+        for s in self._hypotheses():
+            s.aided = bool(aided)
 
     def seed_swing(self, swing_var: float) -> None:
         """Another sensor (the velocity, when its aiding ends) measured the vehicle's velocity
         swing over g, mean square [rad²·s²]: the loop's swing memory (``pv_var``, which sets
         the loop gain, bias.loop_gain) takes it if larger. Non-finite or negative: ignored."""
         v = float(swing_var)
-        if math.isfinite(v) and v > self._state.pv_var:
-            self._state.pv_var = v
+        for s in self._hypotheses():
+            if math.isfinite(v) and v > s.pv_var:
+                s.pv_var = v
 
     def mark_moving(self) -> None:
         """Another sensor (velocity aiding) says the vehicle moves: it is not at rest, so the
         start-up averages the accelerometer (gain 1/t) as after a stillness block that was not
         still, without waiting for the blocks' verdict."""
-        self._state.moved = True
+        for s in self._hypotheses():
+            s.moved = True
 
     def interrupt_rest(self) -> None:
         """Another sensor (velocity aiding) says the vehicle moves now: whatever the stillness
@@ -332,19 +395,21 @@ class ComplementaryFilter:
         slowing down in the air turns smoothly enough to pass the blocks' tests, and its
         accelerometer reads the thrust axis however it tilts). The run of still blocks starts
         again (``rest_time_s`` of them after the vehicle stops)."""
-        self._state.rest_timer_s = 0.0
+        for s in self._hypotheses():
+            s.rest_timer_s = 0.0
 
     def take_hold(self, duration_s: float, reopen_bias: bool = False) -> None:
         """Run the loop as in start-up (gain startup_k1, no clip, no bias learning) for the next
         ``duration_s`` [s]: a correction that has just become trustworthy (velocity aiding that
         began) reveals a tilt error that is real, not a disturbance to reject."""
-        s = self._state
-        s.quick_until_s = max(float(s.quick_until_s), float(s.time_s) + float(duration_s))
-        if reopen_bias:
-            # what the bias estimator learned from the untrustworthy error is suspect: uncertain
-            # again (the prior), so it is learned afresh from the trustworthy one
-            s.bias_var = max(float(s.bias_var), self._params.bias_prior_sigma_rad_s ** 2)
-            s.bias_err_var = max(float(s.bias_err_var), self._params.bias_prior_sigma_rad_s ** 2)
+        for s in self._hypotheses():
+            s.quick_until_s = max(float(s.quick_until_s), float(s.time_s) + float(duration_s))
+            if reopen_bias:
+                # what the bias estimator learned from the untrustworthy error is suspect:
+                # uncertain again (the prior), so it is learned afresh from the trustworthy one
+                prior = self._params.bias_prior_sigma_rad_s ** 2
+                s.bias_var = max(float(s.bias_var), prior)
+                s.bias_err_var = max(float(s.bias_err_var), prior)
 
     def initialize_from(self, accel_m_s2: Vector, mag: Vector | None = None) -> bool:
         """Initialise from one accelerometer (and magnetometer) sample; False if not valid."""
@@ -366,7 +431,12 @@ class ComplementaryFilter:
         Magnetometer units are free (only the direction and relative norm are used).
         """
         if self._kernel_params is not None and self._initialized:  # the compiled twin, same checks
-            return self._state.update(self._kernel_params, gyro_rad_s, accel_m_s2, dt_s, mag)
+            q = self._learning.update(self._kernel_params, gyro_rad_s, accel_m_s2, dt_s, mag)
+            if self._null is None:
+                return q
+            q_null = self._null.update(self._null_kernel_params, gyro_rad_s, accel_m_s2, dt_s,
+                                       mag)
+            return q_null if self._choose() else q
         if not self._initialized:
             self.initialize_from(accel_m_s2, mag) if accel_m_s2 is not None else None
             return self.orientation_tuple() if self._initialized else None
@@ -380,7 +450,10 @@ class ComplementaryFilter:
             raise ValueError(f"dt must be a positive finite number of seconds, got {dt_s!r}")
         acc = tuple(float(c) for c in accel_m_s2) if valid_vector(accel_m_s2) else None
         mg = tuple(float(c) for c in mag) if valid_vector(mag) else None  # type: ignore[union-attr]
-        step(self._state, self._view, (gx, gy, gz), acc, mg, float(dt_s), FloatOps)  # type: ignore[arg-type]
+        step(self._learning, self._view, (gx, gy, gz), acc, mg, float(dt_s), FloatOps)  # type: ignore[arg-type]
+        if self._null is not None:
+            step(self._null, self._null_view, (gx, gy, gz), acc, mg, float(dt_s), FloatOps)  # type: ignore[arg-type]
+            self._choose()
         return self.orientation_tuple()
 
     def run_rows(
@@ -402,17 +475,43 @@ class ComplementaryFilter:
         if not self._initialized:
             raise RuntimeError("run_rows needs an initialised filter")
         if self._kernel_params is not None:
-            self._state.run(self._kernel_params, gyro_rad_s, accel_m_s2, mag, dt_s, start, q_out,
-                            extra_out)
+            if self._null is None:
+                self._learning.run(self._kernel_params, gyro_rad_s, accel_m_s2, mag, dt_s, start,
+                                   q_out, extra_out)
+                return
+            self._run_both(gyro_rad_s, accel_m_s2, mag, dt_s, start, q_out, extra_out)
             return
         g_rows, a_rows = gyro_rad_s.tolist(), accel_m_s2.tolist()
         m_rows = mag.tolist() if mag is not None else None
         dts = dt_s.tolist()
-        s = self._state
         for i in range(start, len(dts)):
             q_out[i] = self.update(g_rows[i], a_rows[i], dts[i], m_rows[i] if m_rows else None)
             if extra_out is not None:
-                extra_out[i] = state_extras(s)
+                extra_out[i] = state_extras(self._state)
+
+    def _run_both(self, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray, mag: np.ndarray | None,
+                  dt_s: np.ndarray, start: int, q_out: np.ndarray,
+                  extra_out: np.ndarray | None) -> None:
+        """The compiled run_rows of both hypotheses, each row published as :meth:`_choose`
+        would (rows a bad row stopped are left as they were, in both)."""
+        extra = extra_out if extra_out is not None else np.zeros((len(dt_s), EXTRA_COLUMNS))
+        q_null, extra_null = q_out.copy(), extra.copy()
+        error: ValueError | None = None
+        try:
+            self._learning.run(self._kernel_params, gyro_rad_s, accel_m_s2, mag, dt_s, start,
+                               q_out, extra)
+        except ValueError as e:  # the same row stops both (the same checks on the same rows)
+            error = e
+        with contextlib.suppress(ValueError):
+            self._null.run(self._null_kernel_params, gyro_rad_s, accel_m_s2, mag, dt_s, start,
+                           q_null, extra_null)
+        rows = slice(start, None)
+        null = EVIDENCE_RATIO * extra_null[rows, Extra.PV_VAR] < extra[rows, Extra.PV_VAR]
+        q_out[rows] = np.where(null[:, None], q_null[rows], q_out[rows])
+        extra[rows] = np.where(null[:, None], extra_null[rows], extra[rows])
+        self._choose()
+        if error is not None:
+            raise error
 
     # -- outputs -----------------------------------------------------------------------------
     def _to_output(self, q_enu: Any) -> np.ndarray:
@@ -469,6 +568,7 @@ class ComplementaryFilter:
             mag_yaw_rate_correction_rad_s=float(s.z_m),
             heading_rate_unverified=bool(s.bias_unverified),
             heading_recovering=bool(s.mag_recovering),
+            bias_hypothesis="rest_only" if s is self._null else "in_flight",
             heading_source=("none" if not s.heading_initialized else
                             "gyro" if s.mag_disturbed else "magnetometer"),
             mag_on_body=bool(s.mag_on_body),

@@ -223,6 +223,7 @@ def compose_report(
         ("gyro_bias_z_rad_s", _f(bias[2])),
         ("gyro_bias_sigma_rad_s", _f(status.gyro_bias_sigma_rad_s if initialized else None)),
         ("gyro_bias_converged", str(bool(initialized and status.gyro_bias_converged)).lower()),
+        ("bias_hypothesis", status.bias_hypothesis if initialized else "in_flight"),
         ("at_rest", str(bool(initialized and status.at_rest)).lower()),
         ("heading_rate_unverified",
          str(bool(initialized and status.heading_rate_unverified)).lower()),
