@@ -241,7 +241,7 @@ def test_model_terms_have_their_documented_sizes() -> None:
     # in the continuous limit, and the steady part the same (M lags: it is c's mean square over
     # 1/k): S = M + L peaks at 1.3–1.4·(A/e)² about 1/k in — less than the A² the tilt is off
     # by at the end of a leg held that long (a vehicle whose velocity is bounded holds no leg
-    # much longer; docs/decisions/0008-covariance.md), gone once it is over
+    # much longer; docs/decisions/0007-covariance.md), gone once it is over
     for k in (0.35, 0.175):
         m.reset()
         s2 = []

@@ -350,8 +350,8 @@ def render(results: dict) -> str:
         "(phantom4's in-air starts) an unlearned drift takes the attitude past 10°, the "
         "accelerometer is ignored until the 5 s recovery, and the drift runs on — its bare "
         "`Ahrs()` does better there; where the gyro is calibrated (BROAD, the thesis "
-        "scenarios) the recommended set-up wins ([decision 0004]"
-        "(docs/decisions/0004-benchmark-report.md)).",
+        "scenarios) the recommended set-up wins ([decision 0003]"
+        "(docs/decisions/0003-benchmark-report.md)).",
     ])
 
     section("Flights: EuRoC and phantom4 (6-D inclination [deg])")
@@ -431,13 +431,13 @@ def render(results: dict) -> str:
         "family (`cf-estimator bench ablate`). The records (question, measurement, choice) "
         "are in [docs/decisions/](docs/decisions/): "
         "[0002](docs/decisions/0002-ablation-held-out-by-family.md) the ablation, "
-        "[0003](docs/decisions/0003-bias-hypotheses-weighed-by-velocity.md) the bias "
-        "hypotheses, [0004](docs/decisions/0004-benchmark-report.md) this report and its peers, "
-        "[0005](docs/decisions/0005-defaults-history.md) the defaults' history, "
-        "[0006](docs/decisions/0006-sustained-acceleration-and-turns.md) sustained "
-        "acceleration and turns, [0007](docs/decisions/0007-velocity-aiding.md) velocity "
-        "aiding, [0008](docs/decisions/0008-covariance.md) the covariance, "
-        "[0009](docs/decisions/0009-tuning.md) tuning, [0010](docs/decisions/0010-replay-speed.md) "
+        "[0010](docs/decisions/0010-bias-hypotheses-weighed-by-velocity.md) the bias "
+        "hypotheses, [0003](docs/decisions/0003-benchmark-report.md) this report and its peers, "
+        "[0004](docs/decisions/0004-defaults-history.md) the defaults' history, "
+        "[0005](docs/decisions/0005-sustained-acceleration-and-turns.md) sustained "
+        "acceleration and turns, [0006](docs/decisions/0006-velocity-aiding.md) velocity "
+        "aiding, [0007](docs/decisions/0007-covariance.md) the covariance, "
+        "[0008](docs/decisions/0008-tuning.md) tuning, [0009](docs/decisions/0009-replay-speed.md) "
         "replay speed. "
         "test/test_cross_table.py guards every row of ours against its noise on each change."])
 

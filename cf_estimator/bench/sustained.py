@@ -20,7 +20,7 @@ taken out of the specific force (what is left is the velocity noise, σ_v·√2/
 m/s), fits the one term by which an IMU alone sees the velocity — the rotor drag across the
 thrust axis (:func:`rotor_drag`) — and scores ours online, ours velocity-aided and VQF online
 on the same samples; the numbers are ``cf-estimator bench sustained``'s
-(docs/decisions/0006-sustained-acceleration-and-turns.md), the figure :func:`plot`'s
+(docs/decisions/0005-sustained-acceleration-and-turns.md), the figure :func:`plot`'s
 (docs/img/sustained_acceleration.png).
 """
 
@@ -49,7 +49,7 @@ OURS = "cf_estimator"
 #: in-air start is still learning its bias, and the rest.
 SPLIT_S = 20.0
 #: Gyro-bias residual [deg/s] for the drift column: about what an in-flight start has left
-#: after 10 s on the Phantom 4 (issue 22; docs/decisions/0006-sustained-acceleration-and-turns.md).
+#: after 10 s on the Phantom 4 (issue 22; docs/decisions/0005-sustained-acceleration-and-turns.md).
 BIAS_RESIDUAL_DEG_S = 0.5
 GRAVITY_M_S2 = 9.80665
 #: Averaging [s] of the specific force in the rotor-drag fit: rotor vibration out, the

@@ -32,7 +32,7 @@ GRAVITY_M_S2 = 9.80665
 """Standard gravity [m/s²]."""
 #: The multirotor flights' linear drag [1/s] (specific force −k·v across the thrust axis). The
 #: real multirotors fit about 0.2 /s (``bench sustained``, rows "rotor drag"); the simulated
-#: rows of ``bench cross`` are the same within their noise at 0.2 (issue 22; decision 0006).
+#: rows of ``bench cross`` are the same within their noise at 0.2 (issue 22; decision 0005).
 DRAG_PER_S = 0.35
 
 IDENTITY_QUAT: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
