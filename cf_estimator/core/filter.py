@@ -51,7 +51,6 @@ def step_params(params: FilterParams) -> SimpleNamespace:
             "the pipeline publishes nwu (cf_estimator.pipeline.frames.core_params)"
         )
     view = SimpleNamespace(**as_dict(params))
-    view.mag_full = params.mag_mode == "full"
     view.prefilter = params.aperiodic_prefilter
     return view
 
