@@ -63,7 +63,7 @@ GYRO_LIMIT_RAD_S = 1e9
 #: square at most 1/EVIDENCE_RATIO of the learning one's. A wrong attitude makes the implied
 #: velocity grow (g·tilt error, integrated) while a manoeuvre's stays bounded; with about 4
 #: degrees of freedom per window, a ratio of 2 is where chance stops explaining the difference
-#: for one window in four. Measured: ``bench ablate`` (docs/decisions/0003).
+#: for one window in four. Measured: ``bench ablate`` (docs/decisions/0010).
 EVIDENCE_RATIO = 2.0
 
 
