@@ -431,14 +431,15 @@ def render(results: dict) -> str:
         "family (`cf-estimator bench ablate`). The records (question, measurement, choice) "
         "are in [docs/decisions/](docs/decisions/): "
         "[0002](docs/decisions/0002-ablation-held-out-by-family.md) the ablation, "
-        "[0010](docs/decisions/0010-bias-hypotheses-weighed-by-velocity.md) the bias "
-        "hypotheses, [0003](docs/decisions/0003-benchmark-report.md) this report and its peers, "
+        "[0003](docs/decisions/0003-benchmark-report.md) this report and its peers, "
         "[0004](docs/decisions/0004-defaults-history.md) the defaults' history, "
         "[0005](docs/decisions/0005-sustained-acceleration-and-turns.md) sustained "
         "acceleration and turns, [0006](docs/decisions/0006-velocity-aiding.md) velocity "
         "aiding, [0007](docs/decisions/0007-covariance.md) the covariance, "
         "[0008](docs/decisions/0008-tuning.md) tuning, [0009](docs/decisions/0009-replay-speed.md) "
-        "replay speed. "
+        "replay speed, [0010](docs/decisions/0010-bias-hypotheses-weighed-by-velocity.md) the "
+        "bias hypotheses, [0011](docs/decisions/0011-full-vector-variant-removed.md) the "
+        "full-vector variant removed. "
         "test/test_cross_table.py guards every row of ours against its noise on each change."])
 
     section("Reproduce", [
