@@ -163,7 +163,7 @@ EXTRA_COLUMNS = 20
 
 
 class Extra:
-    """Column indices of ``extra_out`` (the order above; ``_kernel.c`` writes the same)."""
+    """Column indices of ``extra_out`` (the order above; ``c/cf_core.c`` writes the same)."""
 
     ERROR = slice(0, 3)  #: raw error e (3)
     BIAS = slice(3, 6)  #: integral state b (3)
@@ -182,8 +182,8 @@ class Extra:
 
 
 def state_extras(s: Any) -> tuple:
-    """One ``extra_out`` row (EXTRA_COLUMNS values) from a filter state (_kernel.c writes the
-    same columns in ``State.run``)."""
+    """One ``extra_out`` row (EXTRA_COLUMNS values) from a filter state (c/cf_core.c writes
+    the same columns: ``cf_write_extra``, in ``State.run``)."""
     bx, by, bz = gyro_bias_of(s)
     return (s.ex, s.ey, s.ez, s.bx, s.by, s.bz, s.clipped, s.phase, s.at_rest, s.mag_status,
             bias_error_sigma(s), s.lx, s.ly, s.yaw_error_rad, s.noise_a2, bx, by, bz, s.loop_k1,
