@@ -41,12 +41,36 @@ def all_specs() -> tuple[ParamSpec, ...]:
     return specs_of(FilterParams) + specs_of(PipelineParams)
 
 
+#: Parameters that are gone, with the value that meant "off" and why: a file that still sets
+#: one to that value loads (the line does nothing), any other value is refused with the reason.
+REMOVED_PARAMETERS: dict[str, tuple[Any, str]] = {
+    "k3": (0.0, "the double integral of Ryzhkov's full-vector variant is not offered any more "
+           "(docs/decisions/0011-full-vector-variant-removed.md)"),
+    "mag_mode": ("yaw", "the magnetometer corrects the heading only; the full-vector channel "
+                 "is not offered any more (docs/decisions/0011-full-vector-variant-removed.md)"),
+}
+
+
+def drop_removed(values: Mapping[str, Any]) -> dict[str, Any]:
+    """``values`` without the removed parameters set to their old "off" value; a removed
+    parameter set to anything else raises :class:`ParameterError` naming it and why."""
+    out = dict(values)
+    for name, (neutral, why) in REMOVED_PARAMETERS.items():
+        if name in out:
+            value = out.pop(name)
+            if value != neutral:
+                raise ParameterError(f"{name}: removed, {why}; only {name}: {neutral!r} "
+                                     f"(which did nothing) is still accepted, got {value!r}")
+    return out
+
+
 def build_params(values: Mapping[str, Any]) -> tuple[FilterParams, PipelineParams]:
     """Both parameter objects from a flat name → value mapping (defaults for missing names).
 
     Raises :class:`ParameterError` (one line, naming the parameter) on unknown names or invalid
-    values.
+    values; removed parameters at their old "off" value are ignored (:func:`drop_removed`).
     """
+    values = drop_removed(values)
     fnames = {s.name for s in specs_of(FilterParams)}
     pnames = {s.name for s in specs_of(PipelineParams)}
     unknown = sorted(set(values) - fnames - pnames)
@@ -158,7 +182,9 @@ def describe_unknown(names: Sequence[str]) -> str:
     parts = []
     for n in names:
         near = suggest_name(n)
-        if n.rsplit(".", 1)[-1] in MADGWICK_NAMES:
+        if n in REMOVED_PARAMETERS:
+            parts.append(f"'{n}' (removed: {REMOVED_PARAMETERS[n][1]})")
+        elif n.rsplit(".", 1)[-1] in MADGWICK_NAMES:
             parts.append(f"'{n}' (imu_filter_madgwick's name; ours is '{near}', see "
                          "docs/migrating_from_madgwick.md)")
         else:
@@ -305,6 +331,13 @@ def check_names(path: str | Path, node_name: str = DEFAULT_NODE_NAME
     """
     path = Path(path)
     values, warnings = _applicable_values(path, _read_doc(path), node_name)
+    removed = [n for n in REMOVED_PARAMETERS if n in values]
+    try:
+        values = drop_removed(values)
+    except ParameterError as exc:
+        raise ParameterError(f"{path}: {exc}") from None
+    warnings = [*warnings, *(f"{path}: {n}: removed, the line is ignored "
+                             f"({REMOVED_PARAMETERS[n][1]})" for n in removed)]
     unknown = unknown_names(values)
     if unknown:
         raise ParameterError(f"{path}: unknown parameter {describe_unknown(unknown)}")

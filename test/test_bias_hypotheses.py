@@ -52,7 +52,7 @@ def test_a_de_biased_gyro_keeps_the_hypothesis_without_in_flight_learning(handhe
 def test_a_biased_gyro_started_in_motion_still_learns_its_bias(monkeypatch):
     """The same motion with a 1-3 °/s bias (the Phantom DOTs'), 90 s. The evidence takes a
     while to favour learning here (250 °/s rotations hide a bias); measured: 4.24° against
-    3.64° for the learning hypothesis alone and 8.35° for none (docs/decisions/0003)."""
+    3.64° for the learning hypothesis alone and 8.35° for none (docs/decisions/0010)."""
     case = handheld_case(0)
     bias = (0.04, -0.03, 0.02)  # rad/s
     res, both = _run(case, bias_rad_s=bias)

@@ -1,7 +1,7 @@
 """The compiled step (core/_kernel.c) against its reference, core/step.py run with floats.
 
 Both must give the same numbers for the same inputs: every branch of the step (start-up, rest,
-tight and wide clip, recovery, magnetometer rejection and re-learning, 'full' mode, NED output,
+tight and wide clip, recovery, magnetometer rejection and re-learning, NED output,
 missing and invalid samples, variable dt) is driven here and compared sample by sample.
 
 Without the compiled kernel these tests skip — unless CF_ESTIMATOR_REQUIRE_KERNEL=1 (set by
@@ -58,7 +58,7 @@ def _rich_recording(seed: int) -> tuple[np.ndarray, ...]:
 
 PARAM_SETS = {
     "defaults": FilterParams(),
-    "full_mag": FilterParams(mag_mode="full", r1=0.3, r2=0.01, k3=0.0005),
+    "mag_r2": FilterParams(r1=0.3, r2=0.01),
     "ned": FilterParams(world_frame="ned", r2=0.002),
     "tight_clip_recovery": FilterParams(saturation_limit_rad=0.005,
                                         wide_saturation_limit_rad=0.005, recovery_trigger_s=1.0),
@@ -87,7 +87,7 @@ def drawn_params(seed: int, flags: bool = True) -> FilterParams:
     """Every FilterParams field of the step from the schema: each float to its own value (none
     equal to another field's or to its default), each bool to ``flags``."""
     rng = np.random.default_rng(seed)
-    for _ in range(100):  # redraw the rare set outside the stability bounds (T·k2 < k1, k3)
+    for _ in range(100):  # redraw the rare set outside the stability bounds (T·k2 < k1)
         values = {}
         for spec in specs_of(FilterParams):
             if spec.group in NOT_THE_STEPS:
@@ -148,8 +148,8 @@ def test_drawn_parameters_agree_with_the_reference_in_every_output(flags):
 
 
 def test_every_parameter_is_read_where_the_reference_reads_it():
-    """From a drawn set, each float parameter in turn × 1.25, each bool off in turn, 'full'
-    magnetometer mode: the reference's output must change (the recording exercises the field:
+    """From a drawn set, each float parameter in turn × 1.25, each bool off in turn: the
+    reference's output must change (the recording exercises the field:
     otherwise this test could not see a misread), and the twin must follow it to 1e-12. Reading
     one field where another belongs (the same default or not) breaks one of the two."""
     import dataclasses
@@ -158,8 +158,8 @@ def test_every_parameter_is_read_where_the_reference_reads_it():
     # a seed whose set the recording exercises in every field (a threshold drawn where no event
     # of the recording lies near it, e.g. acceleration_hold_s on other seeds, is not exercised:
     # then the assertion below names it)
-    base = drawn_params(1)
-    names = step_floats() + step_flags() + ["mag_mode"]
+    base = drawn_params(8)
+    names = step_floats() + step_flags()
     sets = [base]
     for name in step_floats():
         v = getattr(base, name) * 1.25
@@ -168,7 +168,6 @@ def test_every_parameter_is_read_where_the_reference_reads_it():
             v = getattr(base, name) * 0.8
         sets.append(dataclasses.replace(base, **{name: v}))
     sets += [dataclasses.replace(base, **{name: False}) for name in step_flags()]
-    sets.append(dataclasses.replace(base, mag_mode="full"))
     ref = estimate_many(sets, gyro, acc, mag, timestamps_s=t, backend="python")
     out = estimate_many(sets, gyro, acc, mag, timestamps_s=t, backend="compiled")
     assert ref is not None and out is not None
@@ -243,7 +242,7 @@ def test_states_agree_field_by_field_after_a_recording():
     dts = np.diff(t, prepend=t[0] - 0.01)
     ends = {}
     for backend in ("python", "compiled"):
-        f = ComplementaryFilter(PARAM_SETS["full_mag"], backend=backend)
+        f = ComplementaryFilter(PARAM_SETS["mag_r2"], backend=backend)
         for g, a, m, dt in zip(gyro.tolist(), acc.tolist(), mag.tolist(), dts.tolist(),
                                strict=True):
             f.update(g, a, dt, m)
@@ -262,7 +261,7 @@ def test_squares_are_the_same_bits_where_libm_pow_is_not_correctly_rounded():
     assert ops.sq(x) == x * x
     ends = {}
     for backend in ("python", "compiled"):
-        f = ComplementaryFilter(PARAM_SETS["full_mag"], backend=backend,
+        f = ComplementaryFilter(PARAM_SETS["mag_r2"], backend=backend,
                                 initial_orientation=(1.0, 0.0, 0.0, 0.0))
         for k in range(7):
             f.update((x * (k % 2), 0.0, x * ((k + 1) % 2)), (0.0, x, G), 0.01)
@@ -348,11 +347,11 @@ vec = st.one_of(
         st.tuples(st.tuples(*[st.floats(-8, 8, allow_nan=False)] * 3), vec, st.none() | vec,
                   st.floats(1e-4, 0.5)),
         min_size=1, max_size=60),
-    k1=st.floats(0.01, 5.0), limit=st.floats(1e-3, 1.0), mode=st.sampled_from(["yaw", "full"]),
+    k1=st.floats(0.01, 5.0), limit=st.floats(1e-3, 1.0),
     startup=st.floats(0.0, 1.0),
 )
-def test_random_streams_agree(samples, k1, limit, mode, startup):
-    p = FilterParams(k1=k1, k2=0.1 * k1, saturation_limit_rad=limit, mag_mode=mode, r2=0.01,
+def test_random_streams_agree(samples, k1, limit, startup):
+    p = FilterParams(k1=k1, k2=0.1 * k1, saturation_limit_rad=limit, r2=0.01,
                      startup_duration_s=startup, recovery_trigger_s=0.3)
     fs = [ComplementaryFilter(p, backend=b, initial_orientation=(0.9, 0.1, -0.3, 0.3))
           for b in ("python", "compiled")]

@@ -164,3 +164,37 @@ def test_invalid_parameter_at_start_exits_with_one_line_error():
     assert proc.returncode == 2
     assert "saturation_limit_rad" in proc.stderr + proc.stdout
     assert "Traceback" not in proc.stderr
+
+
+def test_an_unexpected_exception_is_logged_once_with_its_traceback_and_counted(harness,
+                                                                               monkeypatch):
+    """A bug in the filter (here: an update that raises) drops the message, counts
+    ``internal_error`` and logs the traceback once, not once per message; the node goes on."""
+    assert harness.wait_connected()
+    assert harness.publish_one(harness.imu())  # initialised
+    errors: list[str] = []
+    real_logger = harness.node.get_logger()
+
+    class Logger:
+        def error(self, text, **_kw):
+            errors.append(text)
+
+        def __getattr__(self, name):
+            return getattr(real_logger, name)
+
+    monkeypatch.setattr(harness.node, "get_logger", lambda: Logger())
+    f = harness.pipe._filter  # noqa: SLF001
+
+    def broken(*_a, **_k):
+        raise ZeroDivisionError("a bug in update")
+
+    monkeypatch.setattr(f, "update", broken)
+    for _ in range(3):
+        assert harness.publish_one(harness.imu())
+    assert harness.pipe.counters["rejected"].get("internal_error") == 3
+    assert len(errors) == 1
+    assert "Traceback" in errors[0] and "ZeroDivisionError: a bug in update" in errors[0]
+    monkeypatch.undo()
+    published = len(harness.received["imu"])
+    assert harness.publish_one(harness.imu())
+    assert harness.spin_until(lambda: len(harness.received["imu"]) > published)

@@ -99,7 +99,7 @@ def test_shipped_file_loads_to_the_defaults_without_warnings():
 
 
 def test_round_trip_of_non_default_values(tmp_path):
-    fp = FilterParams(k1=0.75, k2=1e-5, world_frame="ned", use_mag=False, mag_mode="full")
+    fp = FilterParams(k1=0.75, k2=1e-5, world_frame="ned", use_mag=False, r2=0.01)
     pp = PipelineParams(mag_timeout_s=0.25, publish_rpy=False, reset_after_gap_s=0.0)
     path = tmp_path / "p.yaml"
     path.write_text(render_params_yaml(fp, pp), encoding="utf-8")
@@ -212,3 +212,21 @@ def test_docs_parameter_table_is_generated_from_the_schema():
     start = doc.index("<!-- parameter table:")
     body = doc[doc.index("\n", start) + 1 : doc.index("<!-- end of parameter table -->")]
     assert body == render_params_markdown(), "run: python3 -m cf_estimator.params_file --markdown"
+
+
+def test_a_removed_parameter_at_its_old_off_value_loads_and_any_other_is_refused(tmp_path):
+    """k3 and mag_mode are gone (docs/decisions/0011): a file written from the old shipped one
+    still loads (the lines did nothing), and says so; a value that asked for the removed
+    variant is refused with the reason, not silently dropped."""
+    path = tmp_path / "old.yaml"
+    path.write_text("/**:\n  ros__parameters:\n    k1: 0.5\n    k3: 0.0\n    mag_mode: yaw\n",
+                    encoding="utf-8")
+    fp, _, warnings = load_params_file(path)
+    assert fp.k1 == 0.5
+    assert len(warnings) == 2 and all("removed" in w for w in warnings)
+    path.write_text("/**:\n  ros__parameters:\n    k3: 0.001\n", encoding="utf-8")
+    with pytest.raises(ParameterError, match="k3: removed.*full-vector"):
+        load_params_file(path)
+    path.write_text("/**:\n  ros__parameters:\n    mag_mode: full\n", encoding="utf-8")
+    with pytest.raises(ParameterError, match="mag_mode: removed"):
+        load_params_file(path)

@@ -412,7 +412,7 @@ def test_apply_changes_rejects_invalid_values_and_leaves_state_untouched():
         ({"k1": "fast"}, "k1"),
         ({"saturation_limit_rad": 0.0}, "saturation_limit_rad"),
         ({"aperiodic_time_constant_s": 500.0}, "unstable"),
-        ({"k1": 0.7, "mag_mode": "sideways"}, "mag_mode"),
+        ({"k1": 0.7, "velocity_heading": "sideways"}, "velocity_heading"),
         ({"no_such_gain": 1.0}, "unknown"),
         ({"world_frame": "ned"}, "read-only"),
         ({"diagnostics_period_s": 2.0}, "read-only"),

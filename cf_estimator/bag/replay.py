@@ -471,6 +471,10 @@ class _Run:
     def imu(self, log_ns: int, msg: Any) -> None:
         out = self.pipe.on_imu(msg)
         if out is None:
+            bug = self.pipe.take_internal_error()
+            if bug is not None:  # counted as internal_error in the summary; said once here
+                print("cf-estimator: internal error (a bug, please report it): the message "
+                      f"was dropped, the replay goes on\n{bug}", file=sys.stderr)
             return
         bag = self.bag
         if self.offline:

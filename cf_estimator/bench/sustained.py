@@ -197,7 +197,7 @@ def with_known_bias(gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray, t_s: np.ndar
     per sample] taken out of the gyro and no bias learning (integral, in-flight raise, rest):
     what the loop would do if its bias learning were perfect. An analysis (of recordings with
     a reference, of simulations with a truth), never a filter mode. → q_world_from_sensor (N, 4)."""
-    p = dataclasses.replace(params, use_mag=False, k2=0.0, k3=0.0, bias_learning_k2=0.0,
+    p = dataclasses.replace(params, use_mag=False, k2=0.0, bias_learning_k2=0.0,
                             rest_bias_learning=False)
     return estimate(gyro_rad_s - bias_rad_s, accel_m_s2, None, timestamps_s=t_s,
                     params=p).quaternion

@@ -10,7 +10,7 @@ Each pass runs all candidates through :func:`cf_estimator.core.batch.estimate_ma
 trial; every candidate's (N, 4) estimate is scored at once, vectorised over the samples, with
 :mod:`cf_estimator.metrics` (``on_candidate``: nothing per sample in Python). Trials may be
 decimated for screening (:meth:`Trial.decimated`): confirm the result at full rate. The 9-D run
-gives both scores: in ``mag_mode: yaw`` the magnetometer rotates about the world vertical only,
+gives both scores: the magnetometer rotates about the world vertical only,
 so the inclination of the 9-D run is the 6-D inclination. A trial is a BROAD
 :class:`~cf_estimator.bench.broad.Trial` (fixed rate) or a
 :class:`~cf_estimator.bench.bagtrial.BagTrial` (a recorded bag with a reference orientation,

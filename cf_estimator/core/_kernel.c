@@ -8,7 +8,7 @@
  * here, out of the core.
  *
  * Module cf_estimator.core._kernel:
- *   Params(view)  the parameter view of step_params() (FilterParams fields + mag_full), frozen;
+ *   Params(view)  the parameter view of step_params() (FilterParams fields), frozen;
  *   State()       the filter state: one attribute per StepState field (same names, units and
  *                 frames: q* = q_world(ENU)_from_sensor, b* gyro bias [rad/s, sensor], ...), and
  *     .update(params, gyro, accel, dt, mag=None)         = ComplementaryFilter.update once
@@ -446,7 +446,7 @@ static PyMethodDef State_methods[] = {
 #define SB(n) {#n, T_BOOL, offsetof(StateObject, s) + offsetof(cf_state, n), 0, NULL}
 #define SI(n) {#n, T_INT, offsetof(StateObject, s) + offsetof(cf_state, n), 0, NULL}
 static PyMemberDef State_members[] = {
-    SD(qw), SD(qx), SD(qy), SD(qz), SD(cx), SD(cy), SD(cz), SD(lx), SD(ly), SD(lz), SD(rxx),
+    SD(qw), SD(qx), SD(qy), SD(qz), SD(lx), SD(ly), SD(lz), SD(rxx),
     SD(rxy), SD(rxz), SD(ryx), SD(ryy), SD(ryz), SD(rzx), SD(rzy), SD(rzz), SD(time_s),
     SD(clip_timer_s), SB(recovering), SD(recovery_count), SD(accel_hold), SD(acx), SD(acy), SD(acz),
     SD(rate_lp), SI(phase), SB(aided), SD(quick_until_s), SD(rest_timer_s), SB(at_rest), SB(moved), SD(blk_n), SD(blk_t),

@@ -1,19 +1,21 @@
 """Many parameter sets at once over the same data (for tuning): state arrays of shape (P,).
 
 Runs exactly the equations of :mod:`cf_estimator.core.step` with NumPy arrays in place of
-floats, so its output equals P single :class:`~cf_estimator.core.filter.ComplementaryFilter`
-runs (tested to 1e-12).
+floats, both bias hypotheses of :class:`~cf_estimator.core.filter.ComplementaryFilter` side by
+side, so its output equals P single filter runs (tested to 1e-12).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
 
 from cf_estimator.core import quaternion as quat
 from cf_estimator.core.filter import (
+    EVIDENCE_RATIO,
     heading_from_mag,
     orientation_from_vectors,
     step_params,
@@ -35,16 +37,16 @@ class BatchedFilter:
             raise ValueError("all parameter sets of a batch must share world_frame")
         self.params = tuple(params)
         self.world_frame = frames.pop()
-        views = [step_params(p) for p in params]
-        self._view = SimpleNamespace(
-            **{k: np.array([getattr(v, k) for v in views]) for k in vars(views[0])}
-        )
+        self._view = _stacked([step_params(p) for p in params])
+        self._null_view = _stacked([step_params(replace(p, bias_learning_k2=0.0))
+                                    for p in params])
         self.size = len(params)
         self.reset()
 
     def reset(self) -> None:
         """Forget all state; the next valid accelerometer sample initialises every filter."""
         self._state = StepState(np.zeros(self.size), np.zeros(self.size, dtype=bool))
+        self._null = StepState(np.zeros(self.size), np.zeros(self.size, dtype=bool))
         self.initialized = False
 
     def initialize_from(
@@ -56,12 +58,12 @@ class BatchedFilter:
         use_mag = self._view.use_mag & heading_from_mag(accel_m_s2, mag)
         q_mag = orientation_from_vectors(accel_m_s2, mag) if valid_vector(mag) else None
         q_acc = orientation_from_vectors(accel_m_s2, None)
-        s = self._state
-        for i, c in enumerate(("qw", "qx", "qy", "qz")):
-            with_mag = q_acc[i] if q_mag is None else q_mag[i]
-            setattr(s, c, np.where(use_mag, with_mag, q_acc[i]))
-        s.heading_initialized = use_mag.copy()
-        s.phase = np.full(self.size, PHASE_STARTUP)
+        for s in (self._state, self._null):
+            for i, c in enumerate(("qw", "qx", "qy", "qz")):
+                with_mag = q_acc[i] if q_mag is None else q_mag[i]
+                setattr(s, c, np.where(use_mag, with_mag, q_acc[i]))
+            s.heading_initialized = use_mag.copy()
+            s.phase = np.full(self.size, PHASE_STARTUP)
         self.initialized = True
         return True
 
@@ -81,22 +83,36 @@ class BatchedFilter:
         mg = tuple(float(c) for c in mag) if valid_vector(mag) else None  # type: ignore[union-attr]
         gyro = tuple(float(c) for c in gyro_rad_s)
         step(self._state, self._view, gyro, acc, mg, float(dt_s), ArrayOps)  # type: ignore[arg-type]
+        step(self._null, self._null_view, gyro, acc, mg, float(dt_s), ArrayOps)  # type: ignore[arg-type]
         return self.orientation
+
+    def _published(self) -> np.ndarray:
+        """(P,) bool: the hypothesis without in-flight learning is published
+        (ComplementaryFilter._choose; with bias_learning_k2 0 the two are the same)."""
+        return EVIDENCE_RATIO * self._null.pv_var < self._state.pv_var
 
     @property
     def orientation(self) -> np.ndarray:
         """(P, 4) q_world_from_sensor in the batch's world frame."""
-        s = self._state
-        q = np.stack([s.qw, s.qx, s.qy, s.qz], axis=-1)
+        a, b = self._state, self._null
+        null = self._published()[:, None]
+        q = np.where(null, np.stack([b.qw, b.qx, b.qy, b.qz], axis=-1),
+                     np.stack([a.qw, a.qx, a.qy, a.qz], axis=-1))
         return quat.enu_to_ned(q) if self.world_frame == "ned" else q
 
     @property
     def gyro_bias_rad_s(self) -> np.ndarray:
         """(P, 3) gyro-bias estimates [rad/s], sensor frame."""
-        s = self._state
-        return np.stack([s.bx, s.by, s.bz], axis=-1)
+        a, b = self._state, self._null
+        return np.where(self._published()[:, None], np.stack([b.bx, b.by, b.bz], axis=-1),
+                        np.stack([a.bx, a.by, a.bz], axis=-1))
 
     @property
     def state(self) -> StepState:
-        """The live state arrays (read them, do not modify)."""
+        """The live state arrays of the learning hypothesis (read them, do not modify)."""
         return self._state
+
+
+def _stacked(views: list[SimpleNamespace]) -> SimpleNamespace:
+    """One view of P parameter views: each field an array of shape (P,)."""
+    return SimpleNamespace(**{k: np.array([getattr(v, k) for v in views]) for k in vars(views[0])})

@@ -16,13 +16,13 @@ The estimate b (sensor frame, rad/s) is the PI regulator's integral state; its v
   itself is lowered below the configured one when the velocity swing is large
   (:func:`loop_gain`: √(d/σ_V), the gyro's drift rate d — from the estimate's error,
   :func:`error_sigma`, not the schedule's σ_b — against the swing);
-- :func:`integrate` — the integral itself (k2 and the k3 path on the learning input R̄ᵀ·l,
+- :func:`integrate` — the integral itself (k2 on the learning input R̄ᵀ·l,
   step.learning_input: the bias direction the aperiodic unit's state shows), except
   from an error too large to be a bias (:func:`learning_limit_rad`, anti-windup, no narrower
   than the samples' own scatter); the variance shrinks as it learns (time constant k1/k2);
 - :func:`clamp` — bounded by ``bias_limit_rad_s``.
 
-Owns the ``BIAS`` fields of :mod:`cf_estimator.core.state` (and the k3 path's ``c*``). Written
+Owns the ``BIAS`` fields of :mod:`cf_estimator.core.state`. Written
 once for floats and arrays; ``c/cf_core.c`` repeats it inline in ``cf_step``/``stillness``.
 """
 
@@ -192,16 +192,14 @@ def drift_rate(s: StepState, o: Any) -> Any:
 def integrate(s: StepState, p: Any, f: tuple, k1: Any, k2: Any, learn: Any, small: Any,
               dt: Any, o: Any) -> None:
     """The integral states on the learning input ``f`` [rad, sensor] (R̄ᵀ·l,
-    step.learning_input): the k3 path c and b
+    step.learning_input): the bias estimate b
     (``learn``: not in start-up/recovery; ``small``: the raw error is small enough to be a
     bias's, see :func:`learning_limit_rad`); the variance shrinks as the integral learns."""
     fx, fy, fz = f
-    k3dt = o.where(learn, p.k3 * dt, 0.0)
-    s.cx, s.cy, s.cz = s.cx + k3dt * fx, s.cy + k3dt * fy, s.cz + k3dt * fz
     ldt = o.where(learn & small, dt, 0.0)
-    s.bx = s.bx - ldt * (k2 * fx + s.cx)
-    s.by = s.by - ldt * (k2 * fy + s.cy)
-    s.bz = s.bz - ldt * (k2 * fz + s.cz)
+    s.bx = s.bx - ldt * (k2 * fx)
+    s.by = s.by - ldt * (k2 * fy)
+    s.bz = s.bz - ldt * (k2 * fz)
     # the integral learns the bias with time constant ~k1/k2: its variance shrinks so, the
     # variance of the error it leaves twice as fast (error_sigma)
     k1m = o.maximum(k1, BIAS_LEARNING_MIN_K1)

@@ -51,7 +51,6 @@ def step_params(params: FilterParams) -> SimpleNamespace:
             "the pipeline publishes nwu (cf_estimator.pipeline.frames.core_params)"
         )
     view = SimpleNamespace(**as_dict(params))
-    view.mag_full = params.mag_mode == "full"
     view.prefilter = params.aperiodic_prefilter
     return view
 
@@ -64,7 +63,7 @@ GYRO_LIMIT_RAD_S = 1e9
 #: square at most 1/EVIDENCE_RATIO of the learning one's. A wrong attitude makes the implied
 #: velocity grow (g·tilt error, integrated) while a manoeuvre's stays bounded; with about 4
 #: degrees of freedom per window, a ratio of 2 is where chance stops explaining the difference
-#: for one window in four. Measured: ``bench ablate`` (docs/decisions/0003).
+#: for one window in four. Measured: ``bench ablate`` (docs/decisions/0010).
 EVIDENCE_RATIO = 2.0
 
 

@@ -1,8 +1,9 @@
 """Filter parameters: one frozen dataclass, validated on construction, that is also the schema.
 
 Gains follow the papers' names (docs/references.md): the accelerometer channel's regulator is
-W1(s) = k1 + k2/s + k3/s² (Ryzhkov & Karpenko: k3 = 0; Ryzhkov, drift, adds k3), the
-magnetometer channel's is W2(s) = r1 + r2/s (Ryzhkov, drift).
+W1(s) = k1 + k2/s (Ryzhkov & Karpenko), the magnetometer channel's W2(s) = r1 + r2/s on the
+heading alone (Ryzhkov, drift; its full-vector variant with k3 is not offered:
+docs/decisions/0011-full-vector-variant-removed.md).
 The saturation unit and the aperiodic unit 1/(T·s + 1) act on the error signal before W1 (the
 thesis, Habliuk 2023). Defaults are chosen by measurement on recorded and simulated data (see
 BENCHMARKS.md).
@@ -17,7 +18,6 @@ from cf_estimator.schema import ParameterError, param, validate_fields
 #: ``world_frame`` choices. The core estimates in ENU or NED; NWU is published by the pipeline
 #: (:mod:`cf_estimator.pipeline.frames`, a fixed rotation of the ENU estimate).
 WORLD_FRAMES = ("enu", "ned", "nwu")
-MAG_MODES = ("yaw", "full")
 VELOCITY_HEADINGS = ("auto", "filter")
 
 
@@ -28,8 +28,7 @@ class FilterParams:
     k1: float = param(
         0.35,
         "1/s",
-        "Proportional gain of the accelerometer channel (W1 = k1 + k2/s + k3/s^2, Ryzhkov & "
-        "Karpenko).",
+        "Proportional gain of the accelerometer channel (W1 = k1 + k2/s, Ryzhkov & Karpenko).",
         minimum=0.0,
         maximum=100.0,
         group="gains",
@@ -41,15 +40,6 @@ class FilterParams:
         "estimate (0 disables bias learning from the accelerometer).",
         minimum=0.0,
         maximum=100.0,
-        group="gains",
-    )
-    k3: float = param(
-        0.0,
-        "1/s^3",
-        "Double-integral gain of W1 (the full variant of Ryzhkov, drift; 0 = off). Requires "
-        "(k1+r1)(k2+r2) > k3 for stability.",
-        minimum=0.0,
-        maximum=10.0,
         group="gains",
     )
     use_saturation: bool = param(
@@ -166,14 +156,6 @@ class FilterParams:
         True,
         "",
         "Use the magnetometer for heading (False: 6-D, yaw drifts with the gyro).",
-        group="magnetometer",
-    )
-    mag_mode: str = param(
-        "yaw",
-        "",
-        "'yaw': magnetometer corrects heading only (never roll/pitch); 'full': the "
-        "full-vector channel W2 of Ryzhkov, drift, on all axes.",
-        choices=MAG_MODES,
         group="magnetometer",
     )
     r1: float = param(
@@ -429,11 +411,3 @@ class FilterParams:
                 f"unless T < k1/k2 = {self.k1 / self.k2:.4g} s "
                 f"(got T = {self.aperiodic_time_constant_s:g} s)"
             )
-        if self.k3 > 0.0:
-            r1, r2 = (self.r1, self.r2) if self.use_mag and self.mag_mode == "full" else (0.0, 0.0)
-            if (self.k1 + r1) * (self.k2 + r2) <= self.k3:
-                raise ParameterError(
-                    "k3: the loop s^3 + (k1+r1)s^2 + (k2+r2)s + k3 is unstable unless "
-                    f"(k1+r1)(k2+r2) > k3 (got {(self.k1 + r1) * (self.k2 + r2):.4g} "
-                    f"<= {self.k3:g})"
-                )

@@ -2,7 +2,7 @@
 
 Four parts, each a module of its own, update their own fields (and read the others'):
 
-- **compensation loop** (:mod:`cf_estimator.core.step`): attitude, aperiodic unit, k3 path,
+- **compensation loop** (:mod:`cf_estimator.core.step`): attitude, aperiodic unit,
   linear-acceleration detector, phases;
 - **rest/motion classifier** (:mod:`cf_estimator.core.stillness`): block statistics, rest,
   the learned gravity norm;
@@ -53,7 +53,6 @@ LAGGED_ROTATION: tuple[Field, ...] = (
 LOOP: tuple[Field, ...] = (
     _f("qw", "1", "attitude q_world(ENU)_from_sensor, w"),
     *_vec("q", "1", "attitude q_world(ENU)_from_sensor"),
-    *_vec("c", "rad/s", "k3-path (double integral) state, sensor frame"),
     *_vec("l", "rad", "aperiodic unit's state, world frame"),
     *LAGGED_ROTATION,
     _f("time_s", "s", "time since initialisation"),

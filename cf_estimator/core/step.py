@@ -12,8 +12,8 @@ stage is a function of its name here and a static function of the same name in c
                   L = saturation_limit_rad while a linear acceleration is present and the gyro
                   is still (impacts, vibration, manoeuvres), else wide_saturation_limit_rad
     4. aperiodic() l ← l + dt/(T+dt)·(R⁻·e_s − l);  f = R⁻ᵀ·l  (1/(T s+1) in the world frame)
-    5. regulate() c ← c + k3·dt·f;  b ← b − dt·(k2'·f + c);  q ← q⁻ ⊗ Exp(g(k1')·f)
-                  (W1 = k1 + k2/s + k3/s²; g(k) = k·dt/(1+k·dt), the backward-Euler gain;
+    5. regulate() b ← b − dt·k2'·f;  q ← q⁻ ⊗ Exp(g(k1')·f)
+                  (W1 = k1 + k2/s; g(k) = k·dt/(1+k·dt), the backward-Euler gain;
                   b, the integral state, is the gyro-bias estimate; k2' = max(k2,
                   min(bias_learning_k2·σ_b²/σ_0², σ_b/σ_V)) while the bias is uncertain,
                   k1' = max(min(k1, √(d/σ_V)), 2√k2'); σ_V: the velocity swing, d: the
@@ -23,11 +23,10 @@ stage is a function of its name here and a static function of the same name in c
                   the specific force in the world frame, as VQF's; p = 0: the thesis's unit on
                   the error)
     .  recover()  a clip unbroken for recovery_trigger_s: RECOVERING (as start-up)
-    6. heading()  'yaw':  e_ψ = atan2(m_E, m_N) of the measured field in the world frame,
+    6. heading()  e_ψ = atan2(m_E, m_N) of the measured field in the world frame,
                   saturated; q ← Exp_z(g(r1)·e_ψ) ⊗ q; z_m ← z_m + r2·dt_m·e_ψ (heading only:
                   a rotation about the world vertical never changes roll/pitch); saturated
                   for recovery_trigger_s: heading recovery with startup_k1 (as the tilt's)
-                  'full': e_m = m̂ × (R⁻ᵀ·m_ref) through W2 = r1 + r2/s on all axes (Ryzhkov, drift)
 
 The parts (each its own module, each with its own tests; the state's fields are typed and grouped
 by owner in :mod:`cf_estimator.core.state`): the rest/motion classifier
@@ -245,7 +244,7 @@ def step(
 ) -> None:
     """Advance the state one sample (see the module docstring), stage after stage.
 
-    ``p`` has the FilterParams field names (floats, or arrays for a batch) plus ``mag_full``.
+    ``p`` has the FilterParams field names (floats, or arrays for a batch).
     ``accel``/``mag`` are None when absent or invalid at this sample (the caller checks
     finiteness and non-zero norm). ``dt`` > 0 [s]. The C twin's cf_step() (core/c/cf_core.c)
     calls the same stages, of the same names, in the same order.
@@ -439,7 +438,7 @@ def learning_input(s: StepState, lag: tuple, weight: Any, o: Any) -> tuple:
 
 def regulate(s: StepState, p: Any, f: tuple, g: tuple, en: Any, u: tuple, v: tuple,
              quick: Any, tight: Any, learn: Any, dt: Any, o: Any) -> None:
-    """Stage 5: the PI(+k3) regulator on f; its integral states are the bias estimate, learned
+    """Stage 5: the PI regulator on f; its integral state is the bias estimate, learned
     from g = R̄ᵀ·l (:func:`learning_input`).
 
     While the bias is uncertain (no still phase yet) the loop runs faster: k2 up to
@@ -500,7 +499,7 @@ def recover(s: StepState, p: Any, clipped: Any, en: Any, limit: Any, learn: Any,
 
 def heading(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: Any) -> None:
     """Stage 6: the heading channel: one magnetometer sample (any unit) checked against the
-    field reference, then the heading correction ('yaw' or 'full' mode)."""
+    field reference, then the heading correction about the world vertical."""
     mx, my, mz = mag
     mn = o.sqrt(mx * mx + my * my + mz * mz)
     ux, uy, uz = mx / mn, my / mn, mz / mn
@@ -602,24 +601,11 @@ def heading(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: Any) -> 
     ldt = o.where(usable & learn, dt_m, 0.0)
     limit = o.where(quick, MAG_QUICK_LIMIT_RAD, p.mag_saturation_limit_rad)
 
-    # 'yaw' mode (and the first heading fix of either mode): rotate about the world vertical
-    # the heading error the sample implies: used, or rejected but not seen to move with the body
-    # (a field that may be the truth and the heading wrong: covariance.py reports it)
+    # rotate about the world vertical by the heading error the sample implies (the first fix:
+    # all of it): used, or rejected but not seen to move with the body (a field that may be the
+    # truth and the heading wrong: covariance.py reports it)
     s.yaw_error_rad = o.where(usable | (disturbed & o.not_(s.mag_on_body)), yaw_error, 0.0)
     yaw_c = o.minimum(o.maximum(yaw_error, -limit), limit)
-    yaw_mode = o.not_(p.mag_full) | first
-    angle = o.where(first, yaw_error, o.where(yaw_mode, gain * yaw_c, 0.0))
-    s.z_m = s.z_m + o.where(yaw_mode & o.not_(first), p.r2 * ldt * yaw_c, 0.0)
+    angle = o.where(first, yaw_error, gain * yaw_c)
+    s.z_m = s.z_m + o.where(first, 0.0, p.r2 * ldt * yaw_c)
     turn_heading(s, angle, o)
-
-    # 'full' mode (Ryzhkov, drift): vector error against the reference field, all axes
-    full = p.mag_full & o.not_(first) & usable
-    rx, ry, rz = 0.0 * s.mag_ref_dip, o.cos(s.mag_ref_dip), -o.sin(s.mag_ref_dip)
-    px, py, pz = _rotate(s.qw, -s.qx, -s.qy, -s.qz, rx, ry, rz)
-    ex, ey, ez = uy * pz - uz * py, uz * px - ux * pz, ux * py - uy * px
-    en = o.sqrt(ex * ex + ey * ey + ez * ez)
-    scale = o.where(full, o.minimum(1.0, limit / o.maximum(en, TINY)), 0.0)
-    ex, ey, ez = ex * scale, ey * scale, ez * scale
-    s.bx, s.by, s.bz = s.bx - p.r2 * ldt * ex, s.by - p.r2 * ldt * ey, s.bz - p.r2 * ldt * ez
-    dw, dx, dy, dz = _exp(gain * ex, gain * ey, gain * ez, o)
-    s.qw, s.qx, s.qy, s.qz = _mul(s.qw, s.qx, s.qy, s.qz, dw, dx, dy, dz)

@@ -365,6 +365,10 @@ class CfEstimatorNode(Node):
                 or self._pipe.event_total != self._events_logged):
             self._log_events()
         if out is None:
+            bug = self._pipe.take_internal_error()
+            if bug is not None:
+                log.error("internal error (a bug, please report it): the message was dropped, "
+                          f"the node goes on; counted as internal_error\n{bug}")
             return
         for text in out.warnings:
             log.warning(text)

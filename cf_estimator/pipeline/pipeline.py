@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import traceback
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from time import perf_counter
@@ -60,6 +61,9 @@ from cf_estimator.schema import ParameterError, as_dict, specs_of, split_by_owne
 
 Vec3 = tuple[float, float, float]
 TWO_PI = 2.0 * math.pi
+#: An unexpected exception's traceback is reported at most once per this many seconds [s]
+#: (wall clock): a bug that hits every message is logged, not flooded.
+INTERNAL_ERROR_REPORT_S = 10.0
 #: squared norms beyond any sensor's range [(rad/s)², (m/s²)²]: rejected (checks.*_MAX_*)
 GYRO_MAX2 = checks.GYRO_MAX_RAD_S**2
 ACCEL_MAX2 = checks.ACCEL_MAX_M_S2**2
@@ -129,6 +133,9 @@ class ImuPipeline:
         # warn-once state
         self._warned: dict[str, str] = {}
         self._pending_warnings: list[str] = []
+        #: see :meth:`take_internal_error`
+        self.internal_error_traceback: str | None = None
+        self._internal_error_at = -math.inf
         self.imu_frame: str | None = None  #: the IMU messages' frame id (None: none yet)
         self.accel_check_n = 0  #: accelerometer samples in the unit check so far
         self._acc_sx = self._acc_sy = self._acc_sz = 0.0
@@ -440,7 +447,18 @@ class ImuPipeline:
             return self._on_imu(msg, t0)
         except Exception:  # noqa: BLE001 - the pipeline never raises on data
             self._reject(checks.INTERNAL_ERROR)
+            now = perf_counter()
+            if now - self._internal_error_at >= INTERNAL_ERROR_REPORT_S:
+                self._internal_error_at = now
+                self.internal_error_traceback = traceback.format_exc()
             return None
+
+    def take_internal_error(self) -> str | None:
+        """The traceback of an unexpected exception (a bug: the message was dropped and counted
+        as ``internal_error``), at most one per INTERNAL_ERROR_REPORT_S; None when there is none
+        to report. The node logs it, the replay prints it: once, not once per message."""
+        text, self.internal_error_traceback = self.internal_error_traceback, None
+        return text
 
     def _on_imu(self, msg: Any, t0: float) -> PipelineOutput | None:
         try:

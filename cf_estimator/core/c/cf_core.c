@@ -59,14 +59,14 @@
 #define DF(n) {#n, offsetof(cf_params, n), 0}
 #define BF(n) {#n, offsetof(cf_params, n), 1}
 const cf_param_field cf_param_fields[] = {
-    DF(k1), DF(k2), DF(k3), DF(saturation_limit_rad), DF(wide_saturation_limit_rad),
+    DF(k1), DF(k2), DF(saturation_limit_rad), DF(wide_saturation_limit_rad),
     DF(rotation_threshold_rad_s), DF(acceleration_threshold_m_s2), DF(acceleration_hold_s),
     DF(aperiodic_time_constant_s), DF(startup_duration_s), DF(startup_k1),
     DF(recovery_trigger_s), DF(r1), DF(r2), DF(mag_saturation_limit_rad),
     DF(mag_norm_tolerance), DF(mag_dip_tolerance_rad), DF(rest_gyro_threshold_rad_s),
     DF(rest_accel_threshold_m_s2), DF(rest_time_s), DF(rest_window_s),
     DF(bias_prior_sigma_rad_s), DF(bias_learning_k2), DF(bias_limit_rad_s), DF(gravity_m_s2),
-    DF(prefilter), BF(use_saturation), BF(use_mag), BF(mag_full),
+    DF(prefilter), BF(use_saturation), BF(use_mag),
     BF(mag_rejection), BF(rest_bias_learning), {NULL, 0, 0}};
 #undef DF
 #undef BF
@@ -77,7 +77,6 @@ void cf_params_default(cf_params *p)
     memset(p, 0, sizeof(*p));
     p->k1 = 0.35;
     p->k2 = 0.005;
-    p->k3 = 0.0;
     p->saturation_limit_rad = 0.01;
     p->wide_saturation_limit_rad = 10.0;
     p->rotation_threshold_rad_s = 0.2;
@@ -103,7 +102,6 @@ void cf_params_default(cf_params *p)
     p->prefilter = 0.5;
     p->use_saturation = 1;
     p->use_mag = 1;
-    p->mag_full = 0;
     p->mag_rejection = 1;
     p->rest_bias_learning = 1;
     p->ned = 0;
@@ -335,27 +333,9 @@ static void heading(cf_state *s, const cf_params *p, const double *mag, int fast
 
     s->yaw_error_rad = (usable || (disturbed && !s->mag_on_body)) ? yaw_error : 0.0;
     double yaw_c = mind(maxd(yaw_error, -limit), limit);
-    int yaw_mode = !p->mag_full || first;
-    double angle = first ? yaw_error : (yaw_mode ? gain * yaw_c : 0.0);
-    s->z_m = s->z_m + ((yaw_mode && !first) ? p->r2 * ldt * yaw_c : 0.0);
+    double angle = first ? yaw_error : gain * yaw_c;
+    s->z_m = s->z_m + (first ? 0.0 : p->r2 * ldt * yaw_c);
     turn_heading(s, angle);
-
-    int full = p->mag_full && !first && usable;
-    if (!full) return; /* step.py runs the block below scaled by 0: q and b keep their values */
-    double pr[3], d[4];
-    rotate(s->qw, -s->qx, -s->qy, -s->qz, 0.0 * s->mag_ref_dip, cos(s->mag_ref_dip),
-           -sin(s->mag_ref_dip), pr);
-    double ex = uy * pr[2] - uz * pr[1], ey = uz * pr[0] - ux * pr[2], ez = ux * pr[1] - uy * pr[0];
-    double en = sqrt(ex * ex + ey * ey + ez * ez);
-    double scale = mind(1.0, limit / maxd(en, TINY));
-    ex = ex * scale;
-    ey = ey * scale;
-    ez = ez * scale;
-    s->bx = s->bx - p->r2 * ldt * ex;
-    s->by = s->by - p->r2 * ldt * ey;
-    s->bz = s->bz - p->r2 * ldt * ez;
-    expmap(gain * ex, gain * ey, gain * ez, d);
-    mul_into(s, d);
 }
 
 /* _stillness() of step.py: block statistics, rest, bias from still blocks */
@@ -678,18 +658,14 @@ static void regulate(cf_state *s, const cf_params *p, const double *f, const dou
     double k1, k2, loop = loop_gain(s, p);
     learning_gains(s, p, loop, &k1, &k2);
     s->loop_k1 = maxd(loop, 2.0 * sqrt(p->k2));
-    double k3dt = learn ? p->k3 * dt : 0.0;
-    s->cx = s->cx + k3dt * g[0];
-    s->cy = s->cy + k3dt * g[1];
-    s->cz = s->cz + k3dt * g[2];
     /* bias.learning_limit_rad: unaided, widened by one sample's scatter */
     double widen = BIAS_LEARNING_NOISE_SIGMAS * sqrt(s->noise_a2) / s->g_ref;
     double limit = BIAS_LEARNING_MAX_ERROR_RAD + (s->aided ? 0.0 : widen);
     int small = (en < limit) && (u[0] * v[0] + u[1] * v[1] + u[2] * v[2] > 0.0);
     double ldt = (learn && small) ? dt : 0.0;
-    s->bx = s->bx - ldt * (k2 * g[0] + s->cx);
-    s->by = s->by - ldt * (k2 * g[1] + s->cy);
-    s->bz = s->bz - ldt * (k2 * g[2] + s->cz);
+    s->bx = s->bx - ldt * (k2 * g[0]);
+    s->by = s->by - ldt * (k2 * g[1]);
+    s->bz = s->bz - ldt * (k2 * g[2]);
     double k1m = maxd(k1, BIAS_LEARNING_MIN_K1);
     s->bias_var = s->bias_var / (1.0 + ldt * k2 / k1m);
     s->bias_err_var = s->bias_err_var / (1.0 + 2.0 * ldt * k2 / k1m);

@@ -79,19 +79,19 @@ enum cf_extra_column {
 };
 
 /* The parameters the step reads: FilterParams fields (core/params.py: units, meaning,
- * defaults) plus mag_full (mag_mode "full"), prefilter (aperiodic_prefilter) and ned
- * (world_frame "ned": cf_output_q's frame only; the state is ENU). Booleans are 0/1. */
+ * defaults) plus prefilter (aperiodic_prefilter) and ned (world_frame "ned": cf_output_q's
+ * frame only; the state is ENU). Booleans are 0/1. */
 typedef struct {
-    double k1, k2, k3, saturation_limit_rad, wide_saturation_limit_rad, rotation_threshold_rad_s,
+    double k1, k2, saturation_limit_rad, wide_saturation_limit_rad, rotation_threshold_rad_s,
         acceleration_threshold_m_s2, acceleration_hold_s, aperiodic_time_constant_s,
         startup_duration_s, startup_k1, recovery_trigger_s, r1, r2, mag_saturation_limit_rad,
         mag_norm_tolerance, mag_dip_tolerance_rad, rest_gyro_threshold_rad_s,
         rest_accel_threshold_m_s2, rest_time_s, rest_window_s, bias_prior_sigma_rad_s,
         bias_learning_k2, bias_limit_rad_s, gravity_m_s2, prefilter;
-    int use_saturation, use_mag, mag_full, mag_rejection, rest_bias_learning, ned;
+    int use_saturation, use_mag, mag_rejection, rest_bias_learning, ned;
 } cf_params;
 
-/* One parameter the step reads, by name (FilterParams's, or the view's mag_full/prefilter):
+/* One parameter the step reads, by name (FilterParams's, or the view's prefilter):
  * where it is in cf_params, and whether it is an int flag (else a double). */
 typedef struct {
     const char *name;
@@ -106,7 +106,7 @@ extern const cf_param_field cf_param_fields[];
  * q* = q_world(ENU)_from_sensor, b* the integral state [rad/s, sensor], ...). Read it freely;
  * write only what ComplementaryFilter writes (cf_state_start, the aiding's hooks). */
 typedef struct {
-    double qw, qx, qy, qz, bx, by, bz, cx, cy, cz, lx, ly, lz, rxx, rxy, rxz, ryx, ryy, ryz, rzx,
+    double qw, qx, qy, qz, bx, by, bz, lx, ly, lz, rxx, rxy, rxz, ryx, ryy, ryz, rzx,
         rzy, rzz, z_m, time_s, clip_timer_s,
         rest_timer_s, blk_n, blk_t, blk_gx, blk_gy, blk_gz, blk_ax, blk_ay, blk_az, blk_g2, blk_a2,
         prev_n, pgx, pgy, pgz, pax, pay, paz, blk_d, last_n, lgx, lgy, lgz, lax, lay, laz,
