@@ -170,11 +170,21 @@ static PyObject *q_tuple(const cf_state *s, int ned)
 static PyObject *State_update(StateObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     double g[3], a[3], m[3];
-    if (nargs < 4 || nargs > 5) {
-        PyErr_SetString(PyExc_TypeError, "update(params, gyro, accel, dt, mag=None)");
+    if (nargs < 4 || nargs > 7 || nargs == 6) {
+        PyErr_SetString(PyExc_TypeError,
+                        "update(params, gyro, accel, dt, mag=None[, null, null_params])");
         return NULL;
     }
     if (!check_params(args[0])) return NULL;
+    StateObject *null = NULL;
+    if (nargs == 7) {
+        if (!PyObject_TypeCheck(args[5], &StateType)) {
+            PyErr_SetString(PyExc_TypeError, "null must be a State");
+            return NULL;
+        }
+        if (!check_params(args[6])) return NULL;
+        null = (StateObject *)args[5];
+    }
     int hg = read3(args[1], g);
     if (hg < 0) return NULL;
     if (hg == 0) {
@@ -198,11 +208,19 @@ static PyObject *State_update(StateObject *self, PyObject *const *args, Py_ssize
         return NULL;
     }
     int ha = read_optional3(args[2], a);
-    int hm = nargs == 5 ? read_optional3(args[4], m) : 0;
+    int hm = nargs >= 5 ? read_optional3(args[4], m) : 0;
     if (ha < 0 || hm < 0) return NULL;
     const cf_params *p = &((ParamsObject *)args[0])->p;
-    cf_update(&self->s, p, g, ha ? a : NULL, hm ? m : NULL, dt, NULL); /* checked above */
-    return q_tuple(&self->s, p->ned);
+    if (null == NULL) {
+        cf_update(&self->s, p, g, ha ? a : NULL, hm ? m : NULL, dt, NULL); /* checked above */
+        return q_tuple(&self->s, p->ned);
+    }
+    int use_null = 0;
+    cf_update_pair(&self->s, p, &null->s, &((ParamsObject *)args[6])->p, g, ha ? a : NULL,
+                   hm ? m : NULL, dt, NULL, &use_null);
+    PyObject *q = q_tuple(use_null ? &null->s : &self->s, p->ned);
+    if (q == NULL) return NULL;
+    return Py_BuildValue("(NO)", q, use_null ? Py_True : Py_False);
 }
 
 /* A C-contiguous float64 buffer of exactly `count` doubles (None allowed if `optional`). */
@@ -230,11 +248,16 @@ static int get_array(PyObject *o, Py_buffer *b, Py_ssize_t count, int writable, 
 
 static PyObject *State_run(StateObject *self, PyObject *args)
 {
-    PyObject *params, *og, *oa, *om, *odt, *oq, *ox;
+    PyObject *params, *og, *oa, *om, *odt, *oq, *ox, *onull = NULL, *onull_params = NULL;
     Py_ssize_t start;
-    if (!PyArg_ParseTuple(args, "OOOOOnOO:run", &params, &og, &oa, &om, &odt, &start, &oq, &ox))
+    if (!PyArg_ParseTuple(args, "OOOOOnOO|O!O:run", &params, &og, &oa, &om, &odt, &start, &oq,
+                          &ox, &StateType, &onull, &onull_params))
         return NULL;
     if (!check_params(params)) return NULL;
+    if (onull != NULL && (onull_params == NULL || !check_params(onull_params))) {
+        if (!PyErr_Occurred()) PyErr_SetString(PyExc_TypeError, "null needs null_params");
+        return NULL;
+    }
     Py_buffer bdt;
     if (!get_array(odt, &bdt, PyObject_Length(odt), 0, 0, "dt")) return NULL;
     Py_ssize_t n = bdt.len / 8;
@@ -252,9 +275,15 @@ static PyObject *State_run(StateObject *self, PyObject *args)
     const double *G = bg.buf, *A = ba.buf, *M = bm.obj ? bm.buf : NULL, *DT = bdt.buf;
     double *Q = bq.buf, *X = bx.obj ? bx.buf : NULL;
     Py_ssize_t bad;
-    int problem = CF_OK;
+    int problem = CF_OK, use_null = 0;
+    cf_state *null_s = onull ? &((StateObject *)onull)->s : NULL;
+    const cf_params *pn = onull ? &((ParamsObject *)onull_params)->p : NULL;
     Py_BEGIN_ALLOW_THREADS
-    bad = cf_run(&self->s, p, G, A, M, DT, start, n, Q, X, &problem);
+    if (null_s)
+        bad = cf_run_pair(&self->s, p, null_s, pn, G, A, M, DT, start, n, Q, X, &problem,
+                          &use_null);
+    else
+        bad = cf_run(&self->s, p, G, A, M, DT, start, n, Q, X, &problem);
     Py_END_ALLOW_THREADS
     if (bad >= 0) {
         if (problem == CF_BAD_DT)
@@ -269,8 +298,8 @@ static PyObject *State_run(StateObject *self, PyObject *args)
         }
         goto done;
     }
-    result = Py_None;
-    Py_INCREF(result);
+    result = onull ? PyBool_FromLong(use_null) : Py_None;
+    if (!onull) Py_INCREF(result);
 done:
     PyBuffer_Release(&bdt);
     if (bg.obj) PyBuffer_Release(&bg);
@@ -436,9 +465,13 @@ static PyMethodDef module_methods[] = {
 
 static PyMethodDef State_methods[] = {
     {"update", (PyCFunction)(void (*)(void))State_update, METH_FASTCALL,
-     "update(params, gyro, accel, dt, mag=None) -> q (w, x, y, z) in the output frame."},
+     "update(params, gyro, accel, dt, mag=None[, null, null_params]) -> q (w, x, y, z) in the "
+     "output frame; with the null hypothesis's state and parameters: (q of the published one, "
+     "published_null)."},
     {"run", (PyCFunction)State_run, METH_VARARGS,
-     "run(params, gyro, accel, mag|None, dt, start, q_out, extra_out|None): rows start..N-1."},
+     "run(params, gyro, accel, mag|None, dt, start, q_out, extra_out|None[, null, null_params]): "
+     "rows start..N-1; with the null hypothesis: each row the published one's, -> published_null "
+     "after the last."},
     {"copy", (PyCFunction)State_copy, METH_NOARGS, "A copy of the state."},
     {NULL, NULL, 0, NULL}};
 

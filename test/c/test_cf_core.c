@@ -230,6 +230,67 @@ static void test_run_is_update_row_by_row_and_stops_at_the_first_bad_row(void)
     CHECK(why == CF_GYRO_NOT_FINITE, "problem %d", why);
 }
 
+/* The two bias hypotheses: cf_run_pair is cf_update_pair row by row, each row the published
+ * one's; a tilted start in motion on a de-biased gyro teaches the learning hypothesis a bias
+ * the other does not take, and the null one's parameters differ only in bias_learning_k2. */
+static void test_the_two_bias_hypotheses(void)
+{
+    enum { N = 6000 };
+    static double gyro[N][3], acc[N][3], dt[N], q_run[N][4], q_one[N][4];
+    static double x_run[N][CF_EXTRA_COLUMNS], x_one[N][CF_EXTRA_COLUMNS];
+    cf_params p, pn;
+    cf_state a_run, b_run, a_one, b_one;
+    int why = -7, null_run = -1, null_one = -1;
+    const double tilted[4] = {cos(0.05), sin(0.05), 0.0, 0.0}; /* 5.7 deg off */
+    cf_params_default(&p);
+    cf_params_null(&p, &pn);
+    CHECK(pn.bias_learning_k2 == 0.0 && p.bias_learning_k2 > 0.0 && pn.k1 == p.k1,
+          "null parameters");
+    for (int i = 0; i < N; i++) {
+        double t = 0.005 * i; /* 200 Hz, 30 s: a swaying, accelerating sensor, no bias */
+        gyro[i][0] = 0.3 * cos(0.7 * t);
+        gyro[i][1] = 0.0;
+        gyro[i][2] = 0.0;
+        double roll = 0.3 / 0.7 * sin(0.7 * t);
+        double ay = sin(1.3 * t), az = 0.7 * sin(1.7 * t);
+        acc[i][0] = 0.05 * noise();
+        acc[i][1] = G * sin(roll) + ay * cos(roll) - az * sin(roll) + 0.05 * noise();
+        acc[i][2] = G * cos(roll) - ay * sin(roll) + az * cos(roll) + 0.05 * noise();
+        dt[i] = 0.005;
+    }
+    cf_state_start(&a_run, tilted, 0);
+    cf_state_start(&b_run, tilted, 0);
+    cf_state_start(&a_one, tilted, 0);
+    cf_state_start(&b_one, tilted, 0);
+    CHECK(cf_run_pair(&a_run, &p, &b_run, &pn, gyro[0], acc[0], NULL, dt, 0, N, q_run[0],
+                      x_run[0], &why, &null_run) == -1 && why == CF_OK,
+          "cf_run_pair refused a row");
+    for (int i = 0; i < N; i++) {
+        CHECK(cf_update_pair(&a_one, &p, &b_one, &pn, gyro[i], acc[i], NULL, dt[i], q_one[i],
+                             &null_one) == CF_OK, "row %d", i);
+        cf_write_extra(null_one ? &b_one : &a_one, x_one[i]);
+        CHECK(null_one == cf_publishes_null(&a_one, &b_one), "row %d", i);
+    }
+    CHECK(same_state(&a_run, &a_one) && same_state(&b_run, &b_one), "states differ");
+    CHECK(memcmp(q_run, q_one, sizeof(q_run)) == 0, "q differs");
+    CHECK(memcmp(x_run, x_one, sizeof(x_run)) == 0, "extra differs");
+    CHECK(null_run == null_one, "the published one after the last row");
+    CHECK(!same_state(&a_one, &b_one), "the hypotheses never differed");
+    /* the rule: the null one is published only when its swing is below 1/CF_EVIDENCE_RATIO */
+    cf_state a = a_one, b = b_one;
+    a.pv_var = 1.0;
+    b.pv_var = 0.99 / CF_EVIDENCE_RATIO;
+    CHECK(cf_publishes_null(&a, &b), "a smaller swing by more than the ratio");
+    b.pv_var = 1.01 / CF_EVIDENCE_RATIO;
+    CHECK(!cf_publishes_null(&a, &b), "within the ratio: the learning one");
+    /* a refused row steps neither */
+    double bad[3] = {NAN, 0.0, 0.0};
+    cf_state a_before = a_one, b_before = b_one;
+    CHECK(cf_update_pair(&a_one, &p, &b_one, &pn, bad, acc[0], NULL, 0.005, NULL, NULL) ==
+          CF_GYRO_NOT_FINITE, "a NaN gyro");
+    CHECK(same_state(&a_one, &a_before) && same_state(&b_one, &b_before), "stepped anyway");
+}
+
 static void test_the_output_frame(void)
 {
     cf_state s;
@@ -333,6 +394,7 @@ int main(int argc, char **argv)
     test_an_invalid_accelerometer_or_magnetometer_sample_is_skipped();
     test_a_refused_sample_leaves_the_state_as_it_was();
     test_run_is_update_row_by_row_and_stops_at_the_first_bad_row();
+    test_the_two_bias_hypotheses();
     test_the_output_frame();
     test_covariance_rows();
     printf("%d passed, %d failed\n", passed, failed);

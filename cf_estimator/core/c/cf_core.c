@@ -118,7 +118,8 @@ const cf_constant cf_constants[] = {
     C(MAG_RELEARN_AFTER_S), C(MAG_MAX_DT_S), C(MAG_SMOOTH_TIME_CONSTANT_S), C(MAG_SETTLE_S),
     C(MAG_TURN_TIME_CONSTANT_S), C(MAG_TURN_TOLERANCE_RAD), C(MAG_TURN_FRACTION),
     C(MAG_DRIFT_SIGMAS), C(MAG_CANDIDATE_NORM_TOLERANCE), C(SMALL_ANGLE_RAD),
-    {"EXTRA_COLUMNS", CF_EXTRA_COLUMNS, 1}, {NULL, 0.0, 0}};
+    {"EXTRA_COLUMNS", CF_EXTRA_COLUMNS, 1}, {"EVIDENCE_RATIO", CF_EVIDENCE_RATIO, 0},
+    {NULL, 0.0, 0}};
 #undef C
 #undef N
 
@@ -831,6 +832,53 @@ ptrdiff_t cf_run(cf_state *s, const cf_params *p, const double *gyro, const doub
             return i;
         }
         if (extra_out) cf_write_extra(s, extra_out + CF_EXTRA_COLUMNS * i);
+    }
+    if (problem) *problem = CF_OK;
+    return -1;
+}
+
+/* ---- the two bias hypotheses (filter.py ComplementaryFilter) ---------------------------- */
+
+void cf_params_null(const cf_params *p, cf_params *out)
+{
+    *out = *p;
+    out->bias_learning_k2 = 0.0;
+}
+
+int cf_publishes_null(const cf_state *learning, const cf_state *null)
+{
+    return CF_EVIDENCE_RATIO * null->pv_var < learning->pv_var;
+}
+
+int cf_update_pair(cf_state *learning, const cf_params *p, cf_state *null, const cf_params *pn,
+                   const double *gyro, const double *accel, const double *mag, double dt,
+                   double *q_out, int *published_null)
+{
+    int why = cf_update(learning, p, gyro, accel, mag, dt, NULL);
+    if (why) return why;
+    cf_update(null, pn, gyro, accel, mag, dt, NULL); /* the same checks: it runs too */
+    int use_null = cf_publishes_null(learning, null);
+    if (q_out) cf_output_q(use_null ? null : learning, p->ned, q_out);
+    if (published_null) *published_null = use_null;
+    return CF_OK;
+}
+
+ptrdiff_t cf_run_pair(cf_state *learning, const cf_params *p, cf_state *null,
+                      const cf_params *pn, const double *gyro, const double *accel,
+                      const double *mag, const double *dt, ptrdiff_t start, ptrdiff_t n,
+                      double *q_out, double *extra_out, int *problem, int *published_null)
+{
+    for (ptrdiff_t i = start; i < n; i++) {
+        const double *a = accel ? accel + 3 * i : NULL, *m = mag ? mag + 3 * i : NULL;
+        int use_null = 0;
+        int why = cf_update_pair(learning, p, null, pn, gyro + 3 * i, a, m, dt[i],
+                                 q_out + 4 * i, &use_null);
+        if (why) {
+            if (problem) *problem = why;
+            return i;
+        }
+        if (published_null) *published_null = use_null;
+        if (extra_out) cf_write_extra(use_null ? null : learning, extra_out + CF_EXTRA_COLUMNS * i);
     }
     if (problem) *problem = CF_OK;
     return -1;

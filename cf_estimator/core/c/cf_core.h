@@ -163,6 +163,31 @@ ptrdiff_t cf_run(cf_state *s, const cf_params *p, const double *gyro, const doub
                  const double *mag, const double *dt, ptrdiff_t start, ptrdiff_t n,
                  double *q_out, double *extra_out, int *problem);
 
+/* The two bias hypotheses (filter.py ComplementaryFilter, docs/filter.md "Two bias
+ * hypotheses"): the same filter with in-flight learning (`learning`, parameters p) and without
+ * it (`null`, parameters cf_params_null(p)) run on every sample; the null one is published
+ * while CF_EVIDENCE_RATIO * its pv_var (the velocity swing it implies) < the learning one's. */
+#define CF_EVIDENCE_RATIO 2.0
+
+/* p with bias_learning_k2 = 0: the null hypothesis's parameters. */
+void cf_params_null(const cf_params *p, cf_params *out);
+
+/* 1 when the null hypothesis is the one to publish after this sample, else 0. */
+int cf_publishes_null(const cf_state *learning, const cf_state *null);
+
+/* cf_update of both hypotheses (both or neither: the same checks); q_out (may be NULL): the
+ * published one's attitude; *published_null (may be NULL): which. */
+int cf_update_pair(cf_state *learning, const cf_params *p, cf_state *null, const cf_params *pn,
+                   const double *gyro, const double *accel, const double *mag, double dt,
+                   double *q_out, int *published_null);
+
+/* cf_run of both hypotheses, each row's q_out and extra_out from the one published after it;
+ * *published_null (may be NULL): which, after the last row run. */
+ptrdiff_t cf_run_pair(cf_state *learning, const cf_params *p, cf_state *null,
+                      const cf_params *pn, const double *gyro, const double *accel,
+                      const double *mag, const double *dt, ptrdiff_t start, ptrdiff_t n,
+                      double *q_out, double *extra_out, int *problem, int *published_null);
+
 /* q in the output frame (ENU as is; NED = q_ned_from_enu * q when p->ned). */
 void cf_output_q(const cf_state *s, int ned, double *q_out);
 
