@@ -101,7 +101,8 @@ def test_the_c_defaults_are_filter_params_defaults(c_tests):
 
 def test_the_c_named_constants_are_the_python_steps(c_tests):
     c = _pairs(_run([str(c_tests), "--constants"]).stdout)
-    assert {"REST_NOISE_SIGMAS", "MAG_REFERENCE_SAMPLES", "EXTRA_COLUMNS", "EVIDENCE_RATIO"} <= set(c)
+    assert {"REST_NOISE_SIGMAS", "MAG_REFERENCE_SAMPLES", "EXTRA_COLUMNS",
+            "EVIDENCE_RATIO"} <= set(c)
     for name, value in c.items():
         home = next((m for m in PY_HOMES if hasattr(m, name)), None)
         assert home is not None, f"cf_constants {name} has no Python constant of that name"
