@@ -2,7 +2,8 @@
 
 ``colcon build`` installs the console scripts into ``lib/cf_estimator`` (see setup.cfg) so
 ``ros2 run cf_estimator cf_estimator_node`` finds them; ``pip install .`` puts them on PATH.
-``ext_modules``: the optional compiled filter step (cf_estimator/core/_kernel.c).
+``ext_modules``: the optional compiled filter step (the C core cf_estimator/core/c/cf_core.c
+and its binding cf_estimator/core/_kernel.c).
 The ``data_files`` below are what colcon (and pip) install under ``share/cf_estimator``:
 the ament index marker, package.xml, the launch files and the parameter YAML.
 """
@@ -65,10 +66,16 @@ setup(
     # (or with $CF_ESTIMATOR_NO_EXTENSION=1, see BuildKernel) the build goes on and the Python
     # reference runs everything, only slower.
     cmdclass={"build_ext": BuildKernel},
+    # the standalone C core travels with the package (sdist and wheel): a C/C++ user compiles
+    # cf_core.c beside cf_core.h (docs/ARCHITECTURE.md "The core in C")
+    package_data={f"{PACKAGE}.core.c": ["cf_core.h", "cf_core.c"]},
     ext_modules=[
         Extension(
             f"{PACKAGE}.core._kernel",
-            [f"{PACKAGE}/core/_kernel.c"],
+            # the standalone C core (plain C99, no Python.h) and its Python binding
+            [f"{PACKAGE}/core/c/cf_core.c", f"{PACKAGE}/core/_kernel.c"],
+            include_dirs=[f"{PACKAGE}/core/c"],
+            depends=[f"{PACKAGE}/core/c/cf_core.h"],
             extra_compile_args=["-O2", "-ffp-contract=off"],  # no FMA: same bits as Python
             optional=True,
         )

@@ -1,10 +1,12 @@
 """The C twin's source against its reference's: the same named constants and parameter reads.
 
-core/_kernel.c repeats core/step.py (with core/stillness.py and core/bias.py) operation for
-operation. Beside the numeric comparison (test/test_kernel.py), these checks read both sources:
+The C core (core/c/cf_core.h and cf_core.c; core/_kernel.c is its Python binding) repeats
+core/step.py (with core/stillness.py and core/bias.py) operation for operation. Beside the
+numeric comparison (test/test_kernel.py), these checks read both sources:
 
 - every named constant the Python step uses is ``#define``-d in C with the same value, and every
-  numeric ``#define`` of the C has a Python constant of that name and value (both ways);
+  numeric ``#define`` of the C has a Python constant of that name and value (both ways; the
+  header's public ones carry a ``CF_`` prefix, dropped for the comparison);
 - neither step holds a bare literal beyond the algebra's 0, 1, 2, 3 (and the half angle 0.5 and
   the series' 48 in the rotation helpers): a tuning number has a name in both files;
 - each constant and each parameter is read as many times in C as in Python: reading
@@ -25,6 +27,10 @@ import pytest
 from cf_estimator.core import bias, covariance, filter, ops, step, stillness
 
 CORE = Path(step.__file__).parent
+#: The C core: the header (public constants, the structs) and the step's source.
+C_CORE = (CORE / "c" / "cf_core.h", CORE / "c" / "cf_core.c")
+#: The header's namespace for its public names (CF_PHASE_STARTUP is step.py's PHASE_STARTUP).
+C_PREFIX = "CF_"
 #: The Python step: module → its functions that the C repeats (all top-level ones) ...
 PY_MODULES = (step, stillness, bias)
 #: ... plus the small-angle series of the exponential map, which the C inlines into expmap().
@@ -66,21 +72,28 @@ def _py_functions() -> list[tuple[str, ast.AST]]:
 
 
 def _c_source() -> str:
-    return re.sub(r"/\*.*?\*/", "", (CORE / "_kernel.c").read_text(), flags=re.S)
+    text = "\n".join(path.read_text() for path in C_CORE)
+    return re.sub(r"/\*.*?\*/", "", text, flags=re.S)
+
+
+def _unprefixed(name: str) -> str:
+    return name.removeprefix(C_PREFIX)
 
 
 def _c_functions() -> dict[str, str]:
     src = _c_source()
     out = {}
     for name in C_HELPERS + C_STEP:
-        m = re.search(rf"^static \w+ \*?{name}\(.*?^}}\n", src, flags=re.S | re.M)
-        assert m is not None, f"_kernel.c has no function {name}()"
+        # a definition (its header's declaration ends in ";" before any "{")
+        m = re.search(rf"^(?:static )?\w+ \*?{name}\([^;{{]*?\)\n{{.*?^}}\n", src,
+                      flags=re.S | re.M)
+        assert m is not None, f"cf_core.c has no function {name}()"
         out[name] = m.group(0)
     return out
 
 
 def _c_defines() -> dict[str, float]:
-    return {m.group(1): float(m.group(2)) for m in re.finditer(
+    return {_unprefixed(m.group(1)): float(m.group(2)) for m in re.finditer(
         r"^#define ([A-Z][A-Z0-9_]+) ([-+]?\d+\.?\d*(?:[eE][-+]?\d+)?)\s*$", _c_source(),
         flags=re.M)}
 
@@ -110,7 +123,7 @@ def _py_counts() -> tuple[collections.Counter, collections.Counter]:
 
 def _c_counts() -> tuple[collections.Counter, collections.Counter]:
     bodies = "".join(_c_functions().values())
-    names = collections.Counter(n for n in CONST.findall(bodies) if n != "NULL")
+    names = collections.Counter(_unprefixed(n) for n in CONST.findall(bodies) if n != "NULL")
     return names, collections.Counter(re.findall(r"\bp->(\w+)", bodies))
 
 
@@ -136,7 +149,7 @@ def test_every_c_constant_has_its_python_counterpart_with_the_same_value():
     assert {"GYRO_LIMIT_RAD_S", "TINY", "MAG_QUICK_LIMIT_RAD", "REST_GATE_SIGMAS"} <= set(defines)
     for name, value in sorted(defines.items()):
         homes = [m for m in PY_HOMES if hasattr(m, name)]
-        assert homes, f"_kernel.c #define {name} has no Python constant of that name"
+        assert homes, f"cf_core #define {name} has no Python constant of that name"
         assert float(getattr(homes[0], name)) == value, name
 
 
@@ -145,7 +158,7 @@ def test_every_python_constant_of_the_step_is_defined_in_c_with_the_same_value()
     names, _ = _py_counts()
     assert len(names) > 30
     for name in sorted(names):
-        assert name in defines, f"{name} (used by the Python step) is not #define-d in _kernel.c"
+        assert name in defines, f"{name} (used by the Python step) is not #define-d in cf_core"
         home = next(m for m in PY_HOMES if hasattr(m, name))
         assert float(getattr(home, name)) == defines[name], name
 
@@ -175,8 +188,8 @@ def test_each_constant_and_parameter_is_read_as_often_in_c_as_in_python():
 
 
 def test_the_c_params_read_exactly_the_fields_the_python_step_reads():
-    """PARAM_FIELDS (what Params() copies from the view) = the Python step's p.* reads."""
-    table = re.search(r"PARAM_FIELDS\[\] = \{(.*?)\};", _c_source(), flags=re.S)
+    """cf_param_fields (what Params() copies from the view) = the Python step's p.* reads."""
+    table = re.search(r"cf_param_fields\[\] = \{(.*?)\};", _c_source(), flags=re.S)
     assert table is not None
     fields = set(re.findall(r"\b[DB]F\((\w+)\)", table.group(1)))
     _, py_reads = _py_counts()

@@ -84,7 +84,7 @@ when nothing moves —; yaw on BROAD's undisturbed trials, 9-D; BENCHMARKS.md "C
 ``l̄``'s, ``1/k1``, and ``V`` follow from the loop. Each variance is
 capped at π² (an angle error is at most π), or at its floor (yaw: also the unreferenced
 variance) if larger. Plain floats: it runs per message; :meth:`OrientationCovariance.rows` runs
-it over arrays, in the compiled kernel when asked (``_kernel.c`` ``covariance_rows``: the same
+it over arrays, in the compiled kernel when asked (``c/cf_core.c`` ``cf_covariance_rows``: the same
 operations in the same order as :meth:`OrientationCovariance.steps`, the reference).
 """
 

@@ -13,7 +13,6 @@ through :meth:`ComplementaryFilter.status`.
 
 from __future__ import annotations
 
-import contextlib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -162,7 +161,7 @@ EXTRA_COLUMNS = 20
 
 
 class Extra:
-    """Column indices of ``extra_out`` (the order above; ``_kernel.c`` writes the same)."""
+    """Column indices of ``extra_out`` (the order above; ``c/cf_core.c`` writes the same)."""
 
     ERROR = slice(0, 3)  #: raw error e (3)
     BIAS = slice(3, 6)  #: integral state b (3)
@@ -181,8 +180,8 @@ class Extra:
 
 
 def state_extras(s: Any) -> tuple:
-    """One ``extra_out`` row (EXTRA_COLUMNS values) from a filter state (_kernel.c writes the
-    same columns in ``State.run``)."""
+    """One ``extra_out`` row (EXTRA_COLUMNS values) from a filter state (c/cf_core.c writes
+    the same columns: ``cf_write_extra``, in ``State.run``)."""
     bx, by, bz = gyro_bias_of(s)
     return (s.ex, s.ey, s.ez, s.bx, s.by, s.bz, s.clipped, s.phase, s.at_rest, s.mag_status,
             bias_error_sigma(s), s.lx, s.ly, s.yaw_error_rad, s.noise_a2, bx, by, bz, s.loop_k1,
@@ -430,12 +429,13 @@ class ComplementaryFilter:
         Magnetometer units are free (only the direction and relative norm are used).
         """
         if self._kernel_params is not None and self._initialized:  # the compiled twin, same checks
-            q = self._learning.update(self._kernel_params, gyro_rad_s, accel_m_s2, dt_s, mag)
             if self._null is None:
-                return q
-            q_null = self._null.update(self._null_kernel_params, gyro_rad_s, accel_m_s2, dt_s,
-                                       mag)
-            return q_null if self._choose() else q
+                return self._learning.update(self._kernel_params, gyro_rad_s, accel_m_s2, dt_s,
+                                             mag)
+            q, null = self._learning.update(self._kernel_params, gyro_rad_s, accel_m_s2, dt_s,
+                                            mag, self._null, self._null_kernel_params)
+            self._state = self._null if null else self._learning
+            return q
         if not self._initialized:
             self.initialize_from(accel_m_s2, mag) if accel_m_s2 is not None else None
             return self.orientation_tuple() if self._initialized else None
@@ -478,7 +478,11 @@ class ComplementaryFilter:
                 self._learning.run(self._kernel_params, gyro_rad_s, accel_m_s2, mag, dt_s, start,
                                    q_out, extra_out)
                 return
-            self._run_both(gyro_rad_s, accel_m_s2, mag, dt_s, start, q_out, extra_out)
+            try:
+                self._learning.run(self._kernel_params, gyro_rad_s, accel_m_s2, mag, dt_s, start,
+                                   q_out, extra_out, self._null, self._null_kernel_params)
+            finally:
+                self._choose()  # the published one after the last row run
             return
         g_rows, a_rows = gyro_rad_s.tolist(), accel_m_s2.tolist()
         m_rows = mag.tolist() if mag is not None else None
@@ -487,30 +491,6 @@ class ComplementaryFilter:
             q_out[i] = self.update(g_rows[i], a_rows[i], dts[i], m_rows[i] if m_rows else None)
             if extra_out is not None:
                 extra_out[i] = state_extras(self._state)
-
-    def _run_both(self, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray, mag: np.ndarray | None,
-                  dt_s: np.ndarray, start: int, q_out: np.ndarray,
-                  extra_out: np.ndarray | None) -> None:
-        """The compiled run_rows of both hypotheses, each row published as :meth:`_choose`
-        would (rows a bad row stopped are left as they were, in both)."""
-        extra = extra_out if extra_out is not None else np.zeros((len(dt_s), EXTRA_COLUMNS))
-        q_null, extra_null = q_out.copy(), extra.copy()
-        error: ValueError | None = None
-        try:
-            self._learning.run(self._kernel_params, gyro_rad_s, accel_m_s2, mag, dt_s, start,
-                               q_out, extra)
-        except ValueError as e:  # the same row stops both (the same checks on the same rows)
-            error = e
-        with contextlib.suppress(ValueError):
-            self._null.run(self._null_kernel_params, gyro_rad_s, accel_m_s2, mag, dt_s, start,
-                           q_null, extra_null)
-        rows = slice(start, None)
-        null = EVIDENCE_RATIO * extra_null[rows, Extra.PV_VAR] < extra[rows, Extra.PV_VAR]
-        q_out[rows] = np.where(null[:, None], q_null[rows], q_out[rows])
-        extra[rows] = np.where(null[:, None], extra_null[rows], extra[rows])
-        self._choose()
-        if error is not None:
-            raise error
 
     # -- outputs -----------------------------------------------------------------------------
     def _to_output(self, q_enu: Any) -> np.ndarray:

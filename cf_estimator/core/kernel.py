@@ -1,7 +1,8 @@
 """Which implementation runs the filter step: the compiled twin or the Python reference.
 
 :mod:`cf_estimator.core.step` is the reference: the equations, readable, run with floats or
-NumPy arrays. ``_kernel.c`` repeats them operation for operation in C (built by ``pip install``
+NumPy arrays. ``c/cf_core.c`` (the standalone C core; ``_kernel.c`` binds it to Python)
+repeats them operation for operation in C (built by ``pip install``
 / ``colcon build`` when a C compiler is present; tested to agree to 1e-12). Without it
 everything works the same, only slower. ``CF_ESTIMATOR_BACKEND=python`` forces the reference.
 """

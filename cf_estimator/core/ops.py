@@ -17,7 +17,7 @@ TINY = 1e-300
 
 
 def sq(x: Any) -> Any:
-    """x·x: the square as a product, in both back-ends and in ``_kernel.c`` (``sq``). Python's
+    """x·x: the square as a product, in both back-ends and in ``c/cf_core.c`` (``sq``). Python's
     ``x ** 2`` calls libm's ``pow``, which is not correctly rounded: about one input in a
     thousand differs from x·x in the last bit (GCC turns C's ``pow(x, 2.0)`` into x·x)."""
     return x * x
@@ -25,7 +25,7 @@ def sq(x: Any) -> Any:
 
 def rotation_elements(qw: Any, qx: Any, qy: Any, qz: Any) -> tuple[Any, ...]:
     """R(q) of a unit quaternion (w, x, y, z), row-major (r00, r01, … r22): plain arithmetic,
-    floats and arrays alike, the operations of ``_kernel.c`` in the same order."""
+    floats and arrays alike, the operations of ``c/cf_core.c`` in the same order."""
     return (1.0 - 2.0 * (qy * qy + qz * qz), 2.0 * (qx * qy - qw * qz), 2.0 * (qx * qz + qw * qy),
             2.0 * (qx * qy + qw * qz), 1.0 - 2.0 * (qx * qx + qz * qz), 2.0 * (qy * qz - qw * qx),
             2.0 * (qx * qz - qw * qy), 2.0 * (qy * qz + qw * qx), 1.0 - 2.0 * (qx * qx + qy * qy))

@@ -14,8 +14,8 @@ plus the **signals** of the last step (what diagnostics and ``estimate()`` repor
 
 Every field is a float/bool (one filter) or an array of shape (P,) (P parameter sets, the
 batched filter): the step is written once for both (:mod:`cf_estimator.core.ops`). The compiled
-twin (``_kernel.c``) holds the same fields in a C struct and lists them in the same order
-(tested). Frames: q_world(ENU)_from_sensor; "sensor" = the IMU's axes.
+twin holds the same fields in a C struct (``c/cf_core.h``; ``_kernel.c`` lists them in the same
+order, tested). Frames: q_world(ENU)_from_sensor; "sensor" = the IMU's axes.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The 3-D compensation-scheme step: the filter's equations, written once for floats and arrays.
 
 One sample, in the order the code runs (world frame ENU inside; q = q_world_from_sensor); each
-stage is a function of its name here and a static function of the same name in core/_kernel.c::
+stage is a function of its name here and a static function of the same name in core/c/cf_core.c::
 
     1. predict()  q⁻ = Exp_z(z_m·dt) ⊗ q ⊗ Exp((ω − b)·dt)
                   (gyro ω, bias estimate b; z_m: heading channel's world-vertical rate)
@@ -246,7 +246,7 @@ def step(
 
     ``p`` has the FilterParams field names (floats, or arrays for a batch).
     ``accel``/``mag`` are None when absent or invalid at this sample (the caller checks
-    finiteness and non-zero norm). ``dt`` > 0 [s]. The C twin's cf_step() (core/_kernel.c)
+    finiteness and non-zero norm). ``dt`` > 0 [s]. The C twin's cf_step() (core/c/cf_core.c)
     calls the same stages, of the same names, in the same order.
     """
     s.time_s = s.time_s + dt

@@ -5,7 +5,7 @@ sample differences: sensor noise and rotor vibration), capped so that vibration 
 "still" until flight fits inside it; a turning magnetic field and a gyro mean far from the bias
 estimate are motion. Owns the ``CLASSIFIER`` fields of :mod:`cf_estimator.core.state`; reads the
 bias estimate (``b*``, ``bias_var``) for the gate. Written once for floats and arrays
-(:mod:`cf_estimator.core.ops`); ``_kernel.c`` repeats it (``stillness()``).
+(:mod:`cf_estimator.core.ops`); ``c/cf_core.c`` repeats it (``stillness()``).
 """
 
 from __future__ import annotations
