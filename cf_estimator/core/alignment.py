@@ -81,7 +81,7 @@ REMEMBER_MEMORIES = 2.0
 #: windows share most of their data, and the fit's cost (a solve per kept window over the 600
 #: windows of 2 memories of 60 s) must not grow with the velocity's rate (phantom4 aided,
 #: horizontal / vertical: 10 per window 0.826 / 0.698°, 5: 0.838 / 0.695°, 2: 0.848 / 0.714°;
-#: the node load with 10 per window and 3 memories missed its p99 target, BENCHMARKS.md).
+#: the node load with 10 per window and 3 memories missed its p99 target, docs/decisions/0009).
 ROWS_PER_WINDOW = 5.0
 
 # columns of a stored window
@@ -218,7 +218,7 @@ class InMotionAlignment:
         manoeuvre aided by a noiseless velocity took −0.56 °/s about the vertical (true 0.005)
         when the fit became known half a second into the acceleration, and the heading then
         drifted across the 5 m/s²: peak 64.2′ against 32.5′ at 0.1 m/s; with the floor 18.0′
-        (BENCHMARKS.md, "Thesis manoeuvre aided"). A velocity as noisy as configured scatters
+        (docs/decisions/0006, "Thesis manoeuvre aided"). A velocity as noisy as configured scatters
         about as much as the floor, which then changes little."""
         w = self._weights
         n = float(w.sum())

@@ -123,7 +123,7 @@ def turn_share(s: StepState, p: Any, o: Any) -> Any:
     signed low-pass through zero in a second, and with it the full raise came back and learned
     the lean the loop's error still held (tight figure-8s, 1 m/s at 1.5 rad/s: 1.79 → 1.15 °/s
     learned, 2.12° → 1.55°; with the integral learning through the unit's own lag,
-    step.learning_input, 0.25 °/s and 0.75°; BENCHMARKS.md "The tight turn"). Without the
+    step.learning_input, 0.25 °/s and 0.75°; docs/decisions/0005, "The tight turn"). Without the
     share, the raise at full power in a turn learns what the turn leaves: tight 4.85°. A gyro
     bias about the vertical as large as the prior (0.1 rad/s) counts as a turn too, and takes
     15 % of the raise."""
@@ -161,7 +161,7 @@ def error_sigma(s: StepState, o: Any) -> Any:
     and the same still-block measurements (with the gain bias_var chose, :func:`fuse_rest`),
     and shrinks at 2·k2/k1 while learning. ``bias_var`` is the schedule and a bound; this is the
     error. Measured (shipped defaults, the reference's own rates for the true bias, per-axis
-    RMS of the horizontal components at 10 / 20 / 30 s; BENCHMARKS.md "the loop's drift from
+    RMS of the horizontal components at 10 / 20 / 30 s; docs/decisions/0005, "the loop's drift from
     the bias estimate's error"): phantom4 vertical error 0.39 / 0.17 / 0.18 °/s, σ_b 2.28 /
     1.26 / 0.91, this 0.93 / 0.28 / 0.15."""
     return o.sqrt(o.maximum(s.bias_err_var, 0.0))

@@ -39,7 +39,7 @@ the world x and y axes::
   the correction it made: ``k1·∫`` of the disagreement, which dies away as the loop catches up
   (a zig-zag: its legs cancel in ``c`` as they do in the tilt error — the disagreement itself,
   ``|l_h|``, is the swing the loop did *not* follow and over-counts it by ω/k1 at a zig-zag's
-  ω; BENCHMARKS.md "Covariance"). A leg held in one world direction for longer than ``1/k1``
+  ω; docs/decisions/0007). A leg held in one world direction for longer than ``1/k1``
   is counted short: its transient and steady parts are both ``A·k1·t·e^(−k1·t)`` for a lean
   ``A``, and ``M + L`` peaks at 1.3–1.4·(A/e)² while the tilt goes on to ``A`` (a vehicle whose
   velocity is bounded holds no leg long). Older corrections are taken as averaged out. When
@@ -79,7 +79,7 @@ variance with the gyro drift D). Not referenced (``use_mag`` false, or no usable
 
 Constants: ``v0`` and ``y0`` are the only fitted ones (maximum likelihood of the errors under the
 model's Gaussian: tilt on EuRoC's samples at rest on the ground, 6-D — the floor is what is left
-when nothing moves —; yaw on BROAD's undisturbed trials, 9-D; BENCHMARKS.md "Covariance");
+when nothing moves —; yaw on BROAD's undisturbed trials, 9-D; docs/decisions/0007);
 ``M``'s gain k1 (the loop's running gain), its window CORRECTION_WINDOW_S, its memory and
 ``l̄``'s, ``1/k1``, and ``V`` follow from the loop. Each variance is
 capped at π² (an angle error is at most π), or at its floor (yaw: also the unreferenced
@@ -104,7 +104,7 @@ _SETTLING = (PHASE_STARTUP, PHASE_RECOVERING)
 
 #: Default ``v0`` [rad²] per tilt axis (``orientation_covariance_rad2``): what is left when nothing
 #: moves — fitted by maximum likelihood on EuRoC's samples at rest on the ground (its three
-#: flights before take-off, 6-D), checked on every family in motion (BENCHMARKS.md
+#: flights before take-off, 6-D), checked on every family in motion (docs/decisions/0007,
 #: "Covariance"; 6.4e-5 before, fitted on the phantom4 vertical campaign in flight).
 TILT_FLOOR_RAD2 = 1.0e-4
 #: Window [s] of the correction term ``M``: corrections older than this are taken as averaged
@@ -112,7 +112,7 @@ TILT_FLOOR_RAD2 = 1.0e-4
 CORRECTION_WINDOW_S = 10.0
 #: Default ``y0`` [rad²] (``yaw_covariance_rad2``): fitted on BROAD's undisturbed trials, 9-D:
 #: the likelihood is flat from 3e-4 to 5e-4 (maximum 3.8e-4), and within that range the
-#: trials' mean(e²/σ²) is 0.54 at 3e-4, 0.46 at 4e-4 (BENCHMARKS.md "Covariance").
+#: trials' mean(e²/σ²) is 0.54 at 3e-4, 0.46 at 4e-4 (docs/decisions/0007).
 YAW_FLOOR_RAD2 = 3e-4
 #: Default yaw variance [rad²] while no magnetometer references the heading.
 UNREFERENCED_YAW_RAD2 = 10.0

@@ -6,7 +6,7 @@ heading alone (Ryzhkov, drift; its full-vector variant with k3 is not offered:
 docs/decisions/0011-full-vector-variant-removed.md).
 The saturation unit and the aperiodic unit 1/(T·s + 1) act on the error signal before W1 (the
 thesis, Habliuk 2023). Defaults are chosen by measurement on recorded and simulated data (see
-BENCHMARKS.md).
+docs/decisions/0004-defaults-history.md).
 """
 
 from __future__ import annotations
@@ -118,7 +118,7 @@ class FilterParams:
         "matches the current estimate, as in VQF); 0: the thesis's unit on the clipped error, "
         "whose memory of already-corrected error keeps acting (slower, smoother loop); 0 too "
         "while a linear acceleration is detected (tight clip). Chosen "
-        "by measurement on BROAD, EuRoC and the thesis scenarios (BENCHMARKS.md).",
+        "by measurement on BROAD, EuRoC and the thesis scenarios (docs/decisions/0004).",
         minimum=0.0,
         maximum=1.0,
         group="error path",
@@ -315,7 +315,7 @@ class FilterParams:
         "sqrt(2)*velocity_noise/window), matched by the mean specific force over the same "
         "stamps. A longer window averages the noise but delays the in-motion alignment (a few "
         "windows) and with it the take-hold: Phantom 4 horizontal aided 0.86 / 1.03 / 4.2 deg "
-        "at 1 / 2 / 3 s (BENCHMARKS.md).",
+        "at 1 / 2 / 3 s (docs/decisions/0006).",
         minimum=0.0,
         maximum=30.0,
         minimum_exclusive=True,

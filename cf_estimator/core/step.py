@@ -417,7 +417,7 @@ def learning_input(s: StepState, lag: tuple, weight: Any, o: Any) -> tuple:
     averages it out of the world frame, and the learning fades as that evidence does. Through
     f = Rᵀ·l the same e came back turned by atan(ωT) about the vertical (72° at 1.5 rad/s over
     2 s), into other axes, one way in a left turn and the other in a right one: a tight
-    figure-8 taught 1.15 °/s of bias to a de-biased gyro (now 0.25 °/s; BENCHMARKS.md "The
+    figure-8 taught 1.15 °/s of bias to a de-biased gyro (now 0.25 °/s; docs/decisions/0005, "The
     tight turn"). R̄ starts as R (all zero: not set yet), is turned with heading corrections
     (:func:`turn_heading`) and cleared with the unit (ComplementaryFilter.realign)."""
     lx, ly, lz = lag
