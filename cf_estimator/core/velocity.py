@@ -82,8 +82,8 @@ module builds that aided specific force for the unchanged filter step, outside i
   state: a hand shaking the sensor at 8 g passed that state for an attitude error, and each
   take-hold trusted the shake (BROAD's fast translation aided by its optical positions: up
   to 178° off; BENCHMARKS.md "After a gyro fault", docs/decisions/0006). A window whose
-  gravity is not g's size (beyond the same share of g) judges nothing: an attitude error turns it, a window whose
-  velocity and IMU disagree (a shake against the velocity's own bandwidth, in 0.5 s windows:
+  gravity is not g's size (beyond the same share of g) judges nothing: an attitude error turns
+  it, a window whose velocity and IMU disagree (a shake against the velocity's own bandwidth, in 0.5 s windows:
   false take-holds and 166° off) does not.
 - **Fallback.** Without a fresh window (no velocity, a stamp older than ``velocity_timeout_s``,
   a dropout) the raw accelerometer sample is returned untouched: the filter's
