@@ -83,8 +83,8 @@ module builds that aided specific force for the unchanged filter step, outside i
   take-hold trusted the shake (BROAD's fast translation aided by its optical positions: up
   to 178° off; BENCHMARKS.md "After a gyro fault", docs/decisions/0006). A window whose
   gravity is not g's size (beyond the same share of g) judges nothing: an attitude error turns
-  it, a window whose velocity and IMU disagree (a shake against the velocity's own bandwidth, in 0.5 s windows:
-  false take-holds and 166° off) does not.
+  it, a window whose velocity and IMU disagree (a shake against the velocity's own bandwidth,
+  in 0.5 s windows: false take-holds and 166° off) does not.
 - **Fallback.** Without a fresh window (no velocity, a stamp older than ``velocity_timeout_s``,
   a dropout) the raw accelerometer sample is returned untouched: the filter's
   outputs are then bit-identical to the unaided filter's.
