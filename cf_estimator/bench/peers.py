@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -155,6 +156,24 @@ FUSION_SETTINGS = {"convention": "NWU", "gain": 0.5, "gyroscope_range_deg_s": 20
                    "rejection_timeout_s": 5.0}
 
 
+def fusion_recommended(rate_hz: float) -> tuple[Any, Any]:
+    """(``Ahrs``, its gyroscope offset module ``Bias``) set up as Fusion's README recommends
+    (:data:`FUSION_SETTINGS`) for samples at ``rate_hz`` [Hz]: feed each gyro sample [deg/s]
+    through ``Bias.update`` before ``Ahrs.update``."""
+    imufusion = _require("fusion")
+    s = FUSION_SETTINGS
+    ahrs = imufusion.Ahrs()
+    ahrs.set_settings(imufusion.AhrsSettings(
+        sample_rate=float(rate_hz), convention=imufusion.CONVENTION_NWU, gain=s["gain"],
+        gyroscope_range=s["gyroscope_range_deg_s"],
+        acceleration_rejection=s["acceleration_rejection_deg"],
+        magnetic_rejection=s["magnetic_rejection_deg"],
+        rejection_timeout=s["rejection_timeout_s"]))
+    bias = imufusion.Bias()
+    bias.set_settings(imufusion.BiasSettings(sample_rate=float(rate_hz)))
+    return ahrs, bias
+
+
 def run_fusion(gyro: np.ndarray, acc: np.ndarray, mag: np.ndarray | None, rate_hz: float,
                recommended: bool = True) -> np.ndarray:
     """x-io Fusion AHRS (9-D with ``mag``, else ``update_no_magnetometer``).
@@ -166,20 +185,10 @@ def run_fusion(gyro: np.ndarray, acc: np.ndarray, mag: np.ndarray | None, rate_h
     constructed (rejection off: its recovery period is 0; no offset module), only the sample
     period set — the control of the tests that show the recommended set-up at work.
     """
-    imufusion = _require("fusion")
-    ahrs = imufusion.Ahrs()
-    bias = None
     if recommended:
-        s = FUSION_SETTINGS
-        ahrs.set_settings(imufusion.AhrsSettings(
-            sample_rate=float(rate_hz), convention=imufusion.CONVENTION_NWU, gain=s["gain"],
-            gyroscope_range=s["gyroscope_range_deg_s"],
-            acceleration_rejection=s["acceleration_rejection_deg"],
-            magnetic_rejection=s["magnetic_rejection_deg"],
-            rejection_timeout=s["rejection_timeout_s"]))
-        bias = imufusion.Bias()
-        bias.set_settings(imufusion.BiasSettings(sample_rate=float(rate_hz)))
+        ahrs, bias = fusion_recommended(rate_hz)
     else:
+        ahrs, bias = _require("fusion").Ahrs(), None
         ahrs.set_sample_period(1.0 / rate_hz)
     g_deg = np.ascontiguousarray(np.degrees(np.asarray(gyro, dtype=float)))
     if bias is not None:  # the offset module sees every sample at the configured rate

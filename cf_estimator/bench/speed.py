@@ -56,19 +56,9 @@ def per_sample_rates(n: int = 20000, peers: tuple[str, ...] = ("vqf", "fusion", 
             v.getQuat9D()
         out["vqf"] = n / (time.perf_counter() - t0)
     if "fusion" in peers:  # as the bench runs it: the offset module, then the AHRS update
-        import imufusion
+        from cf_estimator.bench.peers import fusion_recommended
 
-        from cf_estimator.bench.peers import FUSION_SETTINGS as fs
-
-        ah = imufusion.Ahrs()
-        ah.set_settings(imufusion.AhrsSettings(
-            sample_rate=float(rate_hz), convention=imufusion.CONVENTION_NWU, gain=fs["gain"],
-            gyroscope_range=fs["gyroscope_range_deg_s"],
-            acceleration_rejection=fs["acceleration_rejection_deg"],
-            magnetic_rejection=fs["magnetic_rejection_deg"],
-            rejection_timeout=fs["rejection_timeout_s"]))
-        bias = imufusion.Bias()
-        bias.set_settings(imufusion.BiasSettings(sample_rate=float(rate_hz)))
+        ah, bias = fusion_recommended(rate_hz)
         gd, ag = np.degrees(gyro), acc / 9.80665
         t0 = time.perf_counter()
         for i in range(n):
