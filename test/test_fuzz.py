@@ -39,7 +39,6 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from ros_test_helpers import Header, Imu, MagneticField, Quaternion, Time, Vector3
 
-from cf_estimator.core.filter import ComplementaryFilter
 from cf_estimator.core.params import FilterParams
 from cf_estimator.params_file import all_specs, build_params
 from cf_estimator.pipeline import ImuPipeline, PipelineParams, checks
@@ -717,9 +716,8 @@ def test_valid_parameter_changes_apply_at_the_next_sample_without_reset(changes,
     t_next = t - 10_000_000 + next_dt_ns
     gyro, accel = (0.02, -0.01, 0.25), (0.4, -0.8, 9.6)
     expected = model.imu(t_next, gyro, accel)
-    ref = ComplementaryFilter(fp_new)
-    ref._state = pipe.filter.state_snapshot()  # noqa: SLF001 - reference from the same state
-    ref._initialized = True  # noqa: SLF001
+    ref = copy.deepcopy(pipe.filter)  # the same state: both bias hypotheses, the published one
+    ref.set_params(fp_new)
     before_gaps = pipe.counters["gaps"]
     out = pipe.on_imu(imu_msg(t_next, gyro, accel))
     assert expected is None and out is not None

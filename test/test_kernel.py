@@ -18,6 +18,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from kernel_guard import require_kernel
 
+from cf_estimator.core import filter as filter_module
 from cf_estimator.core import kernel, ops, step
 from cf_estimator.core.batch import estimate, estimate_many
 from cf_estimator.core.filter import EXTRA_COLUMNS, ComplementaryFilter
@@ -186,12 +187,13 @@ def test_every_parameter_is_read_where_the_reference_reads_it():
 def test_state_fields_and_constants_are_those_of_the_reference():
     assert list(kernel.compiled_kernel.State.FIELDS) == step.StepState.FIELDS
     c = kernel.compiled_kernel.CONSTANTS
-    shared = set(c) - {"SMALL_ANGLE_RAD", "EXTRA_COLUMNS"}
+    shared = set(c) - {"SMALL_ANGLE_RAD", "EXTRA_COLUMNS", "EVIDENCE_RATIO"}
     assert shared >= {"REST_NOISE_SIGMAS", "ACCEL_SPIKE_SIGMAS", "BIAS_RANDOM_WALK_RAD_S_SQRT_S"}
     for name in sorted(shared):
         assert c[name] == getattr(step, name), name
     assert c["SMALL_ANGLE_RAD"] == ops.SMALL_ANGLE_RAD
     assert c["EXTRA_COLUMNS"] == EXTRA_COLUMNS
+    assert c["EVIDENCE_RATIO"] == filter_module.EVIDENCE_RATIO
 
 
 @pytest.mark.parametrize("name", list(PARAM_SETS))
