@@ -12,6 +12,8 @@ world frames: the metric for 6-D estimates and for references whose heading is a
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -81,3 +83,33 @@ def rms_max(errors: ArrayLike, mask: ArrayLike | None = None) -> tuple[float, fl
     if e.size == 0:
         return float("nan"), float("nan"), 0
     return float(np.sqrt(np.mean(e * e))), float(np.max(e)), int(e.size)
+
+
+# -- is the reported covariance honest? (bench/consistency.py pools it per family) ---------
+#: Samples are scored from this long after the first one [s] (as the benchmarks' RMS).
+SETTLE_S = 10.0
+#: e > this many σ counts as beyond.
+SIGMAS = 2.0
+#: A consistent Gaussian's share beyond 2σ, as printed: tilt (2-D, σ² = cov[0] + cov[4]) e⁻⁴,
+#: heading (1-D) 4.6 %, and the tilt's share beyond twice its per-axis σ e⁻².
+CONSISTENT_BEYOND = {"tilt": "1.8 %", "heading": "4.6 %", "tilt per axis": "13.5 %"}
+
+
+def consistency(err_rad: np.ndarray, var_rad2: np.ndarray) -> dict[str, float]:
+    """``{samples, rms_deg, median_sigma_deg, beyond_2sigma_pct, beyond_2sigma_axis_pct,
+    mean_ratio}`` of errors [rad]
+    against reported variances [rad²] (non-finite pairs left out; NaN figures when empty)."""
+    e = np.asarray(err_rad, dtype=float).reshape(-1)
+    v = np.asarray(var_rad2, dtype=float).reshape(-1)
+    ok = np.isfinite(e) & np.isfinite(v) & (v > 0.0)
+    e, v = e[ok], v[ok]
+    if e.size == 0:
+        nan = math.nan
+        return {"samples": 0, "rms_deg": nan, "median_sigma_deg": nan, "beyond_2sigma_pct": nan,
+                "beyond_2sigma_axis_pct": nan, "mean_ratio": nan}
+    z = e * e / v
+    return {"samples": int(e.size), "rms_deg": math.degrees(math.sqrt(float(np.mean(e * e)))),
+            "median_sigma_deg": math.degrees(math.sqrt(float(np.median(v)))),
+            "beyond_2sigma_pct": 100.0 * float(np.mean(z > SIGMAS * SIGMAS)),
+            "beyond_2sigma_axis_pct": 100.0 * float(np.mean(z > SIGMAS * SIGMAS / 2.0)),
+            "mean_ratio": float(np.mean(z))}

@@ -19,7 +19,7 @@ from test_bulk_decode import _assert_same_bags, _hostile_bag
 from test_replay import _convert
 
 from cf_estimator.bag import io, mcapread
-from cf_estimator.bag.reader import open_bag
+from cf_estimator.bag.formats import open_bag
 from cf_estimator.bag.replay import ReplayOptions, replay_bag
 from cf_estimator.bag.simulate import write_scenario_bag
 from cf_estimator.cli.main import main

@@ -46,8 +46,9 @@ from typing import Any
 
 import numpy as np
 
-from cf_estimator.bag import cdr, io
+from cf_estimator.bag import cdr
 from cf_estimator.bag.logbag import Stream, StreamBag
+from cf_estimator.bag.types import IMU_TYPE, MAG_TYPE, QUATERNION_STAMPED_TYPE, BagError, one_line
 from cf_estimator.core import quaternion as quat
 
 DATAFLASH_FORMAT = "ardupilot-dataflash"
@@ -220,15 +221,15 @@ class DataflashBag(StreamBag):
         try:
             rows, params, texts, cut, size = _read(path)
         except Exception as exc:  # noqa: BLE001 - DFReader on garbage raises anything
-            raise io.BagError(f"{path}: not a readable ArduPilot DataFlash log: "
-                              f"{io.one_line(exc)}") from exc
+            raise BagError(f"{path}: not a readable ArduPilot DataFlash log: "
+                              f"{one_line(exc)}") from exc
         #: the autopilot's parameters (name -> value; ArduPilot's units)
         self.parameters: dict[str, Any] = params
         self.vehicle = _vehicle(texts)  #: firmware line, e.g. "APM:Copter V3.3-dev (ae3192b8)"
         imu = self._imu_rows(rows, instance)
         if imu is None:
             kinds = ", ".join(sorted(rows)) or "none the replay reads"
-            raise io.BagError(f"{path}: no IMU messages in this DataFlash log (the IMU the "
+            raise BagError(f"{path}: no IMU messages in this DataFlash log (the IMU the "
                               f"estimator needs); its messages: {kinds}")
         stamps = [r.stamp_us() for r in rows.values() if len(r)]
         self.log_start_us = int(min(int(s.min()) for s in stamps))
@@ -264,7 +265,7 @@ class DataflashBag(StreamBag):
                 r = r.where(r.columns["C"] == np.min(r.columns["C"]))
             q = _attitude_q(r)
             ok = np.all(np.isfinite(q), axis=1)
-            self.streams[topic] = Stream(topic, io.QUATERNION_STAMPED_TYPE,
+            self.streams[topic] = Stream(topic, QUATERNION_STAMPED_TYPE,
                                          r.stamp_us()[ok] * 1000, q[ok], "ned")
         #: the log's time [s since boot] where its attitude first goes upside down (None: never)
         self.upside_down_s = self._upside_down(rows.get(ATTITUDE_TOPIC))
@@ -300,7 +301,7 @@ class DataflashBag(StreamBag):
             if wanted is None:
                 use = min(have)
             else:
-                raise io.BagError(f"{self.path}: {kind} has instances "
+                raise BagError(f"{self.path}: {kind} has instances "
                                   f"{', '.join(map(str, sorted(have)))}, not {wanted} "
                                   "(--instance)", 2)
         self.instances[kind] = use
@@ -349,7 +350,7 @@ class DataflashBag(StreamBag):
         values[:, 4] = -1.0
         values[:, 13:16] = gyro[ok]
         values[:, 25:28] = accel[ok]
-        self.streams[IMU_TOPIC] = Stream(IMU_TOPIC, io.IMU_TYPE, t[ok] * 1000, values,
+        self.streams[IMU_TOPIC] = Stream(IMU_TOPIC, IMU_TYPE, t[ok] * 1000, values,
                                          ARDUPILOT_BODY_FRAME_ID)
 
     def _mag(self, mag: _Rows) -> None:
@@ -362,7 +363,7 @@ class DataflashBag(StreamBag):
         values = np.zeros((int(keep.sum()), cdr.MAG_DOUBLES))
         values[:, 0:3] = (m[keep] if self.trim is None else m[keep] @ self.trim.T) \
             * MILLIGAUSS_TO_TESLA
-        self.streams[MAG_TOPIC] = Stream(MAG_TOPIC, io.MAG_TYPE, mag.stamp_us()[keep] * 1000,
+        self.streams[MAG_TOPIC] = Stream(MAG_TOPIC, MAG_TYPE, mag.stamp_us()[keep] * 1000,
                                          values, ARDUPILOT_BODY_FRAME_ID)
         inst = self.instances.get(MAG_TOPIC, 0)
         ofs = mag.xyz("Ofs")[keep] if {"OfsX", "OfsY", "OfsZ"} <= set(c) else None
@@ -413,10 +414,10 @@ def open_dataflash(path: str | os.PathLike[str], instance: int | None = None) ->
     the file)."""
     p = Path(path)
     if not p.is_file():
-        raise io.BagError(f"{p}: no such file" if not p.exists() else f"{p}: not a file", 2)
+        raise BagError(f"{p}: no such file" if not p.exists() else f"{p}: not a file", 2)
     try:
         import pymavlink  # noqa: F401
     except ImportError:
-        raise io.BagError(f"{p}: reading ArduPilot DataFlash logs needs pymavlink (pip install "
+        raise BagError(f"{p}: reading ArduPilot DataFlash logs needs pymavlink (pip install "
                           "pymavlink)", 2) from None
     return DataflashBag(p, instance)

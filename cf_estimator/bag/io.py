@@ -11,6 +11,7 @@ from cf_estimator.bag.files import (
     user_file_mode,
     write_atomic_text,
 )
+from cf_estimator.bag.formats import open_bag
 from cf_estimator.bag.messages import (
     accel_with_covariance_message,
     covariance9,
@@ -34,7 +35,6 @@ from cf_estimator.bag.reader import (
     MessageChunk,
     TopicInfo,
     migrate_to_jazzy,
-    open_bag,
 )
 from cf_estimator.bag.types import (
     ACCEL_WITH_COVARIANCE_STAMPED_TYPE,

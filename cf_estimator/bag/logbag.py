@@ -18,7 +18,15 @@ from typing import Any
 
 import numpy as np
 
-from cf_estimator.bag import cdr, io
+from cf_estimator.bag import cdr
+from cf_estimator.bag.messages import (
+    imu_message,
+    magnetic_field_message,
+    quaternion_stamped_message,
+    twist_stamped_message,
+)
+from cf_estimator.bag.reader import BagMessage, InputBag, TopicInfo
+from cf_estimator.bag.types import IMU_TYPE, MAG_TYPE, TWIST_STAMPED_TYPE
 from cf_estimator.pipeline import px4
 
 #: Events per chunk of :meth:`StreamBag.chunks` (as bags).
@@ -37,7 +45,7 @@ class Stream:
     frame: str = px4.PX4_BODY_FRAME_ID
 
 
-class StreamBag(io.InputBag):
+class StreamBag(InputBag):
     """An input bag over a log read at construction: ``streams`` (topic -> :class:`Stream`),
     ``topics``, ``imu_topic``, ``log_start_us``/``log_last_us`` [µs since boot] are set by the
     subclass, which also names its ``format``."""
@@ -49,7 +57,7 @@ class StreamBag(io.InputBag):
 
     def finish_topics(self) -> None:
         """``topics`` from ``streams`` (call at the end of the subclass's constructor)."""
-        self.topics = sorted((io.TopicInfo(s.topic, s.msgtype, int(s.t_ns.shape[0]))
+        self.topics = sorted((TopicInfo(s.topic, s.msgtype, int(s.t_ns.shape[0]))
                               for s in self.streams.values()), key=lambda i: i.topic)
 
     def close(self) -> None:
@@ -86,12 +94,12 @@ class StreamBag(io.InputBag):
         order = np.lexsort((which, t))
         return streams, which[order], row[order]
 
-    def messages(self, topics: Iterable[str], *, bulk: bool = False) -> Iterator[io.BagMessage]:
+    def messages(self, topics: Iterable[str], *, bulk: bool = False) -> Iterator[BagMessage]:
         """The messages of ``topics`` one by one, log-time order (``bulk`` changes nothing)."""
         streams, which, row = self._order(topics)
         for k, r in zip(which.tolist(), row.tolist(), strict=True):
             s = streams[k]
-            yield io.BagMessage(s.topic, s.msgtype, int(s.t_ns[r]), message(s, r))
+            yield BagMessage(s.topic, s.msgtype, int(s.t_ns[r]), message(s, r))
 
     def chunks(self, topics: Iterable[str]) -> Iterator[StreamChunk]:
         """The messages of ``topics`` a few thousand at a time, Imu and MagneticField as decoded
@@ -104,21 +112,21 @@ class StreamBag(io.InputBag):
         """A Jazzy message object for ``--copy-inputs`` from one of this log's messages."""
         h = msg.header
         sec, ns, frame = h.stamp.sec, h.stamp.nanosec, h.frame_id
-        if msgtype == io.IMU_TYPE:
+        if msgtype == IMU_TYPE:
             o, w, a = msg.orientation, msg.angular_velocity, msg.linear_acceleration
-            return io.imu_message(sec, ns, frame, (o.x, o.y, o.z, o.w),
+            return imu_message(sec, ns, frame, (o.x, o.y, o.z, o.w),
                                   msg.orientation_covariance, (w.x, w.y, w.z),
                                   msg.angular_velocity_covariance, (a.x, a.y, a.z),
                                   msg.linear_acceleration_covariance)
-        if msgtype == io.MAG_TYPE:
+        if msgtype == MAG_TYPE:
             f = msg.magnetic_field
-            return io.magnetic_field_message(sec, ns, frame, (f.x, f.y, f.z),
+            return magnetic_field_message(sec, ns, frame, (f.x, f.y, f.z),
                                              msg.magnetic_field_covariance)
-        if msgtype == io.TWIST_STAMPED_TYPE:
+        if msgtype == TWIST_STAMPED_TYPE:
             v = msg.twist.linear
-            return io.twist_stamped_message(sec, ns, frame, (v.x, v.y, v.z))
+            return twist_stamped_message(sec, ns, frame, (v.x, v.y, v.z))
         q = msg.quaternion
-        return io.quaternion_stamped_message(sec, ns, frame, (q.w, q.x, q.y, q.z))
+        return quaternion_stamped_message(sec, ns, frame, (q.w, q.x, q.y, q.z))
 
 
 
@@ -145,10 +153,10 @@ def _header(t_ns: int, frame: str) -> cdr.Header:
 
 def message(s: Stream, r: int) -> Any:
     """Row ``r`` of a stream as a light message object (sensor_msgs / geometry_msgs names)."""
-    if s.msgtype in (io.IMU_TYPE, io.MAG_TYPE):
+    if s.msgtype in (IMU_TYPE, MAG_TYPE):
         return _block(s, np.array([r])).message(0)
     v = s.values[r].tolist()
-    if s.msgtype == io.TWIST_STAMPED_TYPE:
+    if s.msgtype == TWIST_STAMPED_TYPE:
         m = _TwistStampedView()
         m.header = _header(s.t_ns[r], s.frame)
         tw = _Twist()
@@ -164,7 +172,7 @@ def message(s: Stream, r: int) -> Any:
 def _block(s: Stream, rows: np.ndarray) -> cdr.Block:
     """Rows of an Imu/MagneticField stream as a decoded :class:`cf_estimator.bag.cdr.Block`."""
     n = int(rows.shape[0])
-    b = cdr.Block(n, s.msgtype == io.IMU_TYPE)
+    b = cdr.Block(n, s.msgtype == IMU_TYPE)
     b.values = np.ascontiguousarray(s.values[rows])
     sec, ns = np.divmod(s.t_ns[rows], 1_000_000_000)
     b.sec, b.nsec = sec.tolist(), ns.tolist()
@@ -190,7 +198,7 @@ class StreamChunk:
             if idx.size == 0:
                 continue
             t[idx] = s.t_ns[row[idx]]
-            if s.msgtype in (io.IMU_TYPE, io.MAG_TYPE):
+            if s.msgtype in (IMU_TYPE, MAG_TYPE):
                 self.blocks[s.msgtype] = _block(s, row[idx])
                 for j, i in enumerate(idx.tolist()):
                     self.row[i] = j

@@ -134,14 +134,14 @@ def covariance_consistency(series: Any, scored: dict[str, np.ndarray],
     ``series``: a :class:`~cf_estimator.bag.replay.ReplaySeries` (t_s, tilt_var_rad2,
     yaw_var_rad2).
 
-    At each scored reference sample from :data:`cf_estimator.bench.consistency.SETTLE_S` after
+    At each scored reference sample from :data:`cf_estimator.metrics.SETTLE_S` after
     the first estimate on: the inclination error against the reported tilt variance
     ``cov[0] + cov[4]`` (and, with ``heading``: the magnetometer references it, the heading
     error against ``cov[8]``), the variance interpolated to the reference stamp. ``{"tilt":
     figures, "heading": figures | None}`` with the figures of
-    :func:`cf_estimator.bench.consistency.consistency` (share beyond 2σ [%], mean(e²/σ²)).
+    :func:`cf_estimator.metrics.consistency` (share beyond 2σ [%], mean(e²/σ²)).
     """
-    from cf_estimator.bench.consistency import SETTLE_S, consistency
+    from cf_estimator.metrics import SETTLE_S, consistency
 
     t = series.t_s
     out: dict[str, Any] = {"settle_s": SETTLE_S, "tilt": None, "heading": None}

@@ -1,8 +1,9 @@
-"""Reading bags over ``rosbags``: :func:`open_bag` wraps ``rosbags.highlevel.AnyReader`` (ROS 1
-``.bag`` files, ROS 2 bag directories with sqlite3 or mcap storage; PX4 ``.ulg`` logs through
-:mod:`cf_estimator.bag.ulog`) and turns every ``rosbags`` failure — missing file, not a bag,
-truncated data, undecodable message — into a :class:`~cf_estimator.bag.types.BagError` whose
-message names the file. Messages come back in log-time order across topics, as recorded.
+"""Reading bags over ``rosbags``: :class:`InputBag` wraps ``rosbags.highlevel.AnyReader`` (ROS 1
+``.bag`` files, ROS 2 bag directories with sqlite3 or mcap storage) and turns every ``rosbags``
+failure — truncated data, undecodable message — into a :class:`~cf_estimator.bag.types.BagError`
+whose message names the file. Messages come back in log-time order across topics, as recorded.
+:func:`cf_estimator.bag.formats.open_bag` picks the reader of a path (this one, the ulog and
+DataFlash readers, the truncated-bag salvage), which build on the types here.
 """
 
 from __future__ import annotations
@@ -39,27 +40,6 @@ class BagMessage:
     msgtype: str
     log_time_ns: int  #: the time the recorder received it
     msg: Any
-
-
-def _looks_like_bag(path: Path) -> str | None:
-    """None when ``path`` may be a bag AnyReader can open, else why it is not."""
-    if not path.exists():
-        return "no such file or directory"
-    if path.is_dir():
-        if path.suffix == ".bag":
-            return "a directory named *.bag cannot be read (rosbags takes .bag for ROS 1 files)"
-        if not (path / "metadata.yaml").is_file():
-            has_storage = any(path.glob("*.mcap")) or any(path.glob("*.db3"))
-            return (
-                "directory has no metadata.yaml (not a ROS 2 bag; reindex it with "
-                "`ros2 bag reindex`)" if has_storage else "directory is not a ROS 2 bag "
-                "(no metadata.yaml)"
-            )
-        return None
-    if path.suffix not in (".bag", ".mcap"):  # a bare .mcap file is a ROS 2 bag (rosbags)
-        return ("not a ROS 1 .bag file, a ROS 2 bag directory or .mcap file, a PX4 .ulg log or "
-                "an ArduPilot .bin log")
-    return None
 
 
 #: Messages decoded together by ``InputBag.messages(bulk=True)``.
@@ -451,43 +431,3 @@ def migrate_to_jazzy(src_store: Any, msgtype: str, msg: Any, cache: dict[str, ob
     if msgtype not in store.fielddefs:
         raise BagError(f"message type {msgtype} is not defined in ROS 2 Jazzy")
     return migrate_message(src_store, store, msgtype, msgtype, cache, msg)
-
-
-def open_bag(path: str | os.PathLike[str], *, ulog_instance: int | None = None) -> InputBag:
-    """Open a ROS 1 ``.bag``, a ROS 2 bag directory, a PX4 ``.ulg`` log
-    (:mod:`cf_estimator.bag.ulog`) or an ArduPilot ``.bin`` DataFlash log
-    (:mod:`cf_estimator.bag.dataflash`) — ``ulog_instance``: the instance (ulog multi_id,
-    DataFlash IMU/MAG instance) to use where a topic has several; :class:`BagError` names the
-    file."""
-    p = Path(path)
-    if p.suffix.lower() == ".ulg" and not p.is_dir():
-        from cf_estimator.bag.ulog import open_ulog
-
-        return open_ulog(p, ulog_instance)
-    if p.suffix.lower() == ".bin" and not p.is_dir():
-        from cf_estimator.bag.dataflash import open_dataflash
-
-        return open_dataflash(p, ulog_instance)
-    why = _looks_like_bag(p)
-    if why is not None:
-        raise BagError(f"{p}: {why}", 2 if not p.exists() else 1)
-    from cf_estimator.bag import salvage
-
-    # sqlite3 opens even cut short (a page missing is found while reading): its header says
-    cut = salvage.truncation(p) if p.is_dir() and not any(p.glob("*.mcap")) else None
-    if cut is None:
-        try:
-            reader = AnyReader([p], default_typestore=typestore())
-            reader.open()
-        except Exception as exc:  # noqa: BLE001 - AnyReaderError, ReaderError, sqlite, yaml...
-            cut = salvage.truncation(p)
-            if cut is None:
-                kind = "ROS 1 bag" if p.suffix == ".bag" else "ROS 2 bag"
-                raise BagError(f"{p}: not a readable {kind}: {one_line(exc)}") from exc
-        else:
-            return InputBag(p, reader)
-    salvaged, note = salvage.open_truncated(p, cut)
-    bag = InputBag(p, salvaged)  # type: ignore[arg-type]
-    bag.truncated = True
-    bag.notes.append(note)
-    return bag

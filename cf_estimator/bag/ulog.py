@@ -1,6 +1,6 @@
 """PX4 ulog flight logs (``.ulg``) as replay input: the same in-memory input a bag gives.
 
-:class:`UlogBag` is an :class:`cf_estimator.bag.io.InputBag` (``open_bag`` returns one for a
+:class:`UlogBag` is an :class:`cf_estimator.bag.reader.InputBag` (``open_bag`` returns one for a
 ``.ulg`` file), so ``replay``, ``tune --bag``, fleets, ``--cluster`` and the Python API read
 ulogs exactly like bags. The log is read once with pyulog (a dependency of the offline tools,
 never imported by the node) into arrays; they are handed out as the light message objects of
@@ -40,8 +40,16 @@ from typing import Any
 
 import numpy as np
 
-from cf_estimator.bag import cdr, io
+from cf_estimator.bag import cdr
 from cf_estimator.bag.logbag import Stream, StreamBag
+from cf_estimator.bag.types import (
+    IMU_TYPE,
+    MAG_TYPE,
+    QUATERNION_STAMPED_TYPE,
+    TWIST_STAMPED_TYPE,
+    BagError,
+    one_line,
+)
 from cf_estimator.pipeline import px4
 
 IMU_TOPIC = "sensor_combined"
@@ -209,7 +217,7 @@ class UlogBag(StreamBag):
         try:
             data = path.read_bytes()  # pyulog keeps it all in memory anyway; reads are faster
         except OSError as exc:
-            raise io.BagError(f"{path}: cannot read: {exc.strerror or exc}", 2) from None
+            raise BagError(f"{path}: cannot read: {exc.strerror or exc}", 2) from None
         try:
             # every topic: the log's span (last_timestamp) counts them all, and the error
             # without sensor_combined lists them
@@ -221,9 +229,9 @@ class UlogBag(StreamBag):
                     log = ULog(io_.BytesIO(data))  # type: ignore[arg-type]
                 cut = None if log.file_corruption else _cut_at(data)
         except ULogException as exc:
-            raise io.BagError(f"{path}: not a readable PX4 ulog: {io.one_line(exc)}") from exc
+            raise BagError(f"{path}: not a readable PX4 ulog: {one_line(exc)}") from exc
         except Exception as exc:  # noqa: BLE001 - pyulog on garbage raises anything
-            raise io.BagError(f"{path}: not a readable PX4 ulog: {io.one_line(exc)}") from exc
+            raise BagError(f"{path}: not a readable PX4 ulog: {one_line(exc)}") from exc
         self.log_start_us = int(log.start_timestamp)
         #: the autopilot's parameters as the log starts (name -> value; PX4's units)
         self.parameters: dict[str, Any] = dict(log.initial_parameters)
@@ -243,7 +251,7 @@ class UlogBag(StreamBag):
             by_name.setdefault(d.name, {})[int(d.multi_id)] = d
         if IMU_TOPIC not in by_name:
             listing = ", ".join(sorted(by_name)) if by_name else "none"
-            raise io.BagError(f"{path}: no {IMU_TOPIC} in this ulog (the IMU the estimator "
+            raise BagError(f"{path}: no {IMU_TOPIC} in this ulog (the IMU the estimator "
                               f"needs); its topics: {listing}")
         chosen = {name: self._pick(name, inst, instance) for name, inst in by_name.items()}
         if instance is not None and not any(len(by_name.get(n, {})) > 1 for n in _WANTED):
@@ -270,7 +278,7 @@ class UlogBag(StreamBag):
             d = chosen[ATTITUDE_TOPIC].data
             q = _field(d, "q", 4)
             ok = np.all(np.isfinite(q), axis=1) & (np.linalg.norm(q, axis=1) > 0.5)
-            self.streams[ATTITUDE_TOPIC] = Stream(ATTITUDE_TOPIC, io.QUATERNION_STAMPED_TYPE,
+            self.streams[ATTITUDE_TOPIC] = Stream(ATTITUDE_TOPIC, QUATERNION_STAMPED_TYPE,
                                                    _stamp_us(d)[ok] * 1000, q[ok])
         self.finish_topics()
 
@@ -285,7 +293,7 @@ class UlogBag(StreamBag):
             self.instances[name] = ids[0]
             return inst[ids[0]]
         if wanted is not None and wanted not in inst:
-            raise io.BagError(
+            raise BagError(
                 f"{self.path}: {name} has instances (multi_id) {', '.join(map(str, ids))}, "
                 f"not {wanted} (--instance)", 2)
         use = ids[0] if wanted is None else wanted
@@ -313,14 +321,14 @@ class UlogBag(StreamBag):
         values[:, 4] = -1.0
         values[:, 13:16] = gyro[keep]
         values[:, 25:28] = accel[keep]
-        self.streams[IMU_TOPIC] = Stream(IMU_TOPIC, io.IMU_TYPE, t[keep] * 1000, values)
+        self.streams[IMU_TOPIC] = Stream(IMU_TOPIC, IMU_TYPE, t[keep] * 1000, values)
 
     def _mag_stream(self, topic: str, t_us: np.ndarray, ga: np.ndarray) -> None:
         ok = np.all(np.isfinite(ga), axis=1)
         values = np.zeros((int(ok.sum()), cdr.MAG_DOUBLES))
         ga = ga[ok] if self.mag_bias_ga is None else ga[ok] - self.mag_bias_ga
         values[:, 0:3] = ga * px4.GAUSS_TO_TESLA
-        self.streams[topic] = Stream(topic, io.MAG_TYPE, t_us[ok] * 1000, values)
+        self.streams[topic] = Stream(topic, MAG_TYPE, t_us[ok] * 1000, values)
 
     def _mag(self, d: dict[str, np.ndarray]) -> None:
         self._mag_stream(MAG_TOPIC, _stamp_us(d), _field(d, "magnetometer_ga", 3))
@@ -349,17 +357,17 @@ class UlogBag(StreamBag):
         for flag in ("v_xy_valid", "v_z_valid"):
             if flag in d:
                 ok &= np.asarray(d[flag]) != 0
-        self.streams[VELOCITY_TOPIC] = Stream(VELOCITY_TOPIC, io.TWIST_STAMPED_TYPE,
+        self.streams[VELOCITY_TOPIC] = Stream(VELOCITY_TOPIC, TWIST_STAMPED_TYPE,
                                                _stamp_us(d)[ok] * 1000, v[ok])
 
 def open_ulog(path: str | os.PathLike[str], instance: int | None = None) -> UlogBag:
     """Read a PX4 ulog for replay (:class:`cf_estimator.bag.io.BagError` names the file)."""
     p = Path(path)
     if not p.is_file():
-        raise io.BagError(f"{p}: no such file" if not p.exists() else f"{p}: not a file", 2)
+        raise BagError(f"{p}: no such file" if not p.exists() else f"{p}: not a file", 2)
     try:
         import pyulog  # noqa: F401
     except ImportError:
-        raise io.BagError(f"{p}: reading PX4 ulogs needs pyulog (pip install pyulog)", 2) \
+        raise BagError(f"{p}: reading PX4 ulogs needs pyulog (pip install pyulog)", 2) \
             from None
     return UlogBag(p, instance)

@@ -32,18 +32,17 @@ import numpy as np
 from cf_estimator import metrics
 from cf_estimator.core.covariance import TILT_FLOOR_RAD2, UNREFERENCED_YAW_RAD2, YAW_FLOOR_RAD2
 from cf_estimator.core.params import FilterParams
+from cf_estimator.metrics import (  # noqa: F401 - the statistic lives with the metrics
+    CONSISTENT_BEYOND,
+    SETTLE_S,
+    SIGMAS,
+    consistency,
+)
 
 if TYPE_CHECKING:
     from cf_estimator.core.batch import EstimateResult
     from cf_estimator.pipeline.params import PipelineParams
 
-#: Samples are scored from this long after the first one [s] (as the benchmarks' RMS).
-SETTLE_S = 10.0
-#: e > this many σ counts as beyond.
-SIGMAS = 2.0
-#: A consistent Gaussian's share beyond 2σ, as printed: tilt (2-D, σ² = cov[0] + cov[4]) e⁻⁴,
-#: heading (1-D) 4.6 %, and the tilt's share beyond twice its per-axis σ e⁻².
-CONSISTENT_BEYOND = {"tilt": "1.8 %", "heading": "4.6 %", "tilt per axis": "13.5 %"}
 #: BROAD's groups of trials with a magnet near the sensor (the heading's hard case).
 MAGNET_GROUPS = frozenset({"stationary_magnet", "attached_magnet"})
 #: BROAD's heading pools beside all trials: (key, name, the groups a trial must be in one of) —
@@ -71,26 +70,6 @@ class Floors:
         """(N, 9) ``orientation_covariance`` of a run with these floors [rad²]."""
         return result.orientation_covariance(self.tilt0_rad2, self.yaw0_rad2,
                                              self.unreferenced_yaw_rad2)
-
-
-def consistency(err_rad: np.ndarray, var_rad2: np.ndarray) -> dict[str, float]:
-    """``{samples, rms_deg, median_sigma_deg, beyond_2sigma_pct, beyond_2sigma_axis_pct,
-    mean_ratio}`` of errors [rad]
-    against reported variances [rad²] (non-finite pairs left out; NaN figures when empty)."""
-    e = np.asarray(err_rad, dtype=float).reshape(-1)
-    v = np.asarray(var_rad2, dtype=float).reshape(-1)
-    ok = np.isfinite(e) & np.isfinite(v) & (v > 0.0)
-    e, v = e[ok], v[ok]
-    if e.size == 0:
-        nan = math.nan
-        return {"samples": 0, "rms_deg": nan, "median_sigma_deg": nan, "beyond_2sigma_pct": nan,
-                "beyond_2sigma_axis_pct": nan, "mean_ratio": nan}
-    z = e * e / v
-    return {"samples": int(e.size), "rms_deg": math.degrees(math.sqrt(float(np.mean(e * e)))),
-            "median_sigma_deg": math.degrees(math.sqrt(float(np.median(v)))),
-            "beyond_2sigma_pct": 100.0 * float(np.mean(z > SIGMAS * SIGMAS)),
-            "beyond_2sigma_axis_pct": 100.0 * float(np.mean(z > SIGMAS * SIGMAS / 2.0)),
-            "mean_ratio": float(np.mean(z))}
 
 
 def flight_samples(path: str | Path, params: FilterParams, floors: Floors = Floors()

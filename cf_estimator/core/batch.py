@@ -371,17 +371,15 @@ def estimate(
     ``mag_hard_iron_t`` (3 floats, the unit of ``mag``: Tesla as the node's) and
     ``mag_soft_iron`` (9 floats, 3x3 row-major): the magnetometer calibration, applied to
     ``mag`` before the filter as the node and the replay apply the parameters of the same
-    names (``m = S (m_raw - h)``, :mod:`cf_estimator.pipeline.magcal`; ``cf-estimator
+    names (``m = S (m_raw - h)``, :mod:`cf_estimator.core.magcal`; ``cf-estimator
     calibrate-mag`` fits them). Invalid values raise :class:`ParameterError`.
     """
     if mag is not None and (mag_hard_iron_t is not None or mag_soft_iron is not None):
-        from cf_estimator.pipeline.magcal import correct_mag
-        from cf_estimator.pipeline.params import PipelineParams
+        from cf_estimator.core.magcal import IDENTITY9, check_calibration, correct_mag
 
-        cal = PipelineParams(**{k: v for k, v in (("mag_hard_iron_t", mag_hard_iron_t),
-                                                   ("mag_soft_iron", mag_soft_iron))
-                                if v is not None})  # the schema's checks and reasons
-        mag = correct_mag(mag, cal.mag_hard_iron_t, cal.mag_soft_iron)
+        h, s = check_calibration((0.0, 0.0, 0.0) if mag_hard_iron_t is None else mag_hard_iron_t,
+                                 IDENTITY9 if mag_soft_iron is None else mag_soft_iron)
+        mag = correct_mag(mag, h, s)
     gyro, acc, mg = _rows(gyro_rad_s, accel_m_s2, mag)
     n = gyro.shape[0]
     t = sample_times(n, rate_hz, timestamps_s)

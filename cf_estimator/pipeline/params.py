@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass
 
 from cf_estimator.core.covariance import TILT_FLOOR_RAD2, UNREFERENCED_YAW_RAD2, YAW_FLOOR_RAD2
+from cf_estimator.core.magcal import check_calibration
 from cf_estimator.schema import ParameterError, param, validate_fields
 
 #: ``body_frame`` choices: the message axes as they are, or one of the two conventions.
@@ -223,17 +224,7 @@ class PipelineParams:
                 f"px4_topic_prefix: {prefix!r} is not a topic namespace (e.g. /fmu/out or "
                 "/px4_1/fmu/out: no trailing '/', no spaces)"
             )
-        s = self.mag_soft_iron
-        det = (s[0] * (s[4] * s[8] - s[5] * s[7]) - s[1] * (s[3] * s[8] - s[5] * s[6])
-               + s[2] * (s[3] * s[7] - s[4] * s[6]))
-        if not det > 1e-6:
-            raise ParameterError(
-                f"mag_soft_iron: determinant {det:.3g}: a calibration matrix must be invertible "
-                "and keep the axes' handedness (det > 0); identity = no soft iron")
-        if max(abs(v) for v in self.mag_hard_iron_t) > 1e-3:
-            raise ParameterError(
-                f"mag_hard_iron_t: {self.mag_hard_iron_t!r} T is not a hard iron (over 1 mT, "
-                "twenty times the Earth's field): Tesla expected (1 G = 1e-4 T)")
+        check_calibration(self.mag_hard_iron_t, self.mag_soft_iron)
         if 0.0 < self.reset_after_gap_s < self.max_dt_s:
             raise ParameterError(
                 f"reset_after_gap_s: {self.reset_after_gap_s:g} s must be 0 (never) or at least "

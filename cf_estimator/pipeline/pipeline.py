@@ -40,6 +40,7 @@ from time import perf_counter
 from typing import Any
 
 from cf_estimator.core.filter import ComplementaryFilter
+from cf_estimator.core.magcal import MagCorrection
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import MAG_DISABLED, MAG_REJECTED, MAG_USED
 from cf_estimator.core.velocity import VelocityAiding, apply_aiding, filter_estimates
@@ -52,7 +53,6 @@ from cf_estimator.pipeline.diagnostics import (
     velocity_values,
 )
 from cf_estimator.pipeline.linear_acceleration import gravity_free
-from cf_estimator.pipeline.magcal import MagCorrection
 from cf_estimator.pipeline.messages import UNKNOWN_COVARIANCE, covariance9
 from cf_estimator.pipeline.params import PipelineParams
 from cf_estimator.pipeline.state import ImuTime, InputRules, MagInput, MessageCounts
@@ -376,7 +376,7 @@ class ImuPipeline:
     # -- magnetometer -----------------------------------------------------------------------------
     def on_mag(self, msg: Any) -> None:
         """Store the latest valid magnetometer sample (any unit; only directions are used),
-        corrected by ``mag_hard_iron_t`` / ``mag_soft_iron`` first (pipeline/magcal.py)."""
+        corrected by ``mag_hard_iron_t`` / ``mag_soft_iron`` first (core/magcal.py)."""
         self.tally.received_mag += 1
         try:
             st = msg.header.stamp
