@@ -3,9 +3,8 @@
 The public Python API is the filter core; the ROS node, the bag replay and the CLI are adapters.
 """
 
+from cf_estimator.analysis import AxisFilter, AxisParams
 from cf_estimator.core import (
-    AxisFilter,
-    AxisParams,
     BatchedFilter,
     ComplementaryFilter,
     EstimateResult,

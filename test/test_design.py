@@ -1,4 +1,4 @@
-"""Tests of the design formulas (cf_estimator.core.design) and the ``design`` CLI command.
+"""Tests of the design formulas (cf_estimator.analysis.design) and the ``design`` CLI command.
 
 Seed numbers are reproduced from the seeds' own formulas; where the papers' printed arithmetic
 differs from those formulas the test says so (DESIGN.md: "trust the formulas").
@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cf_estimator.analysis import design, thesis
+from cf_estimator.analysis.axis import AxisFilter, AxisParams
 from cf_estimator.cli.main import main
-from cf_estimator.core import design, thesis
-from cf_estimator.core.axis import AxisFilter, AxisParams
 from cf_estimator.core.params import FilterParams
 
 K1, K2 = 0.03, 0.001  # Ryzhkov & Karpenko's gains

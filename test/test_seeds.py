@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from scipy import signal
 
+from cf_estimator.analysis.axis import AxisFilter, AxisParams
 from cf_estimator.core import quaternion as quat
-from cf_estimator.core.axis import AxisFilter, AxisParams
 from cf_estimator.core.filter import ComplementaryFilter
 from cf_estimator.core.params import FilterParams
 

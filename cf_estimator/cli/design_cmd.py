@@ -6,7 +6,7 @@ ships. Gains come from ``--k1/--k2`` or from the inverse ``--n N [--xi XI]`` / `
 [--xi XI]`` (ξ = k1/n as in Ryzhkov & Karpenko; default 1, their choice). Accelerations are given
 in g and converted with the papers' small-angle convention (a/g of 0.2 is an accelerometer angle
 error of 0.2 rad); the thesis check uses atan(a/g). References: docs/references.md.
-All formulas live in :mod:`cf_estimator.core.design`.
+All formulas live in :mod:`cf_estimator.analysis.design`.
 """
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ import json
 import math
 from typing import Any
 
+from cf_estimator.analysis import design, thesis
 from cf_estimator.cli.base import CliError, finite_float
-from cf_estimator.core import design, thesis
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import LOOP_LAG_FRACTION
 

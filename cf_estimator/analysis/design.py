@@ -19,8 +19,8 @@ With the thesis's aperiodic unit 1/(T s + 1) on the error path (before W) the lo
 
 which is stable iff T < k1/k2 (Routh). Functions that accept ``aperiodic_time_constant_s`` use
 P; with T = 0 they use D. The saturation unit is nonlinear: its effect is given by the guidance
-formulas below and by simulation of :class:`cf_estimator.core.axis.AxisFilter` in the thesis
-check (:mod:`cf_estimator.core.thesis`).
+formulas below and by simulation of :class:`cf_estimator.analysis.axis.AxisFilter` in the thesis
+check (:mod:`cf_estimator.analysis.thesis`).
 
 "Exact" below means computed from the continuous-time transfer function without the seed's
 approximations: closed-form where available (drift peak, vibration), otherwise by propagating

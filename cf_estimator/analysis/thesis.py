@@ -1,11 +1,11 @@
 """The thesis's accuracy requirements (Habliuk 2023) checked for a set of gains.
 
-Each row simulates :class:`cf_estimator.core.axis.AxisFilter` (or evaluates the exact transfer
+Each row simulates :class:`cf_estimator.analysis.axis.AxisFilter` (or evaluates the exact transfer
 function) under one of the thesis's disturbances and compares the peak angle error [arcmin]
 with the thesis's limit: fixed base with a 10 °/h gyro offset (≤ 28.8′), 60 impacts of 15 g,
 6 g vibration at 20 Hz, and the 0 → 25 m/s in 5 s manoeuvre (≤ 90′). Gains k1 [1/s], k2 [1/s²];
 clip level [rad]; aperiodic time constant [s]. The formulas it uses are in
-:mod:`cf_estimator.core.design`; ``cf-estimator design --thesis`` prints the rows.
+:mod:`cf_estimator.analysis.design`; ``cf-estimator design --thesis`` prints the rows.
 """
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cf_estimator.core.axis import AxisFilter, AxisParams
-from cf_estimator.core.design import (
+from cf_estimator.analysis.axis import AxisFilter, AxisParams
+from cf_estimator.analysis.design import (
     RAD_S_PER_DEG_H,
     STANDARD_GRAVITY_M_S2,
     check_decaying,
