@@ -107,3 +107,28 @@ def test_a_copied_filter_carries_both_hypotheses(handheld):
         qg = g.update(gyro[i], accel[i], t[i] - t[i - 1])
         assert qf == qg
     assert f.status() == g.status()
+
+
+def test_get_state_and_set_state_continue_a_filter_exactly(handheld):
+    """The public state (VQF's getState/setState): saved mid-run as JSON, restored into a new
+    filter, the two continue with the same outputs, both hypotheses and the published one."""
+    import json
+
+    t, gyro, accel, _ = handheld
+    f = ComplementaryFilter(P6)
+    half = t.size // 2
+    for i in range(1, half):
+        f.update(gyro[i], accel[i], t[i] - t[i - 1])
+    saved = json.loads(json.dumps(f.get_state()))
+    g = ComplementaryFilter(P6)
+    g.set_state(saved)
+    assert g.initialized and g.status().bias_hypothesis == f.status().bias_hypothesis
+    for i in range(half, t.size):
+        assert f.update(gyro[i], accel[i], t[i] - t[i - 1]) == \
+            g.update(gyro[i], accel[i], t[i] - t[i - 1])
+    broken = dict(saved, in_flight={k: v for k, v in saved["in_flight"].items() if k != "qw"})
+    with pytest.raises(ValueError, match="missing fields \\['qw'\\]"):
+        g.set_state(broken)
+    with pytest.raises(ValueError, match="rest_only"):  # one hypothesis only with k2 = 0
+        ComplementaryFilter(FilterParams(use_mag=False, bias_learning_k2=0.0)).set_state(saved)
+    assert g.update(gyro[1], accel[1], 0.005) is not None  # untouched by the refusals

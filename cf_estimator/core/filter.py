@@ -239,27 +239,18 @@ class ComplementaryFilter:
     # copy / deepcopy / pickle: the state travels as its field values (the compiled state and
     # parameter objects are rebuilt on arrival)
     def __getstate__(self) -> dict[str, Any]:
-        d = self.__dict__.copy()
-        d["_kernel_params"] = d["_null_kernel_params"] = None
-        d["_learning"] = {k: getattr(self._learning, k) for k in StepState.FIELDS}
-        d["_null"] = (None if self._null is None
-                      else {k: getattr(self._null, k) for k in StepState.FIELDS})
-        d["_state"] = self._state is self._null
+        d = {k: v for k, v in self.__dict__.items()
+             if k not in ("_kernel_params", "_null_kernel_params", "_learning", "_null", "_state")}
+        d["_saved"] = self.get_state()
         return d
 
     def __setstate__(self, d: dict[str, Any]) -> None:
-        learning, null, published_null = d.pop("_learning"), d.pop("_null"), d.pop("_state")
+        saved = d.pop("_saved")
         self.__dict__.update(d)
-        self._learning, self._null = self._new_state(), None
-        self._state = self._learning
+        self._kernel_params = self._null_kernel_params = self._null = None
+        self._learning = self._state = self._new_state()
         self.set_params(self._params)
-        for k, v in learning.items():
-            setattr(self._learning, k, v)
-        if null is not None and self._null is not None:
-            for k, v in null.items():
-                setattr(self._null, k, v)
-            if published_null:
-                self._state = self._null
+        self.set_state(saved)
 
     # -- parameters --------------------------------------------------------------------------
     @property
@@ -552,6 +543,48 @@ class ComplementaryFilter:
                             "gyro" if s.mag_disturbed else "magnetometer"),
             mag_on_body=bool(s.mag_on_body),
         )
+
+    def get_state(self) -> dict[str, Any]:
+        """Everything the filter has learned, as plain values (VQF's ``getState``):
+        ``{"initialized": bool, "published": "in_flight" | "rest_only", "in_flight": {field:
+        value}, "rest_only": {field: value} | None}``, the fields those of
+        :class:`~cf_estimator.core.state.StepState` (units in core/state.py) for each bias
+        hypothesis (``rest_only`` None when ``bias_learning_k2`` is 0). JSON-serialisable;
+        :meth:`set_state` takes it back."""
+        def fields(s: Any) -> dict[str, Any]:
+            return {k: getattr(s, k) for k in StepState.FIELDS}
+
+        return {"initialized": self._initialized,
+                "published": "rest_only" if self._state is self._null else "in_flight",
+                "in_flight": fields(self._learning),
+                "rest_only": None if self._null is None else fields(self._null)}
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        """Continue from a :meth:`get_state` (of a filter with the same parameters, or others:
+        then they apply from the next sample). ValueError, the filter untouched, when a field
+        is missing or unknown, or the hypotheses do not match ``bias_learning_k2``."""
+        want = set(StepState.FIELDS)
+        parts = [state.get("in_flight"), state.get("rest_only")]
+        if not isinstance(parts[0], dict) or (parts[1] is None) != (self._null is None):
+            raise ValueError("set_state: expected the 'in_flight' fields and, exactly when "
+                             "bias_learning_k2 > 0, the 'rest_only' fields (get_state's form)")
+        for part in (p for p in parts if p is not None):
+            if not isinstance(part, dict) or set(part) != want:
+                got = set(part) if isinstance(part, dict) else set()
+                raise ValueError(f"set_state: missing fields {sorted(want - got)}, unknown "
+                                 f"fields {sorted(got - want)}")
+        if state.get("published") not in ("in_flight", "rest_only"):
+            raise ValueError(f"set_state: 'published' must be 'in_flight' or 'rest_only', got "
+                             f"{state.get('published')!r}")
+        learning, null = self._new_state(), None if self._null is None else self._new_state()
+        for target, part in ((learning, parts[0]), (null, parts[1])):
+            if target is not None:
+                for k, v in part.items():
+                    setattr(target, k, v)
+        self._learning, self._null = learning, null
+        self._state = null if (null is not None and state["published"] == "rest_only") \
+            else learning
+        self._initialized = bool(state.get("initialized", True))
 
     def state_snapshot(self) -> Any:
         """A copy of the full internal state (for tests and debugging)."""
