@@ -46,6 +46,13 @@ def add_params_options(parser: Any, what: str = "the node's parameter file") -> 
                         "%(default)s)")
 
 
+def add_jobs_option(parser: Any, unit: str = "") -> None:
+    """``--jobs N``: worker processes, at most 2 by default (the machine's cores otherwise);
+    ``unit`` says what one worker takes (", one flight each")."""
+    parser.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
+                        help=f"worker processes{unit} (default %(default)s)")
+
+
 def load_params(
     path: str | None, node_name: str | None = None
 ) -> tuple[FilterParams, PipelineParams]:

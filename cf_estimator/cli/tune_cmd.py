@@ -18,7 +18,6 @@ that cannot be read is reported on one line and left out; the exit status is the
 from __future__ import annotations
 
 import dataclasses
-import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -28,6 +27,7 @@ import numpy as np
 
 from cf_estimator.cli.base import EXIT_OK, EXIT_SOME_FAILED, CliError, finite_float
 from cf_estimator.cli.common import (
+    add_jobs_option,
     add_params_options,
     check_input_path,
     check_output_file,
@@ -108,8 +108,7 @@ def register(subparsers: Any) -> None:
                    help="re-score start and best at full rate on the tuning data")
     p.add_argument("--seed", type=int, default=0,
                    help="random seed of the search (default 0; same seed, same result)")
-    p.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
-                   help="worker processes (default %(default)s)")
+    add_jobs_option(p)
     p.add_argument("--validate", metavar="LIST",
                    help="held-out recordings the tuned set must not lose on (comma-separated): "
                    "EuRoC/ASL flight folders or a directory of them (e.g. phantom4), BROAD trial "

@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 from pathlib import Path
 from typing import Any
 
 from cf_estimator.cli.base import CliError
 from cf_estimator.cli.bench_cmd.common import check_outputs, csv_list, families_option, write_json
-from cf_estimator.cli.common import load_params, note
+from cf_estimator.cli.common import add_jobs_option, load_params, note
 
 #: The ablation rows of the shipped mechanisms that have a parameter: name → overrides that
 #: switch the mechanism off (or to its neutral value).
@@ -59,8 +58,7 @@ def add_parser(sub: Any) -> None:
                     "earlier --json output (same data and base)")
     ab.add_argument("--json", metavar="OUT", help="write every score and comparison as JSON")
     ab.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
-    ab.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
-                    help="worker processes (default %(default)s)")
+    add_jobs_option(ab)
     ab.set_defaults(run=run)
 
 

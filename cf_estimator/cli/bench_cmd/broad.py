@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import sys
 import time
 from pathlib import Path
@@ -18,6 +17,7 @@ from cf_estimator.cli.bench_cmd.common import (
     write_json,
 )
 from cf_estimator.cli.common import (
+    add_jobs_option,
     add_params_options,
     check_input_path,
 )
@@ -49,8 +49,7 @@ def add_parser(sub: Any) -> None:
                    "inclination RMSE of every algorithm")
     b.add_argument("--overwrite", action="store_true",
                    help="replace existing --json/--plot files")
-    b.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
-                   help="worker processes, one trial each (default %(default)s)")
+    add_jobs_option(b, ", one trial each")
     b.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     from cf_estimator.cluster import add_cluster_option
 

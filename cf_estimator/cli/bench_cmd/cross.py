@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any
 
 from cf_estimator.cli.base import CliError
 from cf_estimator.cli.bench_cmd.common import check_outputs, families_option, write_json
-from cf_estimator.cli.common import load_params, note
+from cf_estimator.cli.common import add_jobs_option, load_params, note
 
 
 def add_parser(sub: Any) -> None:
@@ -38,8 +37,7 @@ def add_parser(sub: Any) -> None:
                     "floors (orientation_covariance_rad2, yaw_covariance_rad2)")
     cr.add_argument("--json", metavar="OUT", help="write the rows as JSON")
     cr.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
-    cr.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
-                    help="worker processes (default %(default)s)")
+    add_jobs_option(cr)
     cr.set_defaults(run=run)
 
 

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
 import sys
 from typing import Any
 
@@ -16,6 +15,7 @@ from cf_estimator.cli.bench_cmd.common import (
     load_filter_params,
     write_json,
 )
+from cf_estimator.cli.common import add_jobs_option
 
 
 def add_parser(sub: Any) -> None:
@@ -56,8 +56,7 @@ def add_parser(sub: Any) -> None:
                    "over-range, a glitch), for every algorithm alike; flights that end before "
                    "it is over are left out. Score after it with --settle")
     e.add_argument("--json", metavar="OUT", help="write per-flight scores and means as JSON")
-    e.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
-                   help="worker processes, one flight each (default %(default)s)")
+    add_jobs_option(e, ", one flight each")
     e.add_argument("--velocity", action="store_true",
                    help="also run our filter aided by the ground truth's velocity (ASL v_RS_R "
                    "columns, else differentiated positions), degraded by the flags below: "

@@ -4,14 +4,13 @@ BENCHMARKS.md from it (``--render-only``: render the committed JSON again, no me
 from __future__ import annotations
 
 import json
-import os
 import sys
 from pathlib import Path
 from typing import Any
 
 from cf_estimator.cli.base import CliError
 from cf_estimator.cli.bench_cmd.common import add_peers_option, available_peers
-from cf_estimator.cli.common import load_params, note
+from cf_estimator.cli.common import add_jobs_option, load_params, note
 
 
 def add_parser(sub: Any) -> None:
@@ -44,8 +43,7 @@ def add_parser(sub: Any) -> None:
     rp.add_argument("--params", metavar="YAML", help="ROS 2 parameter file for our filter "
                     "(default: the shipped defaults)")
     add_peers_option(rp)
-    rp.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
-                    help="worker processes (default %(default)s)")
+    add_jobs_option(rp)
     rp.set_defaults(run=run)
 
 

@@ -4,7 +4,6 @@ the peers.
 
 from __future__ import annotations
 
-import os
 from typing import Any
 
 from cf_estimator.cli.base import CliError
@@ -16,7 +15,7 @@ from cf_estimator.cli.bench_cmd.common import (
     load_filter_params,
     write_json,
 )
-from cf_estimator.cli.common import add_params_options
+from cf_estimator.cli.common import add_jobs_option, add_params_options
 
 
 def add_parser(sub: Any) -> None:
@@ -43,8 +42,7 @@ def add_parser(sub: Any) -> None:
                    "start (cf_estimator_aided_heading)")
     s.add_argument("--json", metavar="OUT", help="write the table's rows as JSON")
     s.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
-    s.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
-                   help="worker processes (default %(default)s)")
+    add_jobs_option(s)
     s.set_defaults(run=run)
 
 
