@@ -226,6 +226,21 @@ def _ros1_connection(fields: dict[str, bytes], data: bytes, owner: object) -> Co
         ConnectionExtRosbag1(inner.get("callerid"), int(latching) if latching else None), owner)
 
 
+def _ros1_record_items(fields: dict[str, bytes], data: bytes, scan: _Scan, owner: object,
+                       chunks: bool) -> Iterator[_Raw]:
+    """What one complete record holds: a connection (kept in ``scan``), a message, or (when
+    ``chunks``: a record of the file, not of a chunk) the records of a chunk."""
+    op = fields.get("op", b"\x00")[0]
+    if op == _OP_CONNECTION:
+        c = _ros1_connection(fields, data, owner)
+        scan.conns.setdefault(c.id, c)
+    elif op == _OP_MSG_DATA:
+        sec, nsec = struct.unpack("<II", fields["time"])
+        yield _Raw(_U32.unpack(fields["conn"])[0], sec * 1_000_000_000 + nsec, data)
+    elif op == _OP_CHUNK and chunks:
+        yield from _ros1_chunk(fields, data, scan, owner)
+
+
 def _ros1_records(buf: bytes, scan: _Scan, owner: object, base: int | None,
                   ) -> Iterator[_Raw]:
     """The connection and message records of ``buf`` (a chunk's records, or the file after its
@@ -238,15 +253,7 @@ def _ros1_records(buf: bytes, scan: _Scan, owner: object, base: int | None,
             if base is None:
                 return
             raise
-        op = fields.get("op", b"\x00")[0]
-        if op == _OP_CONNECTION:
-            c = _ros1_connection(fields, data, owner)
-            scan.conns.setdefault(c.id, c)
-        elif op == _OP_MSG_DATA:
-            sec, nsec = struct.unpack("<II", fields["time"])
-            yield _Raw(_U32.unpack(fields["conn"])[0], sec * 1_000_000_000 + nsec, data)
-        elif op == _OP_CHUNK and base is not None:
-            yield from _ros1_chunk(fields, data, scan, owner)
+        yield from _ros1_record_items(fields, data, scan, owner, chunks=base is not None)
         pos = end
         if base is not None:
             scan.readable_end = base + end
@@ -282,15 +289,7 @@ def _scan_ros1(path: Path, owner: object, scan: _Scan) -> Iterator[_Raw]:
         except (_Short, ValueError, struct.error):
             yield from _ros1_tail(body[pos:], scan, owner)
             return
-        op = fields.get("op", b"\x00")[0]
-        if op == _OP_CHUNK:
-            yield from _ros1_chunk(fields, rec, scan, owner)
-        elif op == _OP_CONNECTION:
-            c = _ros1_connection(fields, rec, owner)
-            scan.conns.setdefault(c.id, c)
-        elif op == _OP_MSG_DATA:
-            sec, nsec = struct.unpack("<II", fields["time"])
-            yield _Raw(_U32.unpack(fields["conn"])[0], sec * 1_000_000_000 + nsec, rec)
+        yield from _ros1_record_items(fields, rec, scan, owner, chunks=True)
         pos = end
         scan.readable_end = first + end
     scan.reached_end = True
