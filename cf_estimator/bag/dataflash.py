@@ -17,6 +17,11 @@ message types):
   with ``Health`` 0 left out. The logged field already has the autopilot's offsets
   (``OfsX/Y/Z``, its ``COMPASS_OFS_*``) and motor compensation (``MOfsX/Y/Z``) applied: it is
   read as logged (:attr:`DataflashBag.mag_text` says so).
+* ``GPS`` → ``geometry_msgs/msg/TwistStamped``: the receiver's velocity, NED [m/s] (``Spd`` along
+  the course ``GCrs`` [deg], ``VZ`` down), rows with a 3-D fix (``Status`` ≥ 3) only, stamped at
+  boot time (``TimeUS``; ``T`` [ms] in 3.2-3.3 logs, whose ``TimeMS`` is the GPS week's); the
+  first receiver (``I`` 0 or ``GPS``). Replayed only when asked for (``--velocity-topic GPS``:
+  velocity aiding, docs/velocity_aiding.md), as a ulog's ``vehicle_local_position``.
 * ``ATT`` → ``geometry_msgs/msg/QuaternionStamped``: the autopilot's own attitude (``Roll``,
   ``Pitch``, ``Yaw`` [deg], FRD → NED, ZYX): the replay compares with it. ``AHR2`` (the DCM
   backup), ``EKF1`` (EKF1, 3.2-3.3), ``NKF1`` (EKF2) and ``XKF1`` (EKF3; core ``C`` 0) likewise,
@@ -48,13 +53,23 @@ import numpy as np
 
 from cf_estimator.bag import cdr
 from cf_estimator.bag.logbag import Stream, StreamBag
-from cf_estimator.bag.types import IMU_TYPE, MAG_TYPE, QUATERNION_STAMPED_TYPE, BagError, one_line
+from cf_estimator.bag.types import (
+    IMU_TYPE,
+    MAG_TYPE,
+    QUATERNION_STAMPED_TYPE,
+    TWIST_STAMPED_TYPE,
+    BagError,
+    one_line,
+)
 from cf_estimator.core import quaternion as quat
 
 DATAFLASH_FORMAT = "ardupilot-dataflash"
 IMU_TOPIC = "IMU"
 MAG_TOPIC = "MAG"
 ATTITUDE_TOPIC = "ATT"
+VELOCITY_TOPIC = "GPS"
+#: GPS ``Status`` of a 3-D fix (AP_GPS::GPS_OK_FIX_3D); below it the velocity is not measured.
+GPS_FIX_3D = 3
 #: The autopilot's other attitude estimates compared beside ATT where the log has them.
 ESTIMATE_TOPICS = ("AHR2", "EKF1", "NKF1", "XKF1")
 #: frame_id of the IMU and magnetometer messages (ArduPilot's body axes: FRD).
@@ -136,6 +151,8 @@ class _Rows:
             return c["SampleUS"].astype(np.int64)
         if "TimeUS" in c:
             return c["TimeUS"].astype(np.int64)
+        if "Week" in c and "T" in c:  # 3.2-3.3 GPS: TimeMS is the GPS week's, T the boot's
+            return c["T"].astype(np.int64) * 1000
         return c["TimeMS"].astype(np.int64) * 1000
 
     def xyz(self, prefix: str) -> np.ndarray:
@@ -151,7 +168,7 @@ def _read(path: Path) -> tuple[dict[str, _Rows], dict[str, Any], list[str], int 
     from pymavlink import DFReader
 
     wanted = ["IMU", "IMU2", "IMU3", "MAG", "MAG2", "MAG3", ATTITUDE_TOPIC, *ESTIMATE_TOPICS,
-              "GYR", "ACC", "GYR1", "GYR2", "GYR3", "ACC1", "ACC2", "ACC3", "MSG"]
+              "GYR", "ACC", "GYR1", "GYR2", "GYR3", "ACC1", "ACC2", "ACC3", VELOCITY_TOPIC, "MSG"]
     raw: dict[str, dict[str, list[Any]]] = {}
     texts: list[str] = []
     sink = io_.StringIO()
@@ -257,6 +274,9 @@ class DataflashBag(StreamBag):
         else:
             self.mag_text = "no MAG in this log: heading from the gyro alone (yaw unreferenced)"
             self.notes.append(self.mag_text)
+        gps = rows.get(VELOCITY_TOPIC)
+        if gps is not None and len(gps):
+            self._gps(gps)
         for topic in (ATTITUDE_TOPIC, *ESTIMATE_TOPICS):
             r = rows.get(topic)
             if r is None or not len(r) or not {"Roll", "Pitch", "Yaw"} <= set(r.columns):
@@ -377,6 +397,23 @@ class DataflashBag(StreamBag):
                              "compass reads its hard-iron field as heading error)")
         if len(mag) and not keep.any():
             self.notes.append(f"MAG {inst}: no healthy sample (Health 0 or zero field)")
+
+    def _gps(self, gps: _Rows) -> None:
+        """The first receiver's 3-D-fix velocity [m/s] NED as the ``GPS`` velocity stream."""
+        c = gps.columns
+        if not {"Spd", "GCrs", "VZ", "Status"} <= set(c):
+            return
+        if "I" in c:
+            gps = gps.where(c["I"] == np.min(c["I"]))
+            c = gps.columns
+        t_us = gps.stamp_us()
+        speed, course = c["Spd"].astype(float), np.radians(c["GCrs"].astype(float))
+        v = np.stack([speed * np.cos(course), speed * np.sin(course), c["VZ"].astype(float)],
+                     axis=1)
+        ok = (c["Status"].astype(float) >= GPS_FIX_3D) & np.all(np.isfinite(v), axis=1)
+        if ok.any():
+            self.streams[VELOCITY_TOPIC] = Stream(VELOCITY_TOPIC, TWIST_STAMPED_TYPE,
+                                                   t_us[ok] * 1000, v[ok], "ned")
 
     def _upside_down(self, att: _Rows | None) -> float | None:
         if att is None or not len(att) or "Roll" not in att.columns:

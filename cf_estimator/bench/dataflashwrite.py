@@ -80,6 +80,9 @@ MAG_FORMAT = ("MAG", "QhhhhhhhhhB", ("TimeUS", "MagX", "MagY", "MagZ", "OfsX", "
 ATT_FORMAT = ("ATT", "Qffffff", ("TimeUS", "DesRoll", "Roll", "DesPitch", "Pitch", "DesYaw",
                                   "Yaw"))
 
+GPS_FORMAT = ("GPS", "QBBffffB", ("TimeUS", "I", "Status", "Spd", "GCrs", "VZ", "HDop",
+                                   "NSats"))
+
 
 def imu_message(t_us: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
                 name: str = "IMU") -> Message:
@@ -95,6 +98,17 @@ def mag_message(t_us: np.ndarray, mag_mga: np.ndarray, offsets_mga: Sequence[int
     rows = [(int(t), *(int(round(c)) for c in m), *map(int, offsets_mga), 0, 0, 0, health)
             for t, m in zip(t_us, mag_mga, strict=True)]
     return Message("MAG", MAG_FORMAT[1], MAG_FORMAT[2], rows)
+
+
+def gps_message(t_us: np.ndarray, v_ned_m_s: np.ndarray, status: int | Sequence[int] = 3,
+                instance: int = 0) -> Message:
+    """GPS rows (ArduPilot ≥ 3.4 layout): stamps [µs since boot], a velocity NED [m/s] as
+    ground speed, course [deg] and VZ (down), fix ``status`` (3: 3-D) per row or for all."""
+    st = np.broadcast_to(np.asarray(status), (len(t_us),))
+    rows = [(int(t), instance, int(k), float(math.hypot(v[0], v[1])),
+             math.degrees(math.atan2(v[1], v[0])) % 360.0, float(v[2]), 0.8, 12)
+            for t, v, k in zip(t_us, v_ned_m_s, st, strict=True)]
+    return Message("GPS", GPS_FORMAT[1], GPS_FORMAT[2], rows)
 
 
 def att_message(t_us: np.ndarray, rpy_deg: np.ndarray) -> Message:
