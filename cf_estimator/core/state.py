@@ -82,6 +82,8 @@ CLASSIFIER: tuple[Field, ...] = (
     _f("blk_d", "1", "differences summed in the block"),
     *_vec("blk_m", "1", "sum of the block's unit magnetometer vectors"),
     _f("blk_mn", "1", "magnetometer samples in the block"),
+    _f("blk_m2", "1", "sum of squared sample-to-sample differences of the unit field direction"),
+    _f("blk_md", "1", "field-direction differences summed in the block"),
     _f("prev_n", "1", "samples in the previous block (0: none yet)"),
     *_vec("pg", "rad/s", "previous block's gyro mean"),
     *_vec("pa", "m/s^2", "previous block's accelerometer mean"),
@@ -90,8 +92,11 @@ CLASSIFIER: tuple[Field, ...] = (
     _f("last_n", "1", "samples seen (for the differences)"),
     *_vec("lg", "rad/s", "last gyro sample"),
     *_vec("la", "m/s^2", "last accelerometer sample"),
+    *_vec("lm", "1", "last unit field direction (all 0: none yet)"),
     _f("noise_g2", "(rad/s)^2", "last block's gyro noise variance (sum over axes)"),
     _f("noise_a2", "(m/s^2)^2", "last block's accelerometer noise variance (sum over axes)"),
+    _f("noise_m2", "1", "field-direction noise variance (sum over axes) of the last block with "
+       "magnetometer samples"),
     _f("g_ref", "m/s^2", "gravity norm: the prior, then |a| of still blocks"),
 )
 

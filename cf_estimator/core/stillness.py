@@ -91,10 +91,18 @@ def classify(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple | None,
         mx, my, mz = mag
         mn = o.sqrt(mx * mx + my * my + mz * mz)
         use = o.where(p.use_mag, 1.0, 0.0)
-        s.blk_mx = s.blk_mx + use * mx / mn
-        s.blk_my = s.blk_my + use * my / mn
-        s.blk_mz = s.blk_mz + use * mz / mn
+        ux, uy, uz = mx / mn, my / mn, mz / mn
+        s.blk_mx = s.blk_mx + use * ux
+        s.blk_my = s.blk_my + use * uy
+        s.blk_mz = s.blk_mz + use * uz
         s.blk_mn = s.blk_mn + use
+        # its noise as the gyro's: sample-to-sample differences (the previous sample may lie
+        # in an earlier block: a sparse magnetometer has one sample a block, or none)
+        seen_m = use * o.where(s.lmx * s.lmx + s.lmy * s.lmy + s.lmz * s.lmz > 0.0, 1.0, 0.0)
+        s.blk_m2 = s.blk_m2 + seen_m * (sq(ux - s.lmx) + sq(uy - s.lmy) + sq(uz - s.lmz))
+        s.blk_md = s.blk_md + seen_m
+        s.lmx, s.lmy, s.lmz = (s.lmx + use * (ux - s.lmx), s.lmy + use * (uy - s.lmy),
+                               s.lmz + use * (uz - s.lmz))
     has_prev = s.prev_n > 0.0
     # a sample far outside the noise around the last block's mean ends rest at once
     jump_g = o.sqrt(sq(gx - s.pgx) + sq(gy - s.pgy) + sq(gz - s.pgz)) > (
@@ -123,7 +131,12 @@ def classify(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple | None,
                    TINY)
     umx, umy, umz = s.blk_mx / bm, s.blk_my / bm, s.blk_mz / bm
     dm = o.sqrt(sq(umx - s.pmx) + sq(umy - s.pmy) + sq(umz - s.pmz))
-    turned = mag_seen & (dm > REST_MAG_TOLERANCE_RAD + p.rest_gyro_threshold_rad_s * s.blk_t)
+    # the two block means' noise, as for the gyro (one sample a block at 2 Hz: ~0.01 rad)
+    noise_m2 = o.where(s.blk_md > 0.0, s.blk_m2 / (2.0 * o.maximum(s.blk_md, 1.0)), s.noise_m2)
+    spread_m = 1.0 / o.maximum(s.blk_mn, 1.0) + 1.0 / o.maximum(s.pm_n, 1.0)
+    tol_m = REST_MAG_TOLERANCE_RAD + p.rest_gyro_threshold_rad_s * s.blk_t + REST_NOISE_SIGMAS \
+        * o.minimum(o.sqrt(noise_m2 * spread_m), REST_NOISE_CAP * REST_MAG_TOLERANCE_RAD)
+    turned = mag_seen & (dm > tol_m)
     steady = (
         has_prev
         & (dg < tol_g)
@@ -150,6 +163,7 @@ def classify(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple | None,
     # next block
     s.noise_g2 = o.where(done, noise_g2, s.noise_g2)
     s.noise_a2 = o.where(done, noise_a2, s.noise_a2)
+    s.noise_m2 = o.where(done, noise_m2, s.noise_m2)
     s.pgx, s.pgy, s.pgz = (o.where(done, mgx, s.pgx), o.where(done, mgy, s.pgy),
                            o.where(done, mgz, s.pgz))
     s.pax, s.pay, s.paz = (o.where(done, max_, s.pax), o.where(done, may, s.pay),
@@ -165,5 +179,5 @@ def classify(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple | None,
     s.blk_ax, s.blk_ay, s.blk_az = s.blk_ax * keep, s.blk_ay * keep, s.blk_az * keep
     s.blk_g2, s.blk_a2 = s.blk_g2 * keep, s.blk_a2 * keep
     s.blk_mx, s.blk_my, s.blk_mz = s.blk_mx * keep, s.blk_my * keep, s.blk_mz * keep
-    s.blk_mn = s.blk_mn * keep
+    s.blk_mn, s.blk_m2, s.blk_md = s.blk_mn * keep, s.blk_m2 * keep, s.blk_md * keep
     return RestMeasurement(measure, mgx, mgy, mgz, r, mag_seen)

@@ -369,10 +369,19 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
         double mx = mag[0], my = mag[1], mz = mag[2];
         double mn = sqrt(mx * mx + my * my + mz * mz);
         double use = p->use_mag ? 1.0 : 0.0;
-        s->blk_mx = s->blk_mx + use * mx / mn;
-        s->blk_my = s->blk_my + use * my / mn;
-        s->blk_mz = s->blk_mz + use * mz / mn;
+        double ux = mx / mn, uy = my / mn, uz = mz / mn;
+        s->blk_mx = s->blk_mx + use * ux;
+        s->blk_my = s->blk_my + use * uy;
+        s->blk_mz = s->blk_mz + use * uz;
         s->blk_mn = s->blk_mn + use;
+        /* its noise as the gyro's: sample-to-sample differences (across blocks) */
+        double seen_m =
+            use * ((s->lmx * s->lmx + s->lmy * s->lmy + s->lmz * s->lmz > 0.0) ? 1.0 : 0.0);
+        s->blk_m2 = s->blk_m2 + seen_m * (sq(ux - s->lmx) + sq(uy - s->lmy) + sq(uz - s->lmz));
+        s->blk_md = s->blk_md + seen_m;
+        s->lmx = s->lmx + use * (ux - s->lmx);
+        s->lmy = s->lmy + use * (uy - s->lmy);
+        s->lmz = s->lmz + use * (uz - s->lmz);
     }
     int has_prev = s->prev_n > 0.0;
     int jump_g = sqrt(sq(gx - s->pgx) + sq(gy - s->pgy) + sq(gz - s->pgz)) >
@@ -404,8 +413,13 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
                      TINY);
     double umx = s->blk_mx / bm, umy = s->blk_my / bm, umz = s->blk_mz / bm;
     double dm = sqrt(sq(umx - s->pmx) + sq(umy - s->pmy) + sq(umz - s->pmz));
-    int turned = mag_seen &&
-                 (dm > REST_MAG_TOLERANCE_RAD + p->rest_gyro_threshold_rad_s * s->blk_t);
+    double noise_m2 =
+        s->blk_md > 0.0 ? s->blk_m2 / (2.0 * maxd(s->blk_md, 1.0)) : s->noise_m2;
+    double spread_m = 1.0 / maxd(s->blk_mn, 1.0) + 1.0 / maxd(s->pm_n, 1.0);
+    double tol_m = REST_MAG_TOLERANCE_RAD + p->rest_gyro_threshold_rad_s * s->blk_t +
+                   REST_NOISE_SIGMAS * mind(sqrt(noise_m2 * spread_m),
+                                            REST_NOISE_CAP * REST_MAG_TOLERANCE_RAD);
+    int turned = mag_seen && (dm > tol_m);
     int steady = has_prev && (dg < tol_g) && (da < tol_a) && !turned &&
                  (sqrt(mgx * mgx + mgy * mgy + mgz * mgz) <
                   p->bias_limit_rad_s * SQRT3);
@@ -433,6 +447,7 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
     }
     s->noise_g2 = noise_g2;
     s->noise_a2 = noise_a2;
+    s->noise_m2 = noise_m2;
     s->pgx = mgx;
     s->pgy = mgy;
     s->pgz = mgz;
@@ -448,6 +463,7 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
     s->pm_n = s->blk_mn;
     s->blk_mx = s->blk_my = s->blk_mz = 0.0;
     s->blk_mn = 0.0;
+    s->blk_m2 = s->blk_md = 0.0;
     s->blk_n = 0.0;
     s->blk_t = 0.0;
     s->blk_d = 0.0;

@@ -111,6 +111,7 @@ typedef struct {
         rest_timer_s, blk_n, blk_t, blk_gx, blk_gy, blk_gz, blk_ax, blk_ay, blk_az, blk_g2, blk_a2,
         prev_n, pgx, pgy, pgz, pax, pay, paz, blk_d, last_n, lgx, lgy, lgz, lax, lay, laz,
         noise_g2, noise_a2, bias_var, bias_err_var, blk_mx, blk_my, blk_mz, blk_mn, pmx, pmy, pmz, pm_n,
+        blk_m2, blk_md, lmx, lmy, lmz, noise_m2,
         mag_clip_timer_s, mag_ref_norm, mag_ref_dip, mag_ref_count,
         mag_last_time_s, mvx, mvy, mvz, mcx, mcy, mcz, mmx, mmy, mmz, mag_cand_norm, mag_seen_time_s,
         mag_ok_timer_s, mag_cand_timer_s, mag_ref_time_s, g_ref, accel_hold, acx, acy, acz, rate_lp, ex, ey,
