@@ -23,8 +23,10 @@ REST_NOISE_SIGMAS = 2.0
 #: vibration: uncapped, 17 of 40 airborne recordings were taken for rest).
 REST_NOISE_CAP = 1.0
 #: Stillness with a magnetometer: the block-mean field direction (unit vector, sensor frame) may
-#: turn by at most this plus rest_gyro_threshold_rad_s × the block length [rad]; more is a turn
-#: (a steady turn looks still to the gyro and accelerometer, never to the magnetometer).
+#: turn by at most this plus rest_gyro_threshold_rad_s × the block length [rad], plus
+#: REST_NOISE_SIGMAS of the two means' measured noise (capped at REST_NOISE_CAP × this: a 2 Hz
+#: compass's single sample a block); more is a turn (a steady turn looks still to the gyro and
+#: accelerometer, never to the magnetometer).
 REST_MAG_TOLERANCE_RAD = 0.01
 #: A single sample this many noise standard deviations (plus the thresholds) away from the last
 #: block mean ends a still phase at once, without waiting for the block to end.
