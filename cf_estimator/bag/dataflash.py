@@ -72,6 +72,11 @@ VELOCITY_TOPIC = "GPS"
 GPS_FIX_3D = 3
 #: The autopilot's other attitude estimates compared beside ATT where the log has them.
 ESTIMATE_TOPICS = ("AHR2", "EKF1", "NKF1", "XKF1")
+#: The EKF's earth-field states (MN, ME, MD [mGauss], NED), newest EKF first: EKF3, EKF2,
+#: and the 3.2-3.3 EKF's second message. atan2(ME, MN) is the declination the autopilot applies.
+EARTH_FIELD_TOPICS = ("XKF2", "NKF2", "EKF2")
+#: An earth-field estimate weaker than this [mGauss] horizontally has no declination (not set).
+MIN_EARTH_FIELD_MGAUSS = 10.0
 #: frame_id of the IMU and magnetometer messages (ArduPilot's body axes: FRD).
 ARDUPILOT_BODY_FRAME_ID = "base_link_frd"
 #: 1 milligauss in tesla (DataFlash MAG is in mGauss; sensor_msgs/MagneticField in T).
@@ -168,7 +173,7 @@ def _read(path: Path) -> tuple[dict[str, _Rows], dict[str, Any], list[str], int 
     from pymavlink import DFReader
 
     wanted = ["IMU", "IMU2", "IMU3", "MAG", "MAG2", "MAG3", ATTITUDE_TOPIC, *ESTIMATE_TOPICS,
-              "GYR", "ACC", "GYR1", "GYR2", "GYR3", "ACC1", "ACC2", "ACC3", VELOCITY_TOPIC, "MSG"]
+              "GYR", "ACC", "GYR1", "GYR2", "GYR3", "ACC1", "ACC2", "ACC3", VELOCITY_TOPIC, *EARTH_FIELD_TOPICS, "MSG"]
     raw: dict[str, dict[str, list[Any]]] = {}
     texts: list[str] = []
     sink = io_.StringIO()
@@ -274,6 +279,9 @@ class DataflashBag(StreamBag):
         else:
             self.mag_text = "no MAG in this log: heading from the gyro alone (yaw unreferenced)"
             self.notes.append(self.mag_text)
+        #: the declination the autopilot's EKF applied: (stamps [s since boot], [rad]) of its
+        #: earth-field states, None when the log has none
+        self.declination = _earth_field_declination(rows)
         gps = rows.get(VELOCITY_TOPIC)
         if gps is not None and len(gps):
             self._gps(gps)
@@ -433,8 +441,42 @@ class DataflashBag(StreamBag):
         return None if self.upside_down_s is None else self.upside_down_s - CRASH_MARGIN_S
 
     def log_defaults(self) -> tuple[dict[str, Any], str]:
-        """:func:`log_defaults` of this log's parameters."""
-        return log_defaults(self.parameters)
+        """:func:`log_defaults` of this log's parameters; where the note says the declination is
+        not in the parameters but the EKF's earth field is in the log, the note says that the
+        comparison uses it instead."""
+        defaults, note = log_defaults(self.parameters)
+        if note and self.declination is not None:
+            t, dec = self.declination
+            note = (f"{DECLINATION_PARAM} 0 with {AUTODEC_PARAM} 1: headings are compared about "
+                    "the declination the autopilot's EKF applied at each time (atan2(ME, MN) of "
+                    f"its earth field: {math.degrees(dec[0]):+.1f} deg at {t[0]:.0f} s, "
+                    f"{math.degrees(dec[-1]):+.1f} deg at {t[-1]:.0f} s)")
+        return defaults, note
+
+    def declination_at(self, t_s: np.ndarray) -> np.ndarray | None:
+        """The declination [rad] the autopilot's EKF applied at ``t_s`` [s since boot]
+        (interpolated; the first/last value outside its span), None without its earth field."""
+        if self.declination is None:
+            return None
+        t, dec = self.declination
+        return np.interp(t_s, t, np.unwrap(dec))
+
+
+def _earth_field_declination(rows: dict[str, _Rows]) -> tuple[np.ndarray, np.ndarray] | None:
+    """(stamps [s since boot], declination [rad]) of the newest EKF's earth field in the log
+    (:data:`EARTH_FIELD_TOPICS`, the primary core ``C``), rows with a horizontal field of at
+    least :data:`MIN_EARTH_FIELD_MGAUSS` only; None when there is none."""
+    for topic in EARTH_FIELD_TOPICS:
+        r = rows.get(topic)
+        if r is None or not len(r) or not {"MN", "ME"} <= set(r.columns):
+            continue
+        if "C" in r.columns:
+            r = r.where(r.columns["C"] == np.min(r.columns["C"]))
+        mn, me = r.columns["MN"].astype(float), r.columns["ME"].astype(float)
+        ok = np.isfinite(mn) & np.isfinite(me) & (np.hypot(mn, me) >= MIN_EARTH_FIELD_MGAUSS)
+        if ok.any():
+            return r.stamp_us()[ok] * 1e-6, np.arctan2(me[ok], mn[ok])
+    return None
 
 
 def _rate_hz(t_us: np.ndarray) -> float:

@@ -967,8 +967,14 @@ class _Px4Input:
         keep = (t >= lo - MAX_INTERPOLATION_GAP_S) & (t <= hi + MAX_INTERPOLATION_GAP_S)
         if self.scored_until_s is not None:
             keep &= t <= self.scored_until_s
+        t, q = t[keep], q[keep]
+        dec = self.bag.declination_at(t) if self.kind == "ardupilot" else None
+        if dec is not None:  # the autopilot's true north -> ours (magnetic_declination_rad)
+            half = -0.5 * (dec - r.pparams.magnetic_declination_rad)  # NED yaw: about +z down
+            turn = np.stack([np.cos(half), 0.0 * half, 0.0 * half, np.sin(half)], axis=1)
+            q = quat.multiply(turn, q)
         world = r.fparams.world_frame
-        qo = px4.attitude_in_output_frames(q[keep], world,
+        qo = px4.attitude_in_output_frames(q, world,
                                            px4.output_body(r.pparams.body_frame, world))
         if qo is None:
             text = (f"{self.reference_topic} is not compared: no conversion into world frame "
@@ -976,7 +982,7 @@ class _Px4Input:
             if text not in r.warnings:
                 r.warnings.append(text)
             return [], []
-        return t[keep].tolist(), [tuple(x) for x in qo.tolist()]
+        return t.tolist(), [tuple(x) for x in qo.tolist()]
 
     def summary(self, r: _Run, series: ReplaySeries | None = None,
                 align: str | None = None) -> dict[str, Any]:
@@ -1059,7 +1065,8 @@ def _px4_input(bag: Any, opts: ReplayOptions, variants: Sequence[ReplayVariant]
     return _Px4Input(bag, out, changed, want_ref, notes, (lo, hi, dur), kind="ardupilot",
                      reference_topic=dataflash.ATTITUDE_TOPIC,
                      estimate_topics=(dataflash.ATTITUDE_TOPIC, *dataflash.ESTIMATE_TOPICS),
-                     heading_unknown=bool(decl_note), scored_until_s=bag.scored_until_s())
+                     heading_unknown=bool(decl_note) and bag.declination is None,
+                     scored_until_s=bag.scored_until_s())
 
 
 def _velocity_summary(pipe: Any, n_vel: int) -> dict[str, Any]:
