@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from conftest import DATA_ROOT
+
 from cf_estimator import FilterParams, estimate
 from cf_estimator.bag.logarrays import log_arrays
 from cf_estimator.scenarios import make_scenario

@@ -173,7 +173,8 @@ def _read(path: Path) -> tuple[dict[str, _Rows], dict[str, Any], list[str], int 
     from pymavlink import DFReader
 
     wanted = ["IMU", "IMU2", "IMU3", "MAG", "MAG2", "MAG3", ATTITUDE_TOPIC, *ESTIMATE_TOPICS,
-              "GYR", "ACC", "GYR1", "GYR2", "GYR3", "ACC1", "ACC2", "ACC3", VELOCITY_TOPIC, *EARTH_FIELD_TOPICS, "MSG"]
+              "GYR", "ACC", "GYR1", "GYR2", "GYR3", "ACC1", "ACC2", "ACC3", VELOCITY_TOPIC,
+              *EARTH_FIELD_TOPICS, "MSG"]
     raw: dict[str, dict[str, list[Any]]] = {}
     texts: list[str] = []
     sink = io_.StringIO()
