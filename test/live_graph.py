@@ -53,8 +53,19 @@ T0_S = 1_700_000_000
 #: Generous: a loaded 2-core machine may need seconds for DDS discovery.
 TIMEOUT_S = 30.0
 
-_DOMAINS = list(range(1, 102))
-random.Random(os.getpid() ^ time.time_ns()).shuffle(_DOMAINS)
+def _domains() -> list[int]:
+    """ROS domain ids 1-101, shuffled; under pytest-xdist each worker (``gw0``, ``gw1``...)
+    takes its own share, so two workers' graphs never share a domain."""
+    domains = list(range(1, 102))
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "")
+    count = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1") or 1)
+    if worker.startswith("gw") and worker[2:].isdigit() and count > 1:
+        domains = domains[int(worker[2:]) % count::count]
+    random.Random(os.getpid() ^ time.time_ns()).shuffle(domains)
+    return domains
+
+
+_DOMAINS = _domains()
 
 
 def require(module: str, *, required: bool = REQUIRE_ROS, hint: str = "") -> ModuleType:
