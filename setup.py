@@ -108,9 +108,10 @@ setup(
     extras_require={
         # vqf, imufusion: the peers the bench tests run (test_fair_peers.py: Fusion's recommended
         # set-up at work); dask[distributed]: the LocalCluster (loopback) tests;
-        # pytest-timeout: a hung test fails after 10 minutes (pyproject: timeout), not at CI's limit
-        "test": ["pytest", "pytest-timeout", "hypothesis", "ruff", "vqf", "imufusion",
-                 "dask[distributed]"],
+        # pytest-timeout: a hung test fails after 10 minutes (pyproject: timeout), not at CI's limit;
+        # pytest-xdist: scripts/test.sh runs the suite on every core (-n auto)
+        "test": ["pytest", "pytest-timeout", "pytest-xdist", "hypothesis", "ruff", "vqf",
+                 "imufusion", "dask[distributed]"],
         # --cluster ADDRESS|local:N on replay, tune and bench (docs/cluster.md)
         "cluster": ["dask[distributed]"],
         # riann: RIANN on ONNX Runtime (~80 MB installed, no torch); its weights ship inside
