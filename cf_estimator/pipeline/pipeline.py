@@ -99,6 +99,23 @@ class PipelineOutput:
     gravity_free: tuple[Vec3, tuple[float, ...], Vec3, tuple[float, ...]] | None = None
 
 
+@dataclass(slots=True)
+class _ImuSample:
+    """One IMU message's fields after the checks (body convention paired with world_frame):
+    header stamp (sec, nsec) and t_ns [ns], frame_id, gyro [rad/s], accelerometer [m/s²], their
+    covariances as published, and |gyro|² [(rad/s)²]."""
+
+    sec: int
+    nsec: int
+    t_ns: int
+    frame: Any
+    gyro: tuple[float, float, float]
+    accel: tuple[float, float, float]
+    av_cov: Any
+    la_cov: Any
+    g2: float
+
+
 class ImuPipeline:
     """Validated IMU (+ magnetometer) messages → complementary filter → output contents.
 
@@ -461,6 +478,26 @@ class ImuPipeline:
         return text
 
     def _on_imu(self, msg: Any, t0: float) -> PipelineOutput | None:
+        """One IMU message through the stages, in order; None when a stage rejects it (the
+        stage counted the reason)."""
+        sample = self._read_imu(msg)
+        if sample is None:
+            return None
+        dt = self._advance_time(sample.t_ns)
+        if dt is None:
+            return None
+        self._check_units(sample)
+        mag, mag_stamp_ns = self._take_mag(sample.t_ns)
+        q, mag_used, mag_rejected = self._run_filter(sample, dt, mag, mag_stamp_ns)
+        self.clock.last_ns = sample.t_ns
+        self.tally.processed += 1
+        out = self._output(sample, q, dt, mag_used, mag_rejected)
+        self._time_statistics(sample.t_ns, t0)
+        return out
+
+    def _read_imu(self, msg: Any) -> _ImuSample | None:
+        """Stage 1: the message's fields (in the body convention paired with world_frame) and
+        the per-sample checks: malformed, zero stamp, non-finite, zero or implausible."""
         try:
             header = msg.header
             st = header.stamp
@@ -498,11 +535,17 @@ class ImuPipeline:
         if a2 > ACCEL_MAX2:
             self._reject(checks.IMPLAUSIBLE_ACCEL)
             return None
+        return _ImuSample(sec, nsec, sec * 1_000_000_000 + nsec, frame, (gx, gy, gz),
+                          (ax, ay, az), av_cov, la_cov, g2)
 
-        # -- time ---------------------------------------------------------------------------------
-        t_ns = sec * 1_000_000_000 + nsec
+    def _advance_time(self, t_ns: int) -> float | None:
+        """Stage 2: the time base → dt [s] (0 for the first sample and after a reset; the mean
+        dt across a gap), or None when the stamp is rejected (duplicate, out of order, time
+        going backwards without a reset); resets on a jump back or a long gap; the rate
+        statistics of the diagnostics period."""
         last = self.clock.last_ns
         dt = 0.0
+        d_ns = 0
         if last is not None:
             d_ns = t_ns - last
             if d_ns <= 0:
@@ -520,9 +563,8 @@ class ImuPipeline:
                 self.reset(checks.RESET_LONG_GAP)
             else:
                 dt = d_ns * 1e-9
-        # -- from here on the message is processed ------------------------------------------------
-        w = self.window
         if dt > 0.0:
+            w = self.window
             if w.n_dt == 0 or dt < w.dt_min:
                 w.dt_min = dt
             if dt > w.dt_max:
@@ -537,13 +579,19 @@ class ImuPipeline:
                 self.clock.dt_mean += 0.05 * (dt - self.clock.dt_mean)
             else:
                 self.clock.dt_mean = dt
+        return dt
 
+    def _check_units(self, sample: _ImuSample) -> None:
+        """Stage 3: what the input says about its conventions, once each: a new frame_id, an
+        accelerometer not in m/s² (|mean a| of the first samples), a gyro not in rad/s."""
+        frame = sample.frame
         if frame != self.imu_frame:
             self.imu_frame = frame
             self._warn(checks.frame_id_warning(str(frame), "IMU"))
         if self.accel_check_n < checks.ACCEL_CHECK_SAMPLES:
             # |mean a|, not mean |a|: vibration adds to every |a| (13 m/s^2 on a quadrotor)
             # but averages out of the vector, which is gravity (plus a mean acceleration)
+            ax, ay, az = sample.accel
             self.accel_check_n += 1
             self._acc_sx += ax
             self._acc_sy += ay
@@ -552,63 +600,75 @@ class ImuPipeline:
                 n = self.accel_check_n
                 mean_norm = math.sqrt(self._acc_sx**2 + self._acc_sy**2 + self._acc_sz**2) / n
                 self._warn(checks.accel_units_warning(mean_norm, self._fp.gravity_m_s2))
-        if g2 > checks.GYRO_IMPLAUSIBLE_RAD_S**2:
-            self._warn(checks.gyro_units_warning(math.sqrt(g2)))
+        if sample.g2 > checks.GYRO_IMPLAUSIBLE_RAD_S**2:
+            self._warn(checks.gyro_units_warning(math.sqrt(sample.g2)))
 
-        # -- magnetometer sample, used once -------------------------------------------------------
-        mag = None
-        mag_used = mag_rejected = False
+    def _take_mag(self, t_ns: int) -> tuple[tuple[float, float, float] | None, int | None]:
+        """Stage 4: the magnetometer sample waiting for this IMU sample, used once → (the field,
+        its stamp [ns]); (None, None) when there is none, it is disabled or stale (counted)."""
         pending = self.mag_input.pending
-        if pending is not None:
-            self.mag_input.pending = None
-            if not self.rules.use_mag:
-                self.tally.mag_disabled += 1
-            elif abs(t_ns - pending[0]) <= self.rules.mag_timeout_ns:
-                mag = (pending[1], pending[2], pending[3])
-            else:
-                self.tally.mag_stale += 1
-
-        # -- filter -------------------------------------------------------------------------------
-        f = self._filter
-        if f.initialized:
-            acc = (ax, ay, az)
-            if self._aiding is not None:
-                acc = self._aiding.aided_accel(t_ns * 1e-9, (gx, gy, gz), acc, dt,
-                                               f.orientation_tuple(), filter_estimates(f))
-                apply_aiding(f, self._aiding)
-            q = f.update((gx, gy, gz), acc, dt, mag)
-            s = f._state  # noqa: SLF001 - per-sample flags without building FilterStatus (20 us)
-            if mag is not None:
-                ms = s.mag_status
-                if ms == MAG_USED:
-                    self.tally.mag_used += 1
-                    mag_used = True
-                    self.mag_input.last_used_ns = pending[0]  # type: ignore[index]
-                elif ms == MAG_REJECTED:
-                    self.tally.mag_rejected += 1
-                    mag_rejected = True
-                elif ms == MAG_DISABLED:
-                    self.tally.mag_disabled += 1
-            w.n_err += 1
-            e = s.error_norm
-            w.err_sum += e
-            if e > w.err_max:
-                w.err_max = e
-            if s.clipped:
-                w.n_clipped += 1
+        if pending is None:
+            return None, None
+        self.mag_input.pending = None
+        if not self.rules.use_mag:
+            self.tally.mag_disabled += 1
+        elif abs(t_ns - pending[0]) <= self.rules.mag_timeout_ns:
+            return (pending[1], pending[2], pending[3]), pending[0]
         else:
-            q = f.update((gx, gy, gz), (ax, ay, az), 0.0, mag)
+            self.tally.mag_stale += 1
+        return None, None
+
+    def _run_filter(self, sample: _ImuSample, dt: float,
+                    mag: tuple[float, float, float] | None, mag_stamp_ns: int | None
+                    ) -> tuple[tuple[float, float, float, float] | None, bool, bool]:
+        """Stage 5: velocity aiding (when configured) and the filter step → (q_world_from_body
+        (w, x, y, z) in the core's world, or None before the first sample initialises it;
+        the magnetometer sample used; rejected), with the magnetometer and error counters."""
+        f = self._filter
+        gyro, accel = sample.gyro, sample.accel
+        mag_used = mag_rejected = False
+        if not f.initialized:
+            q = f.update(gyro, accel, 0.0, mag)
             if mag is not None:
                 if f._state.heading_initialized:  # noqa: SLF001
                     self.tally.mag_used += 1
                     mag_used = True
-                    self.mag_input.last_used_ns = pending[0]  # type: ignore[index]
+                    self.mag_input.last_used_ns = mag_stamp_ns
                 else:  # horizontal component too small to give a heading
                     self.tally.mag_rejected += 1
-        self.clock.last_ns = t_ns
-        self.tally.processed += 1
+            return q, mag_used, mag_rejected
+        if self._aiding is not None:
+            accel = self._aiding.aided_accel(sample.t_ns * 1e-9, gyro, accel, dt,
+                                             f.orientation_tuple(), filter_estimates(f))
+            apply_aiding(f, self._aiding)
+        q = f.update(gyro, accel, dt, mag)
+        s = f._state  # noqa: SLF001 - per-sample flags without building FilterStatus (20 us)
+        if mag is not None:
+            ms = s.mag_status
+            if ms == MAG_USED:
+                self.tally.mag_used += 1
+                mag_used = True
+                self.mag_input.last_used_ns = mag_stamp_ns
+            elif ms == MAG_REJECTED:
+                self.tally.mag_rejected += 1
+                mag_rejected = True
+            elif ms == MAG_DISABLED:
+                self.tally.mag_disabled += 1
+        w = self.window
+        w.n_err += 1
+        e = s.error_norm
+        w.err_sum += e
+        if e > w.err_max:
+            w.err_max = e
+        if s.clipped:
+            w.n_clipped += 1
+        return q, mag_used, mag_rejected
 
-        # -- output -------------------------------------------------------------------------------
+    def _output(self, sample: _ImuSample, q: tuple[float, float, float, float] | None,
+                dt: float, mag_used: bool, mag_rejected: bool) -> PipelineOutput:
+        """Stage 6: the published message: orientation in the output frame, its covariance,
+        roll/pitch/yaw, the input's rates and accelerations, pending warnings, and the
+        gravity-free acceleration when asked for."""
         if q is None:  # cannot happen after the checks above; keep the contract anyway
             xyzw: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
             cov: tuple[float, ...] = UNKNOWN_COVARIANCE
@@ -621,20 +681,9 @@ class ImuPipeline:
             xyzw = (qx, qy, qz, qw)
             last_mag = self.mag_input.last_used_ns
             cov = self.covariance_model.update(
-                dt, f._state, mag_used,  # noqa: SLF001 - flags without building FilterStatus
-                None if last_mag is None else (t_ns - last_mag) * 1e-9, mag_rejected)
-            roll = math.atan2(2.0 * (qw * qx + qy * qz), 1.0 - 2.0 * (qx * qx + qy * qy))
-            sp = 2.0 * (qw * qy - qz * qx)
-            pitch = math.asin(1.0 if sp > 1.0 else (-1.0 if sp < -1.0 else sp))
-            yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
-            if self._pp.rpy_unwrap:
-                prev = self.clock.unwrap_prev
-                if prev is not None:
-                    roll += TWO_PI * round((prev[0] - roll) / TWO_PI)
-                    yaw += TWO_PI * round((prev[2] - yaw) / TWO_PI)
-                self.clock.unwrap_prev = (roll, pitch, yaw)
-            rpy = (roll, pitch, yaw)
-            self.last_rpy = rpy
+                dt, self._filter._state, mag_used,  # noqa: SLF001 - flags, no FilterStatus
+                None if last_mag is None else (sample.t_ns - last_mag) * 1e-9, mag_rejected)
+            rpy = self._rpy(qw, qx, qy, qz)
             initialized = True
         warnings = self._pending_warnings
         if warnings:
@@ -642,13 +691,33 @@ class ImuPipeline:
         else:
             warnings = []
         out = PipelineOutput(
-            sec, nsec, self.output_frame_id(str(frame)), xyzw, cov, (gx, gy, gz), av_cov,
-            (ax, ay, az), la_cov, rpy, initialized, warnings,
+            sample.sec, sample.nsec, self.output_frame_id(str(sample.frame)), xyzw, cov,
+            sample.gyro, sample.av_cov, sample.accel, sample.la_cov, rpy, initialized, warnings,
         )
         if self._pp.publish_linear_acceleration and initialized:
-            out.gravity_free = gravity_free(xyzw, out.linear_acceleration, cov, la_cov,
+            out.gravity_free = gravity_free(xyzw, out.linear_acceleration, cov, sample.la_cov,
                                             self._fp.gravity_m_s2, self._fp.world_frame)
-        # -- statistics (incremental) -----------------------------------------------------------
+        return out
+
+    def _rpy(self, qw: float, qx: float, qy: float, qz: float) -> tuple[float, float, float]:
+        """Roll, pitch, yaw [rad] (aerospace ZYX) of the published q, unwrapped when asked."""
+        roll = math.atan2(2.0 * (qw * qx + qy * qz), 1.0 - 2.0 * (qx * qx + qy * qy))
+        sp = 2.0 * (qw * qy - qz * qx)
+        pitch = math.asin(1.0 if sp > 1.0 else (-1.0 if sp < -1.0 else sp))
+        yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+        if self._pp.rpy_unwrap:
+            prev = self.clock.unwrap_prev
+            if prev is not None:
+                roll += TWO_PI * round((prev[0] - roll) / TWO_PI)
+                yaw += TWO_PI * round((prev[2] - yaw) / TWO_PI)
+            self.clock.unwrap_prev = (roll, pitch, yaw)
+        rpy = (roll, pitch, yaw)
+        self.last_rpy = rpy
+        return rpy
+
+    def _time_statistics(self, t_ns: int, t0: float) -> None:
+        """Stage 7: the diagnostics period's sample count, span and processing time [s]."""
+        w = self.window
         if w.n == 0:
             w.first_ns = t_ns
         w.n += 1
@@ -657,7 +726,6 @@ class ImuPipeline:
         w.proc_sum += elapsed
         if elapsed > w.proc_max:
             w.proc_max = elapsed
-        return out
 
     # -- diagnostics ------------------------------------------------------------------------------
     def diagnostics(self, now_s: float | None = None) -> DiagnosticsReport:
