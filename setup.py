@@ -108,7 +108,8 @@ setup(
     extras_require={
         # vqf, imufusion: the peers the bench tests run (test_fair_peers.py: Fusion's recommended
         # set-up at work); dask[distributed]: the LocalCluster (loopback) tests;
-        # pytest-timeout: a hung test fails after 10 minutes (pyproject: timeout), not at CI's limit;
+        # pytest-timeout: a hung test fails after 10 minutes (pyproject: timeout), not at CI's
+        # limit;
         # pytest-xdist: scripts/test.sh runs the suite on every core (-n auto)
         "test": ["pytest", "pytest-timeout", "pytest-xdist", "hypothesis", "ruff", "vqf",
                  "imufusion", "dask[distributed]"],
