@@ -250,7 +250,7 @@ def test_thesis_acceleration_manoeuvre_aided_peak_below_unaided():
 def test_an_uncertain_heading_weighs_the_measurement_across_the_acceleration_only():
     """The heading offset's σ turns the acceleration taken out: its error lies across a_h. That
     component is kept in the share σ_t²/(σ_t² + (σ_δ·|a_h|/g)²) (σ_t: the filter's tilt σ from
-    its drift, the 5th value of filter_estimates), the one along a_h whole."""
+    its drift, the 5th value of aiding_estimates()), the one along a_h whole."""
     from cf_estimator.core.alignment import HeadingOffset
 
     aiding = VelocityAiding(FilterParams(use_mag=False))
@@ -274,12 +274,11 @@ def test_a_loop_without_gain_is_aided_without_dividing_by_it():
     """k1 = k2 = 0 (a gyro-only loop, a valid set) with a velocity: the tilt σ the aiding reads
     is unbounded (no loop holds the tilt), not a division by zero, and the run completes."""
     from cf_estimator.core.filter import ComplementaryFilter
-    from cf_estimator.core.velocity import filter_estimates
 
     p = FilterParams(use_mag=False, k1=0.0, k2=0.0, bias_learning_k2=0.0)
     f = ComplementaryFilter(p)
     f.initialize_from((0.0, 0.0, 9.81))
-    assert filter_estimates(f)[4] == math.inf
+    assert f.aiding_estimates()[4] == math.inf
     n = 2000
     t = np.arange(n) / 100.0
     tv = np.arange(0.0, 20.0, 0.1)
@@ -399,12 +398,11 @@ def test_dropout_of_seconds_falls_back_to_imu_only_and_recovers(uav, uav_unaided
 
 def test_the_velocity_measures_the_swing_and_hands_it_to_the_loop_when_aiding_ends():
     """VelocityAiding's swing: the horizontal velocity high-passed and its mean square over g²
-    (what the loop's pseudo-velocity measures unaided); apply_aiding gives it to the filter at
+    (what the loop's pseudo-velocity measures unaided); the filter takes it (apply_aiding) at
     the end of aiding only (seed_swing: kept if larger, never a non-finite value)."""
-    from types import SimpleNamespace
+    import dataclasses
 
-    from cf_estimator.core.filter import ComplementaryFilter
-    from cf_estimator.core.velocity import apply_aiding
+    from cf_estimator.core.filter import AidingInput, ComplementaryFilter
 
     a = VelocityAiding(P6)
     g = P6.gravity_m_s2
@@ -414,16 +412,16 @@ def test_the_velocity_measures_the_swing_and_hands_it_to_the_loop_when_aiding_en
     assert 0.8 * 6.0 / g < math.sqrt(a.swing_var) < 1.1 * 6.0 / g
     f = ComplementaryFilter(P6)
     f.initialize((1.0, 0.0, 0.0, 0.0))
-    end = SimpleNamespace(moving=False, moving_now=False, started=False, first_start=False,
-                          active=False, swing_var=0.3, take_realignment=lambda: None,
-                          take_heading_correction=lambda: 0.0)
-    apply_aiding(f, end)  # was not aided: nothing to hand over
+    end = AidingInput((0.0, 0.0, 9.81), moving=False, moving_now=False, started=False,
+                      first_start=False, realign=None, active=False, horizontal=False,
+                      swing_var=0.3, window_error_rad=0.0, heading_turn_rad=0.0)
+    assert not f.apply_aiding(end)  # was not aided: nothing to hand over
     assert f.step_state.pv_var == 0.0
     f.set_aided(True)
-    apply_aiding(f, end)
+    f.apply_aiding(end)
     assert f.step_state.pv_var == 0.3 and not f.step_state.aided
     f.set_aided(True)
-    apply_aiding(f, SimpleNamespace(**{**vars(end), "swing_var": 0.1}))  # smaller: kept
+    f.apply_aiding(dataclasses.replace(end, swing_var=0.1))  # smaller: kept
     assert f.step_state.pv_var == 0.3
     f.seed_swing(float("nan"))
     assert f.step_state.pv_var == 0.3
@@ -576,10 +574,11 @@ def test_take_hold_removes_a_revealed_tilt_error_at_once_without_learning_bias()
 
 def test_an_attitude_error_revealed_while_aided_is_taken_hold_of(uav, monkeypatch):
     """A gyro fault mid-flight (3 rad/s on x for 0.2 s: a 34 deg step) while aided
-    horizontally: the filter takes hold again (velocity.apply_aiding; here about 0.8 s after
-    the fault, once the aperiodic unit holds the error) and is within a degree from 2 s after
-    it; with the check disabled, the running loop is still 10 deg and more off then, and the
-    rest of the flight is worse too (part of the step learned as gyro bias)."""
+    horizontally: the filter takes hold again (ComplementaryFilter.apply_aiding; here about
+    0.8 s after the fault, once the aperiodic unit holds the error) and is within a degree
+    from 2 s after it; with the check disabled, the running loop is still 10 deg and more off
+    then, and the rest of the flight is worse too (part of the step learned as gyro bias)."""
+    import cf_estimator.core.filter as filter_module
     import cf_estimator.core.velocity as velocity_module
 
     vd = measure_velocity(uav.truth, VelocityModel(10.0, 0.1, 0.1), np.random.default_rng(0))
@@ -599,6 +598,7 @@ def test_an_attitude_error_revealed_while_aided_is_taken_hold_of(uav, monkeypatc
     counted: list[int] = []
     held, held_rest = after_fault()
     monkeypatch.setattr(velocity_module, "BIAS_LEARNING_MAX_ERROR_RAD", math.inf)
+    monkeypatch.setattr(filter_module, "BIAS_LEARNING_MAX_ERROR_RAD", math.inf)
     learned, learned_rest = after_fault()
     assert held.max() < 1.0 < 10.0 < learned.min()
     assert _rms(held_rest) < 0.7 * _rms(learned_rest)
@@ -683,7 +683,6 @@ def test_the_compass_prior_and_the_fit_weigh_by_their_variances():
 
 def test_the_aiding_reads_whether_the_compass_references_the_heading():
     from cf_estimator.core.filter import ComplementaryFilter
-    from cf_estimator.core.velocity import filter_estimates
 
     still = ((0.0, 0.0, 0.0), (0.0, 0.0, 9.81), 0.01)
     field = (20e-6, 0.0, -40e-6)  # T
@@ -692,14 +691,14 @@ def test_the_aiding_reads_whether_the_compass_references_the_heading():
     for _ in range(50):
         six.update(*still)
         nine.update(*still, mag=field)
-    assert filter_estimates(six)[5] == 0.0  # no magnetometer
-    assert filter_estimates(nine)[5] == 1.0
+    assert six.aiding_estimates()[5] == 0.0  # no magnetometer
+    assert nine.aiding_estimates()[5] == 1.0
     # the field turns by 90 deg while the sensor stands still: disturbed, the heading on the
     # gyro alone, and the compass no longer vouches for it
     for _ in range(50):
         nine.update(*still, mag=(0.0, 20e-6, -40e-6))
     assert nine.status().heading_source == "gyro"
-    assert filter_estimates(nine)[5] == 0.0
+    assert nine.aiding_estimates()[5] == 0.0
 
 
 def test_a_compass_gives_the_heading_offset_from_the_first_window(uav):
@@ -803,12 +802,12 @@ def test_a_vehicle_the_velocity_says_moves_is_never_at_rest(backend, offline):
 @pytest.mark.parametrize("backend", ["python", "compiled"])
 def test_a_velocity_that_says_moving_starts_the_averaging_at_once(backend):
     """velocity.MOVING_SPEED_SIGMAS: a velocity sample beyond 5 σ of its noise says the vehicle
-    moves, so apply_aiding marks the filter moving and its start-up averages the accelerometer
+    moves, so the aiding input marks the filter moving and its start-up averages the accelerometer
     (gain 1/t) without waiting for the stillness blocks; a velocity within the noise (a vehicle
     on the ground) leaves the start-up's fast gain alone."""
     from cf_estimator.core.filter import ComplementaryFilter
     from cf_estimator.core.kernel import compiled_available
-    from cf_estimator.core.velocity import MOVING_SPEED_SIGMAS, apply_aiding
+    from cf_estimator.core.velocity import MOVING_SPEED_SIGMAS
 
     if backend == "compiled" and not compiled_available():
         pytest.skip("the compiled twin is not built here")
@@ -820,7 +819,8 @@ def test_a_velocity_that_says_moving_starts_the_averaging_at_once(backend):
         assert not f.step_state.moved
         assert aiding.add_velocity(0.0, (speed * 0.6, speed * 0.8, 0.0)) is None
         assert aiding.moving is moving
-        apply_aiding(f, aiding)
+        f.apply_aiding(aiding.step_input(0.01, (0.0, 0.0, 0.0), (0.0, 0.0, 9.80665), 0.01,
+                                         f.orientation_tuple(), f.aiding_estimates()))
         assert bool(f.step_state.moved) is moving
     # what it changes: a level filter shown a 10 deg lean for the last 0.3 s of its first second
     # (a start in the air, a leg beginning) takes 3 deg of it when averaging (the lean's share of

@@ -286,7 +286,8 @@ class _RecordingFilter(ComplementaryFilter):
         super().interrupt_rest()
         self._moving = True
 
-    def update(self, gyro_rad_s: Any, accel_m_s2: Any, dt_s: float, mag: Any = None) -> Any:
+    def _update(self, gyro_rad_s: Any, accel_m_s2: Any, dt_s: float, mag: Any = None) -> Any:
+        """Record the row the step takes (after the aiding's input), then step."""
         m = tuple(mag) if mag is not None else (math.nan, math.nan, math.nan)
         self.rows.append((*gyro_rad_s, *accel_m_s2, *m))
         self.flags.append((ROW_AIDED if self.step_state.aided else 0)
@@ -294,7 +295,7 @@ class _RecordingFilter(ComplementaryFilter):
         self._moving = False
         self._in_update = True
         try:
-            return super().update(gyro_rad_s, accel_m_s2, dt_s, mag)
+            return super()._update(gyro_rad_s, accel_m_s2, dt_s, mag)
         finally:
             self._in_update = False
 

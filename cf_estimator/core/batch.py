@@ -30,12 +30,7 @@ from cf_estimator.core.input_checks import warn_units
 from cf_estimator.core.kernel import resolve_backend
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import BIAS_CONVERGED_SIGMA_RAD_S, MAG_REJECTED, MAG_USED
-from cf_estimator.core.velocity import (
-    VelocityAiding,
-    VelocityStatus,
-    apply_aiding,
-    filter_estimates,
-)
+from cf_estimator.core.velocity import VelocityAiding, VelocityStatus
 
 
 @dataclass
@@ -319,12 +314,14 @@ def run_aided(f: ComplementaryFilter, aiding: VelocityAiding, gyro: np.ndarray, 
             init_row = i
             a_in = a_rows[i]
             aiding.aided_accel(ts[i], g_rows[i], a_in, 1e-9, f.orientation_tuple(),
-                               filter_estimates(f))
+                               f.aiding_estimates())
         else:
-            a_in = aiding.aided_accel(ts[i], g_rows[i], a_rows[i], dts[i],
-                                      f.orientation_tuple(), filter_estimates(f))
-            apply_aiding(f, aiding)
-            f.update(g_rows[i], a_in, dts[i], m)
+            inp = aiding.step_input(ts[i], g_rows[i], a_rows[i], dts[i],
+                                    f.orientation_tuple(), f.aiding_estimates())
+            a_in = inp.accel_m_s2
+            f.update(g_rows[i], a_rows[i], dts[i], m, aiding=inp)
+            if f.aiding_attitude_error:
+                aiding.note_attitude_error()
         q_out[i] = f.orientation_tuple()
         aided_out[i] = aiding.active
         if moving_out is not None:

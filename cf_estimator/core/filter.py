@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from cf_estimator.core import quaternion as quat
+from cf_estimator.core.bias import BIAS_LEARNING_MAX_ERROR_RAD, drift_rate
 from cf_estimator.core.kernel import compiled_kernel, resolve_backend
 from cf_estimator.core.ops import FloatOps
 from cf_estimator.core.params import FilterParams
@@ -160,6 +161,42 @@ class FilterStatus:
 EXTRA_COLUMNS = 20
 
 
+#: Velocity aiding that begins (or comes back after a dropout) lets the filter take hold for
+#: this long [s]: start-up gain, no clip, no bias learning (the tilt error it reveals is real).
+AIDING_TAKE_HOLD_S = 2.0
+
+
+@dataclass(frozen=True, slots=True)
+class AidingInput:
+    """What velocity aiding gives the filter at one IMU sample (``update(..., aiding=)``), as
+    x-io Fusion's update takes an external heading: built by
+    :meth:`cf_estimator.core.velocity.VelocityAiding.step_input`.
+
+    ``accel_m_s2``: the specific force the step takes [m/s², sensor frame]: the vehicle's
+    acceleration taken out while ``active``, else the accelerometer sample itself.
+    ``moving``: the velocity has said the vehicle moves (start-up averages the accelerometer);
+    ``moving_now``: it moves now (not at rest). ``started``: aiding began (or came back) at this
+    sample, ``first_start``: for the first time (the bias learned unaided is reopened).
+    ``realign``: the in-motion alignment's (tilt rotation vector [rad], output world frame;
+    gyro bias [rad/s], sensor frame), once, or None. ``active``: this sample is aided;
+    ``horizontal``: horizontally (the heading offset known). ``swing_var``: the vehicle's
+    velocity swing over g, mean square [rad²·s²], from the velocity. ``window_error_rad``: the
+    angle between the filter's vertical and the gravity the last velocity window measured.
+    ``heading_turn_rad``: the heading correction due [rad] (6-D, about the output world z)."""
+
+    accel_m_s2: Sequence[float]
+    moving: bool
+    moving_now: bool
+    started: bool
+    first_start: bool
+    realign: tuple[Any, Any] | None
+    active: bool
+    horizontal: bool
+    swing_var: float
+    window_error_rad: float
+    heading_turn_rad: float
+
+
 class Extra:
     """Column indices of ``extra_out`` (the order above; ``c/cf_core.c`` writes the same)."""
 
@@ -232,6 +269,8 @@ class ComplementaryFilter:
         self._learning: Any = self._new_state()
         self._state: Any = self._learning  # the published hypothesis
         self._initialized = False
+        #: the last update's aiding took hold on an attitude error (apply_aiding)
+        self.aiding_attitude_error = False
         self.set_params(params if params is not None else FilterParams())
         if initial_orientation is not None:
             self.initialize(initial_orientation)
@@ -400,6 +439,51 @@ class ComplementaryFilter:
                 s.bias_var = max(float(s.bias_var), prior)
                 s.bias_err_var = max(float(s.bias_err_var), prior)
 
+    def apply_aiding(self, aiding: AidingInput) -> bool:
+        """What velocity aiding tells the filter before a step, in this order: the vehicle moves
+        (the start-up averages), take hold when aiding began (and again when, aided, the
+        disagreement is an attitude error), the alignment's tilt and bias once known, the swing
+        measured while aided when aiding ends, whether the sample is aided, the heading
+        correction due. True when it took hold on an attitude error (the aiding counts it).
+        :meth:`update` with ``aiding=`` calls it."""
+        if aiding.moving:
+            self.mark_moving()
+        if aiding.moving_now:
+            self.interrupt_rest()
+        if aiding.started:
+            self.take_hold(AIDING_TAKE_HOLD_S, reopen_bias=aiding.first_start)
+        if aiding.realign is not None:
+            self.realign(*aiding.realign)
+        if self._state.aided and not aiding.active:
+            # aiding ends (a dropout): what the filter measured of the swing while aided is what
+            # the aiding left; the unaided loop takes the vehicle's swing from the velocity
+            self.seed_swing(aiding.swing_var)
+        self.set_aided(aiding.active)
+        s = self._state
+        attitude_error = (aiding.active and aiding.horizontal and s.time_s > s.quick_until_s
+                          and aiding.window_error_rad > BIAS_LEARNING_MAX_ERROR_RAD)
+        if attitude_error:
+            # aided, the window's gravity is off the filter's vertical by the tilt error itself
+            # (what the aiding leaves is hundredths of a rad): one beyond what a bias explains
+            # is an attitude error (a gyro fault): take hold, learning nothing from it
+            self.take_hold(AIDING_TAKE_HOLD_S)
+        self.correct_heading(aiding.heading_turn_rad)
+        return attitude_error
+
+    def aiding_estimates(self) -> tuple[float, float, float, float, float, float]:
+        """What velocity aiding reads of the filter, cheaply: the regulator's integral (bias)
+        state b [rad/s] (sensor frame), its variance per axis [(rad/s)²] (< 0: none yet), the
+        σ [rad] of the tilt error the gyro's drift leaves in the aided loop: d/k1, d the drift
+        rate (:func:`~cf_estimator.core.bias.drift_rate`), k1 the configured gain (the aided
+        loop's); unbounded (inf) with k1 = 0, a loop that never corrects its tilt; and 1.0 while
+        the magnetometer references the heading (taken, the field not disturbed, no heading
+        recovery under way), else 0.0."""
+        s = self._state
+        k1 = self._params.k1
+        sigma_t = drift_rate(s, FloatOps) / k1 if k1 > 0.0 else math.inf
+        compass = bool(s.heading_initialized) and not s.mag_disturbed and not s.mag_recovering
+        return (s.bx, s.by, s.bz, s.bias_var, sigma_t, 1.0 if compass else 0.0)
+
     def initialize_from(self, accel_m_s2: Vector, mag: Vector | None = None) -> bool:
         """Initialise from one accelerometer (and magnetometer) sample; False if not valid."""
         if not valid_vector(accel_m_s2):
@@ -410,7 +494,8 @@ class ComplementaryFilter:
         return True
 
     def update(
-        self, gyro_rad_s: Vector, accel_m_s2: Vector | None, dt_s: float, mag: Vector | None = None
+        self, gyro_rad_s: Vector, accel_m_s2: Vector | None, dt_s: float, mag: Vector | None = None,
+        aiding: AidingInput | None = None,
     ) -> tuple[float, float, float, float] | None:
         """Process one sample; returns q_world_from_sensor (w, x, y, z) or None before init.
 
@@ -418,7 +503,19 @@ class ComplementaryFilter:
         otherwise); an invalid (non-finite, zero or overflowing norm) or
         missing accelerometer/magnetometer sample is skipped for this step (gyro-only).
         Magnetometer units are free (only the direction and relative norm are used).
+        ``aiding`` (an initialised filter): velocity aiding's input at this sample
+        (:meth:`apply_aiding` first; the step then takes its ``accel_m_s2`` instead of
+        ``accel_m_s2``); :attr:`aiding_attitude_error` says whether it took hold on an
+        attitude error.
         """
+        if aiding is not None and self._initialized:
+            self.aiding_attitude_error = self.apply_aiding(aiding)
+            accel_m_s2 = aiding.accel_m_s2
+        return self._update(gyro_rad_s, accel_m_s2, dt_s, mag)
+
+    def _update(self, gyro_rad_s: Vector, accel_m_s2: Vector | None, dt_s: float,
+                mag: Vector | None) -> tuple[float, float, float, float] | None:
+        """The step itself (:meth:`update` after the aiding's input): both hypotheses."""
         if self._kernel_params is not None and self._initialized:  # the compiled twin, same checks
             if self._null is None:
                 return self._learning.update(self._kernel_params, gyro_rad_s, accel_m_s2, dt_s,

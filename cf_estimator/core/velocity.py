@@ -56,8 +56,9 @@ module builds that aided specific force for the unchanged filter step, outside i
   mid-air 12 s–end 1.68/1.56/1.24° → 1.13/1.26/0.86°).
 - **An uncertain heading, across the acceleration.** The error δ's uncertainty σ_δ leaves in the
   acceleration taken out, σ_δ·|a_h|, lies across a_h; across a_h the aided measurement is weighed
-  against the filter's own tilt (σ_t: the drift its gyro leaves, filter_estimates) as a
-  Kalman gain would, along a_h it is kept whole (:meth:`VelocityAiding._across_heading_error`).
+  against the filter's own tilt (σ_t: the drift its gyro leaves, ``aiding_estimates()`` of
+  the filter) as a Kalman gain would, along a_h it is kept whole
+  (:meth:`VelocityAiding._across_heading_error`).
   The thesis manoeuvre, whose fit is known 0.5 s into a 5 m/s² acceleration with σ_δ near
   0.3 rad: aided peak 51.7′ → 42.8′ (heading known from the start: 32.5′); the Phantom 4
   flights, started in the air with σ_t of 10–15°, unchanged.
@@ -117,15 +118,12 @@ from cf_estimator.core.bias import (
     BIAS_LEARNING_MAX_ERROR_RAD,
     SWING_TIME_CONSTANT_S,
     SWING_VAR_TIME_CONSTANT_S,
-    drift_rate,
 )
-from cf_estimator.core.ops import FloatOps, rotation_elements
+from cf_estimator.core.filter import AidingInput
+from cf_estimator.core.ops import rotation_elements
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.quaternion import to_matrix
 
-#: Velocity aiding that begins (or comes back after a dropout) lets the filter take hold for
-#: this long [s]: start-up gain, no clip, no bias learning (the tilt error it reveals is real).
-AIDING_TAKE_HOLD_S = 2.0
 #: Without a heading reference of its own (6-D), the filter is steered onto the velocity's
 #: frame once the heading offset δ is known: the first fix turns its heading at once, then it
 #: turns by this gain × δ per second, so the offset stays near 0 instead of drifting with the
@@ -185,7 +183,7 @@ class VelocityStatus:
     moving_now: bool = False  #: the velocity says the vehicle moves: the filter is not at rest
     #: (VelocityAiding.moving_now)
     attitude_errors: int = 0  #: times an attitude error revealed while aided horizontally (a
-    #: gyro fault) made the filter take hold again (apply_aiding)
+    #: gyro fault) made the filter take hold again (ComplementaryFilter.apply_aiding)
 
 
 def _rot(qw: float, qx: float, qy: float, qz: float, x: float, y: float, z: float
@@ -207,15 +205,16 @@ def _mul(aw: float, ax: float, ay: float, az: float, bw: float, bx: float, by: f
 class VelocityAiding:
     """Turns IMU samples into aided specific force given world-frame velocity samples.
 
-    Per IMU sample, before the filter's update::
+    Per IMU sample, the aiding is an input of the filter's update::
 
-        accel_in = aiding.aided_accel(t_s, gyro, accel, dt_s, q_filter,
-                                      filter_estimates(filter))
-        apply_aiding(filter, aiding)
-        filter.update(gyro, accel_in, dt_s, mag)
+        inp = aiding.step_input(t_s, gyro, accel, dt_s, filter.orientation_tuple(),
+                                filter.aiding_estimates())
+        filter.update(gyro, accel, dt_s, mag, aiding=inp)
+        if filter.aiding_attitude_error:
+            aiding.note_attitude_error()
 
     ``q_filter``: the filter's q_world_from_sensor before the update (its world frame, ENU or
-    NED); ``filter_estimates``: its gyro-bias estimate [rad/s] (sensor frame), the estimate's
+    NED); ``aiding_estimates()``: its gyro-bias estimate [rad/s] (sensor frame), the estimate's
     variance, and its tilt's σ from the gyro's drift.
     Velocity samples [m/s] in the velocity's world frame (same axes convention as the filter's
     world: ENU or NED) arrive through :meth:`add_velocity` with their header stamps [s].
@@ -339,6 +338,18 @@ class VelocityAiding:
         return reason
 
     # -- per IMU sample ------------------------------------------------------------------------
+    def step_input(self, t_s: float, gyro_rad_s: Sequence[float], accel_m_s2: Sequence[float],
+                   dt_s: float, q_filter: Sequence[float], filter_state: Sequence[float]
+                   ) -> AidingInput:
+        """The filter's input at IMU stamp t_s [s] (``filter.update(..., aiding=)``):
+        :meth:`aided_accel` and what the aiding says with it; the realignment and heading
+        correction due are handed over once."""
+        accel = self.aided_accel(t_s, gyro_rad_s, accel_m_s2, dt_s, q_filter, filter_state)
+        return AidingInput(accel, self._moving, self.moving_now, self.started, self.first_start,
+                           self.take_realignment(), self._active, self.axes == "xy",
+                           self._swing_var, self.window_error_rad,
+                           self.take_heading_correction())
+
     def aided_accel(self, t_s: float, gyro_rad_s: Sequence[float], accel_m_s2: Sequence[float],
                     dt_s: float, q_filter: Sequence[float], filter_state: Sequence[float]
                     ) -> Sequence[float]:
@@ -347,7 +358,7 @@ class VelocityAiding:
         before), else ``accel_m_s2`` itself (same object). ``filter_state``: the filter's gyro
         bias estimate [rad/s] (sensor frame), optionally its variance [(rad/s)²] per axis
         (< 0: none yet) and the σ [rad] of its tilt from the gyro's drift, as
-        :func:`filter_estimates` gives them."""
+        :meth:`~cf_estimator.core.filter.ComplementaryFilter.aiding_estimates` gives them."""
         # queued samples the buffer covers, with P and q_filter both at the last IMU stamp
         bt = self._bt
         if self._pending and bt and self._pending[0][0] <= bt[-1]:
@@ -584,7 +595,7 @@ class VelocityAiding:
         The heading offset's uncertainty σ_δ turns that acceleration: the error it leaves,
         σ_δ·|a_h|, lies across a_h (along it, δ enters to second order only). Across a_h the
         measurement is weighed against the filter's tilt (σ_t·g, σ_t the tilt error its gyro's
-        drift leaves: :func:`filter_estimates`) as a Kalman gain would:
+        drift leaves: ``ComplementaryFilter.aiding_estimates``) as a Kalman gain would:
         w = σ_t²/(σ_t² + (σ_δ·|a_h|/g)²) of it is kept, the rest taken as the filter's (a level
         horizontal part: no correction). A known heading ('filter', σ_δ = 0), or none taken
         out, keeps it whole."""
@@ -727,7 +738,8 @@ class VelocityAiding:
         return self._window_error
 
     def note_attitude_error(self) -> None:
-        """Count one take-hold on an attitude error revealed while aided (apply_aiding)."""
+        """Count one take-hold on an attitude error revealed while aided
+        (:meth:`~cf_estimator.core.filter.ComplementaryFilter.apply_aiding` returned True)."""
         self._attitude_errors += 1
 
     @property
@@ -748,50 +760,3 @@ def with_compass(fit: HeadingOffset, sigma_rad: float, required_rad: float) -> H
         return HeadingOffset(fit.offset_rad * p2 / (p2 + f2), math.sqrt(p2 * f2 / (p2 + f2)),
                              True)
     return HeadingOffset(0.0, sigma_rad, sigma_rad < required_rad)
-
-
-def apply_aiding(f: Any, aiding: VelocityAiding) -> None:
-    """What the aiding tells the filter before its update (after
-    :meth:`VelocityAiding.aided_accel`): the vehicle moves (the start-up averages), take hold
-    when aiding began (and again when, aided, the disagreement is an attitude error), the
-    alignment's tilt and bias once it is known, whether the sample is aided, the heading
-    correction due. One place for the per-message pipeline and
-    :func:`~cf_estimator.core.batch.estimate`."""
-    if aiding.moving:
-        f.mark_moving()
-    if aiding.moving_now:
-        f.interrupt_rest()
-    if aiding.started:
-        f.take_hold(AIDING_TAKE_HOLD_S, reopen_bias=aiding.first_start)
-    realign = aiding.take_realignment()
-    if realign is not None:
-        f.realign(*realign)
-    if f.step_state.aided and not aiding.active:
-        # aiding ends (a dropout): what the filter measured of the swing while aided is what
-        # the aiding left; the unaided loop takes the vehicle's swing from the velocity
-        f.seed_swing(aiding.swing_var)
-    f.set_aided(aiding.active)
-    s = f.step_state
-    if (aiding.active and aiding.axes == "xy" and s.time_s > s.quick_until_s
-            and aiding.window_error_rad > BIAS_LEARNING_MAX_ERROR_RAD):
-        # aided, the window's gravity is off the filter's vertical by the tilt error itself
-        # (what the aiding leaves is hundredths of a rad): one beyond what a bias explains is
-        # an attitude error (a gyro fault): take hold, learning nothing from it
-        f.take_hold(AIDING_TAKE_HOLD_S)
-        aiding.note_attitude_error()
-    f.correct_heading(aiding.take_heading_correction())
-
-
-def filter_estimates(f: Any) -> tuple[float, float, float, float, float, float]:
-    """What the aiding reads of a ComplementaryFilter, cheaply: the regulator's integral (bias)
-    state b [rad/s] (sensor frame), its variance per axis [(rad/s)²] (< 0: none yet), the
-    σ [rad] of the tilt error the gyro's drift leaves in the aided loop: d/k1, d the drift
-    rate (:func:`~cf_estimator.core.bias.drift_rate`), k1 the configured gain (the aided
-    loop's); unbounded (inf) with k1 = 0, a loop that never corrects its tilt; and 1.0 while
-    the magnetometer references the heading (taken, the field not disturbed, no heading
-    recovery under way: :func:`with_compass`), else 0.0."""
-    s = f._state  # noqa: SLF001 - read-only access to the state fields
-    k1 = f._params.k1  # noqa: SLF001
-    sigma_t = drift_rate(s, FloatOps) / k1 if k1 > 0.0 else math.inf
-    compass = bool(s.heading_initialized) and not s.mag_disturbed and not s.mag_recovering
-    return (s.bx, s.by, s.bz, s.bias_var, sigma_t, 1.0 if compass else 0.0)

@@ -43,7 +43,7 @@ from cf_estimator.core.filter import ComplementaryFilter
 from cf_estimator.core.magcal import MagCorrection
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import MAG_DISABLED, MAG_REJECTED, MAG_USED
-from cf_estimator.core.velocity import VelocityAiding, apply_aiding, filter_estimates
+from cf_estimator.core.velocity import VelocityAiding
 from cf_estimator.pipeline import checks, frames
 from cf_estimator.pipeline.covariance import OrientationCovariance
 from cf_estimator.pipeline.diagnostics import (
@@ -364,7 +364,7 @@ class ImuPipeline:
     @property
     def event_counts(self) -> Mapping[str, int]:
         """Events by kind, cumulative: 'attitude_error', a take-hold on an attitude error
-        revealed while aided (core/velocity.py apply_aiding; counted by the aiding, which
+        revealed while aided (ComplementaryFilter.apply_aiding; counted by the aiding, which
         keeps its counters across resets)."""
         return {"attitude_error": self.event_total} if self._aiding is not None else {}
 
@@ -637,11 +637,14 @@ class ImuPipeline:
                 else:  # horizontal component too small to give a heading
                     self.tally.mag_rejected += 1
             return q, mag_used, mag_rejected
-        if self._aiding is not None:
-            accel = self._aiding.aided_accel(sample.t_ns * 1e-9, gyro, accel, dt,
-                                             f.orientation_tuple(), filter_estimates(f))
-            apply_aiding(f, self._aiding)
-        q = f.update(gyro, accel, dt, mag)
+        if self._aiding is None:
+            q = f.update(gyro, accel, dt, mag)
+        else:
+            q = f.update(gyro, accel, dt, mag, aiding=self._aiding.step_input(
+                sample.t_ns * 1e-9, gyro, accel, dt, f.orientation_tuple(),
+                f.aiding_estimates()))
+            if f.aiding_attitude_error:
+                self._aiding.note_attitude_error()
         s = f._state  # noqa: SLF001 - per-sample flags without building FilterStatus (20 us)
         if mag is not None:
             ms = s.mag_status
