@@ -504,9 +504,9 @@ class ComplementaryFilter:
         missing accelerometer/magnetometer sample is skipped for this step (gyro-only).
         Magnetometer units are free (only the direction and relative norm are used).
         ``aiding`` (an initialised filter): velocity aiding's input at this sample
-        (:meth:`apply_aiding` first; the step then takes its ``accel_m_s2`` instead of
-        ``accel_m_s2``); :attr:`aiding_attitude_error` says whether it took hold on an
-        attitude error.
+        (:meth:`apply_aiding` first; the step then takes ``aiding.accel_m_s2``, the aided
+        specific force, in place of the ``accel_m_s2`` argument); :attr:`aiding_attitude_error`
+        says whether it took hold on an attitude error.
         """
         if aiding is not None and self._initialized:
             self.aiding_attitude_error = self.apply_aiding(aiding)
