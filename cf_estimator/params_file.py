@@ -41,13 +41,26 @@ def all_specs() -> tuple[ParamSpec, ...]:
     return specs_of(FilterParams) + specs_of(PipelineParams)
 
 
-#: Parameters that are gone, with the value that meant "off" and why: a file that still sets
-#: one to that value loads (the line does nothing), any other value is refused with the reason.
+#: Parameters that are gone, with their old default (whose behaviour the filter keeps) and why:
+#: a file that still sets one to that value loads (the line is ignored, with a warning), any
+#: other value is refused with the reason.
 REMOVED_PARAMETERS: dict[str, tuple[Any, str]] = {
     "k3": (0.0, "the double integral of Ryzhkov's full-vector variant is not offered any more "
            "(docs/decisions/0011-full-vector-variant-removed.md)"),
     "mag_mode": ("yaw", "the magnetometer corrects the heading only; the full-vector channel "
                  "is not offered any more (docs/decisions/0011-full-vector-variant-removed.md)"),
+    "wide_saturation_limit_rad": (10.0, "outside the clip's condition there is no clip "
+                                  "(docs/decisions/0013-fewer-parameters.md)"),
+    "acceleration_hold_s": (1.0, "a linear acceleration is held for two stillness blocks, "
+                            "2 x rest_window_s (docs/decisions/0013-fewer-parameters.md)"),
+    "rest_time_s": (1.0, "two still blocks in a row are rest, 2 x rest_window_s "
+                    "(docs/decisions/0013-fewer-parameters.md)"),
+    "bias_limit_rad_s": (0.5, "the bias is bounded at 5 x bias_prior_sigma_rad_s "
+                         "(docs/decisions/0013-fewer-parameters.md)"),
+    "mag_norm_tolerance": (0.2, "mag_field_tolerance sets the norm's and the dip's tolerance "
+                           "(docs/decisions/0013-fewer-parameters.md)"),
+    "mag_dip_tolerance_rad": (0.17, "mag_field_tolerance sets the norm's and the dip's tolerance "
+                              "(docs/decisions/0013-fewer-parameters.md)"),
 }
 
 
@@ -60,7 +73,7 @@ def drop_removed(values: Mapping[str, Any]) -> dict[str, Any]:
             value = out.pop(name)
             if value != neutral:
                 raise ParameterError(f"{name}: removed, {why}; only {name}: {neutral!r} "
-                                     f"(which did nothing) is still accepted, got {value!r}")
+                                     f"(its old default) is still accepted, got {value!r}")
     return out
 
 
@@ -68,7 +81,7 @@ def build_params(values: Mapping[str, Any]) -> tuple[FilterParams, PipelineParam
     """Both parameter objects from a flat name → value mapping (defaults for missing names).
 
     Raises :class:`ParameterError` (one line, naming the parameter) on unknown names or invalid
-    values; removed parameters at their old "off" value are ignored (:func:`drop_removed`).
+    values; removed parameters at their old default are ignored (:func:`drop_removed`).
     """
     values = drop_removed(values)
     fnames = {s.name for s in specs_of(FilterParams)}

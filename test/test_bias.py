@@ -82,7 +82,7 @@ def test_vibration_keeps_a_still_recording_still(seed):
     quiet = estimate(gyro + bias, accel, rate_hz=rate, params=FilterParams(use_mag=False))
     shaken = estimate(gyro + bias + vib_g, accel + vib_a, rate_hz=rate,
                       params=FilterParams(use_mag=False))
-    settled = slice(int(3 * rate), None)  # first blocks + rest_time_s
+    settled = slice(int(3 * rate), None)  # first blocks + two still blocks
     assert quiet.at_rest[settled].all()
     assert shaken.at_rest[settled].mean() > 0.97
     assert np.allclose(shaken.gyro_bias_rad_s[-1], bias, atol=0.003)

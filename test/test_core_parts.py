@@ -315,8 +315,8 @@ def test_integral_learns_only_from_a_bias_sized_error_and_is_bounded():
     bias.integrate(s, p, (0.0, 0.1, 0.0), 1.8, 0.8, True, False, 0.01, FloatOps)  # too large
     assert (s.by, s.bias_var) == (by, var)
     s.bz = 7.0
-    bias.clamp(s, SimpleNamespace(bias_limit_rad_s=0.5), FloatOps)
-    assert s.bz == 0.5
+    bias.clamp(s, SimpleNamespace(bias_prior_sigma_rad_s=0.1), FloatOps)
+    assert s.bz == 0.5  # five standard deviations of the prior
 
 
 def test_the_learning_limit_is_widened_by_the_sample_scatter_only_unaided():

@@ -26,22 +26,21 @@ with the right reason, in ``counters`` and in ``diagnostics()``; the tilt (the w
 seen in the sensor frame) stays within 2 deg of the clean replay outside the faulted stretches.
 
 **Faulted stretches** (where the tilt comparison is skipped): the fault itself plus a settling
-window of ``SETTLE_S`` = 15 s after it (``SETTLE_RESET_S`` = 35 s after the 5 s gap, see
-below). Why 15 s: a fault that loses samples (drop, swap, NaN,
-gap) loses gyro information, so the faulted estimate deviates from the clean one during fast
-motion (the AR.Drone turns at up to 23 rad/s: one lost sample is up to ~25 deg). Nothing in the
-faulted run is then wrong, it just has less information; the deviation is removed by the
-accelerometer channel, i.e. as fast as the filter corrects any attitude error: within ~3 s at
-rest (rest detection after ``rest_time_s`` = 1.5 s, then the start-up gain), at the clipped rate
-``k1*saturation_limit_rad`` ~ 0.3 deg/s in motion until the ``recovery_trigger_s`` = 10 s
-recovery mode takes over: 10 s + a few seconds of convergence. The 5 s gap resets the filter
-(gap > ``reset_after_gap_s``) and re-initialises it from the single accelerometer sample after
-the gap, then runs the 2 s start-up phase (high gain, no clip): during a manoeuvre the estimate
-follows the linear accelerations, and the error left is removed at the clipped rate: measured up
-to 33 s on the AR.Drone (a gap at 54 s), hence 35 s. Faults are placed
-at fixed fractions of each bag (chosen before looking at the results, not tuned); measured
-settling times at other positions are in docs/failure_modes.md. Duplicates and the loop lose
-no information: their tilt must match the clean replay everywhere (duplicates: bit for bit).
+window of ``SETTLE_S`` = 15 s after it (``SETTLE_RESET_S`` = 35 s after the 5 s gap, see below). Why
+15 s: a fault that loses samples (drop, swap, NaN, gap) loses gyro information, so the faulted
+estimate deviates from the clean one during fast motion (the AR.Drone turns at up to 23 rad/s: one
+lost sample is up to ~25 deg). Nothing in the faulted run is then wrong, it just has less
+information; the deviation is removed by the accelerometer channel, i.e. as fast as the filter
+corrects any attitude error: within ~3 s at rest (rest detection after two still blocks, 1.5 s with
+the first, then the start-up gain), at the clipped rate ``k1*saturation_limit_rad`` ~ 0.3 deg/s in
+motion until the ``recovery_trigger_s`` = 10 s recovery mode takes over: 10 s + a few seconds of
+convergence. The 5 s gap resets the filter (gap > ``reset_after_gap_s``) and re-initialises it from
+the single accelerometer sample after the gap, then runs the 2 s start-up phase (high gain, no
+clip): during a manoeuvre the estimate follows the linear accelerations, and the error left is
+removed at the clipped rate: measured up to 33 s on the AR.Drone (a gap at 54 s), hence 35 s. Faults
+are placed at fixed fractions of each bag (chosen before looking at the results, not tuned);
+measured settling times at other positions are in docs/failure_modes.md. Duplicates and the loop
+lose no information: their tilt must match the clean replay everywhere (duplicates: bit for bit).
 """
 
 from __future__ import annotations

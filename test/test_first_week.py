@@ -245,20 +245,19 @@ def test_search_boxes_keep_the_safety_nets() -> None:
 
     boxes = {d.name: (d.lo, d.hi) for d in tuning.SEARCHABLE}
     assert boxes["recovery_trigger_s"][1] <= 30.0 and boxes["recovery_trigger_s"][0] > 0.0
-    assert boxes["wide_saturation_limit_rad"][0] >= 0.5
     assert boxes["k1"][0] >= 0.1
     with pytest.raises(ValueError, match="safety range"):
         tuning.with_bounds(tuning.DEFAULT_SPACE, {"recovery_trigger_s": (10.0, 400.0)})
 
 
 def test_tune_refuses_to_write_a_set_that_loses_on_validation(flight60, tmp_path, capsys):
-    """The simulated flight alone tunes to a slow loop (k1 0.14, T 1 s) that loses on real
+    """The simulated flight alone tunes to a slow loop (k1 0.13, T 8 s) that loses on real
     phantom4 recordings it never saw (and on one built-in case): refused."""
     phantom4 = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "phantom4"
     if not phantom4.is_dir():
         pytest.skip(f"{phantom4} not present")
     out = tmp_path / "tuned.yaml"
-    argv = ["tune", "--bag", str(flight60), "--candidates", "24", "--passes", "2",
+    argv = ["tune", "--bag", str(flight60), "--candidates", "48", "--passes", "2",
             "--validate", str(phantom4), "--out", str(out)]
     assert cli_main(argv) == 1
     cap = capsys.readouterr()
@@ -268,8 +267,7 @@ def test_tune_refuses_to_write_a_set_that_loses_on_validation(flight60, tmp_path
     assert last.startswith("cf-estimator: error: the tuned set is worse than the start point")
     assert "--force" in last and not out.exists()
     # every searched value inside the safety nets
-    for name, lo, hi in (("recovery_trigger_s", 5.0, 30.0), ("wide_saturation_limit_rad", 0.5,
-                                                                10.0), ("k1", 0.1, 5.0)):
+    for name, lo, hi in (("recovery_trigger_s", 5.0, 30.0), ("k1", 0.1, 5.0)):
         line = next(x for x in cap.out.splitlines() if x.strip().startswith(name + " "))
         assert lo <= float(line.split("->")[1]) <= hi, line
     # --force: written, with the warning in the file and on stderr

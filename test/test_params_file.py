@@ -230,3 +230,20 @@ def test_a_removed_parameter_at_its_old_off_value_loads_and_any_other_is_refused
     path.write_text("/**:\n  ros__parameters:\n    mag_mode: full\n", encoding="utf-8")
     with pytest.raises(ParameterError, match="mag_mode: removed"):
         load_params_file(path)
+
+
+def test_the_parameter_file_shipped_before_the_2026_12_removals_still_loads(tmp_path):
+    """The five parameters of docs/decisions/0013 at their old defaults (the lines of the old
+    shipped file) load with one warning each and change nothing; a tuned value is refused,
+    naming the record, instead of being silently dropped."""
+    old = {"wide_saturation_limit_rad": 10.0, "acceleration_hold_s": 1.0, "rest_time_s": 1.0,
+           "bias_limit_rad_s": 0.5, "mag_norm_tolerance": 0.2, "mag_dip_tolerance_rad": 0.17}
+    path = tmp_path / "old.yaml"
+    lines = "".join(f"    {k}: {v}\n" for k, v in old.items())
+    path.write_text(f"/**:\n  ros__parameters:\n    k1: 0.5\n{lines}", encoding="utf-8")
+    fp, _, warnings = load_params_file(path)
+    assert fp == dataclasses.replace(FilterParams(), k1=0.5)
+    assert len(warnings) == len(old) and all("0013" in w for w in warnings)
+    path.write_text("/**:\n  ros__parameters:\n    rest_time_s: 3.0\n", encoding="utf-8")
+    with pytest.raises(ParameterError, match="rest_time_s: removed.*0013"):
+        load_params_file(path)

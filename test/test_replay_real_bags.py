@@ -162,7 +162,7 @@ def _quasi_static_tilt_errors(data, topic: str) -> np.ndarray:
     Quasi-static: over a 3 s window the gyro varies by < 0.05 rad/s around its window mean (a
     constant bias is allowed), the accelerometer direction by < 1 deg and |a| is within 3 % of
     its median. 3 s, not 1 s: a filter that rejects linear accelerations must not trust the
-    accelerometer the moment motion stops; ours detects rest after rest_time_s = 1.5 s and then
+    accelerometer the moment motion stops; ours detects rest after 1.5 s (three blocks) and then
     converges in about a second (after the AR.Drone's 23 rad/s manoeuvres the error at that
     moment is ~5-90 deg). The filter is given 5 s to settle at the start.
     """

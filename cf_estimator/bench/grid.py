@@ -4,7 +4,7 @@ The shipped defaults were checked with it: a change is kept only if it helps on 
 (tuned on one half, it must also help on the other — it generalises), not only on all 18.
 
     python -m cf_estimator.bench.grid --data ../shared/data/broad \\
-        --set rest_time_s=1,2 --set rest_gyro_threshold_rad_s=0.005,0.01,0.02
+        --set rest_window_s=0.5,1 --set rest_gyro_threshold_rad_s=0.005,0.01,0.02
 
 Prints, per grid point (all combinations of the ``--set`` values applied to ``--params`` or the
 defaults), the mean inclination and 9-D total RMSE [deg] over all trials and over each half

@@ -83,37 +83,31 @@ SEARCHABLE: tuple[Dim, ...] = (
     # never 0 (= never recover), never long: recovering from a real attitude error (a bad
     # start, a hand-held launch) is a promise; 400 s left a real bag 112 deg off lying still
     Dim("recovery_trigger_s", 5.0, 30.0),
-    # clip selection: the tight clip (saturation_limit_rad) applies only while a linear
+    # clip selection: the clip (saturation_limit_rad) applies only while a linear
     # acceleration is detected and the low-passed rotation rate is below the threshold
-    # 10 rad = effectively no clip; a wide clip below ~0.5 rad turns every large error into a
-    # slow ramp (0.045 rad: a real bag 70 deg off in motion)
-    Dim("wide_saturation_limit_rad", 0.5, 10.0),
     Dim("rotation_threshold_rad_s", 0.03, 3.0),
     Dim("acceleration_threshold_m_s2", 0.05, 5.0),
-    Dim("acceleration_hold_s", 0.1, 10.0),
     # the error path's aperiodic unit: how much of each correction it also sees
     Dim("aperiodic_prefilter", 0.01, 1.0, zero_prob=0.2),
     # stillness detection (matters only with still phases) and in-motion bias learning
     Dim("rest_gyro_threshold_rad_s", 0.002, 0.1),
-    Dim("rest_time_s", 0.3, 10.0),
     Dim("rest_window_s", 0.1, 2.0),
     Dim("bias_learning_k2", 0.002, 0.5, zero_prob=0.2),
 )
 
-#: Searched by default: the loop gains, both clip levels and what selects between them, the
+#: Searched by default: the loop gains, the clip level and what selects it, the
 #: aperiodic unit, the magnetometer gains and the recovery trigger. The acceleration hold and
 #: the rest parameters can be chosen with ``space_from_names``.
 DEFAULT_SEARCH: tuple[str, ...] = (
     "k1", "k2", "saturation_limit_rad", "aperiodic_time_constant_s", "aperiodic_prefilter",
-    "r1", "r2", "recovery_trigger_s", "wide_saturation_limit_rad", "rotation_threshold_rad_s",
-    "acceleration_threshold_m_s2",
+    "r1", "r2", "recovery_trigger_s", "rotation_threshold_rad_s", "acceleration_threshold_m_s2",
 )
 
 
 #: The safety nets: a searched box may never leave these ranges (``--bounds`` included).
 SAFETY_RANGES: dict[str, tuple[float, float]] = {
     d.name: (d.lo, d.hi) for d in SEARCHABLE
-    if d.name in ("k1", "recovery_trigger_s", "wide_saturation_limit_rad")
+    if d.name in ("k1", "recovery_trigger_s")
 }
 
 #: Parameters of the magnetometer channel: invisible to the ``inclination`` objective.
@@ -165,16 +159,11 @@ def with_bounds(space: Sequence[Dim], bounds: Mapping[str, tuple[float, float]])
 
 def make_params(base: FilterParams, values: Mapping[str, float]) -> FilterParams | None:
     """``base`` with ``values``; None when the combination is invalid for the filter (e.g.
-    unstable T·k2 ≥ k1) or pointless for the search: a wide clip level below the tight one
-    (``wide_saturation_limit_rad`` < ``saturation_limit_rad`` inverts the clip selection)."""
+    unstable T·k2 ≥ k1)."""
     try:
-        p = dataclasses.replace(base, **dict(values))
+        return dataclasses.replace(base, **dict(values))
     except (ParameterError, ValueError):
         return None
-    if p.wide_saturation_limit_rad < p.saturation_limit_rad and (
-            "wide_saturation_limit_rad" in values or "saturation_limit_rad" in values):
-        return None
-    return p
 
 
 # -- scoring -----------------------------------------------------------------------------------

@@ -172,7 +172,7 @@ def heading_warning(s: dict[str, Any]) -> str | None:
     return (f"heading was mostly unreferenced: the magnetometer corrected it with only {used} "
             f"of {received} samples ({100.0 * used / received:.0f} %; rejected "
             f"{c.get('mag_rejected', 0)}, stale {c.get('mag_stale', 0)}); in between yaw "
-            "follows the gyro (see mag_rejection, mag_norm_tolerance, mag_dip_tolerance_rad)")
+            "follows the gyro (see mag_rejection, mag_field_tolerance)")
 
 
 def autopilot_line(ref: dict[str, Any]) -> str:

@@ -20,7 +20,7 @@ The estimate b (sensor frame, rad/s) is the PI regulator's integral state; its v
   step.learning_input: the bias direction the aperiodic unit's state shows), except
   from an error too large to be a bias (:func:`learning_limit_rad`, anti-windup, no narrower
   than the samples' own scatter); the variance shrinks as it learns (time constant k1/k2);
-- :func:`clamp` — bounded by ``bias_limit_rad_s``.
+- :func:`clamp` — bounded by BIAS_LIMIT_SIGMAS × ``bias_prior_sigma_rad_s``.
 
 Owns the ``BIAS`` fields of :mod:`cf_estimator.core.state`. Written
 once for floats and arrays; ``c/cf_core.c`` repeats it inline in ``cf_step``/``stillness``.
@@ -32,7 +32,7 @@ from typing import Any
 
 from cf_estimator.core.ops import TINY, sq
 from cf_estimator.core.state import StepState
-from cf_estimator.core.stillness import RestMeasurement
+from cf_estimator.core.stillness import BIAS_LIMIT_SIGMAS, RestMeasurement
 
 #: The integral (bias) learns only while the raw error is below this [rad]: a bias within the
 #: prior leaves an error of at most a few REST_GATE_SIGMAS·bias_prior_sigma_rad_s / k1 (< 0.2
@@ -208,8 +208,8 @@ def integrate(s: StepState, p: Any, f: tuple, k1: Any, k2: Any, learn: Any, smal
 
 
 def clamp(s: StepState, p: Any, o: Any) -> None:
-    """Each component within ±``bias_limit_rad_s`` (anti-windup)."""
-    lim = p.bias_limit_rad_s
+    """Each component within ±BIAS_LIMIT_SIGMAS × ``bias_prior_sigma_rad_s`` (anti-windup)."""
+    lim = BIAS_LIMIT_SIGMAS * p.bias_prior_sigma_rad_s
     s.bx = o.minimum(o.maximum(s.bx, -lim), lim)
     s.by = o.minimum(o.maximum(s.by, -lim), lim)
     s.bz = o.minimum(o.maximum(s.bz, -lim), lim)

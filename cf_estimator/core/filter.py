@@ -122,7 +122,7 @@ class FilterStatus:
     gyro_bias_rad_s: tuple[float, float, float]  #: bias estimate, sensor frame
     gyro_bias_sigma_rad_s: float  #: σ of the bias estimate's error [rad/s] (bias.error_sigma)
     gyro_bias_converged: bool  #: sigma below BIAS_CONVERGED_SIGMA_RAD_S
-    at_rest: bool  #: still (block statistics) for rest_time_s: the bias is learned from the gyro
+    at_rest: bool  #: still (block statistics) for two blocks: the bias is learned from the gyro
     accel_used: bool
     mag_status: str  #: none | used | rejected | disabled
     heading_initialized: bool
@@ -397,7 +397,7 @@ class ComplementaryFilter:
     def set_aided(self, aided: bool) -> None:
         """Say whether the next update's accelerometer sample is velocity-aided (the vehicle's
         acceleration taken out): the aperiodic unit then only averages vibration
-        (AIDED_LAG_TIME_CONSTANT_S instead of aperiodic_time_constant_s)."""
+        (QUICK_LAG_TIME_CONSTANT_S instead of aperiodic_time_constant_s)."""
         for s in self._hypotheses():
             s.aided = bool(aided)
 
@@ -422,7 +422,7 @@ class ComplementaryFilter:
         blocks say, it is not at rest — its gyro mean is no bias measurement (a multirotor
         slowing down in the air turns smoothly enough to pass the blocks' tests, and its
         accelerometer reads the thrust axis however it tilts). The run of still blocks starts
-        again (``rest_time_s`` of them after the vehicle stops)."""
+        again (two still blocks after the vehicle stops)."""
         for s in self._hypotheses():
             s.rest_timer_s = 0.0
 

@@ -45,7 +45,10 @@ class FilterParams:
     use_saturation: bool = param(
         True,
         "",
-        "Clip the error vector by norm before the aperiodic unit and the regulator.",
+        "Clip the error vector by norm before the aperiodic unit and the regulator, while a "
+        "linear acceleration is present and the gyro is still (impacts, vibration, manoeuvres); "
+        "never while rotating faster than rotation_threshold_rad_s or unaccelerated: a real "
+        "attitude error (a gyro's scale error after a fast turn) is then corrected in full.",
         group="error path",
     )
     saturation_limit_rad: float = param(
@@ -59,22 +62,10 @@ class FilterParams:
         minimum_exclusive=True,
         group="error path",
     )
-    wide_saturation_limit_rad: float = param(
-        10.0,
-        "rad",
-        "Saturation level when no linear acceleration is detected or the sensor rotates faster "
-        "than rotation_threshold_rad_s (hand-held, agile motion: real attitude errors from gyro "
-        "scale errors must be tracked, and a clip would rectify large zero-mean accelerations). "
-        "10 = effectively no clip; equal to saturation_limit_rad = one level always.",
-        minimum=0.0,
-        maximum=100.0,
-        minimum_exclusive=True,
-        group="error path",
-    )
     rotation_threshold_rad_s: float = param(
         0.2,
         "rad/s",
-        "Above this low-passed rotation rate the wide saturation level applies.",
+        "Above this low-passed rotation rate the error is not clipped.",
         minimum=0.0,
         maximum=100.0,
         group="error path",
@@ -87,16 +78,6 @@ class FilterParams:
         "path is quick only while the block mean's |a| is within this of g_ref.",
         minimum=0.0,
         maximum=100.0,
-        minimum_exclusive=True,
-        group="error path",
-    )
-    acceleration_hold_s: float = param(
-        1.0,
-        "s",
-        "Decay time of the acceleration detector's peak hold: vibration, repeated impacts and "
-        "their quiet phases all count as acceleration present.",
-        minimum=0.0,
-        maximum=60.0,
         minimum_exclusive=True,
         group="error path",
     )
@@ -190,19 +171,12 @@ class FilterParams:
         "learned at start-up (magnetic disturbances).",
         group="magnetometer",
     )
-    mag_norm_tolerance: float = param(
-        0.2,
-        "1",
-        "Relative norm deviation above which a magnetometer sample is a disturbance.",
-        minimum=0.0,
-        maximum=10.0,
-        minimum_exclusive=True,
-        group="magnetometer",
-    )
-    mag_dip_tolerance_rad: float = param(
+    mag_field_tolerance: float = param(
         0.17,
-        "rad",
-        "Dip-angle deviation above which a magnetometer sample is a disturbance.",
+        "1",
+        "Share of the reference field a disturbance may add before a magnetometer sample is "
+        "rejected: its norm may depart by this fraction, its dip angle by this many rad (a "
+        "disturbance of relative size d moves either by at most about d).",
         minimum=0.0,
         maximum=3.2,
         minimum_exclusive=True,
@@ -219,7 +193,9 @@ class FilterParams:
         0.5,
         "s",
         "Stillness detection: block length. Each block's gyro and accelerometer means are "
-        "compared with the previous block's.",
+        "compared with the previous block's; two still blocks in a row are rest (each further "
+        "one measures the bias), and a linear acceleration counts as present for two blocks "
+        "after it was last seen.",
         minimum=0.0,
         maximum=60.0,
         minimum_exclusive=True,
@@ -246,21 +222,12 @@ class FilterParams:
         minimum_exclusive=True,
         group="bias",
     )
-    rest_time_s: float = param(
-        1.0,
-        "s",
-        "Stillness detection: still blocks must follow each other this long before the sensor "
-        "counts as at rest (and each further still block measures the bias).",
-        minimum=0.0,
-        maximum=600.0,
-        minimum_exclusive=True,
-        group="bias",
-    )
     bias_prior_sigma_rad_s: float = param(
         0.1,
         "rad/s",
         "Prior standard deviation of the gyro bias (uncalibrated MEMS gyros: several deg/s). "
-        "It weighs the first still blocks against the initial estimate 0.",
+        "It weighs the first still blocks against the initial estimate 0; the estimate is "
+        "bounded at 5 times it on each axis (anti-windup).",
         minimum=0.0,
         maximum=10.0,
         minimum_exclusive=True,
@@ -274,15 +241,6 @@ class FilterParams:
         "so a large bias is learned in flight within about 20 s, from any start (0 = off).",
         minimum=0.0,
         maximum=10.0,
-        group="bias",
-    )
-    bias_limit_rad_s: float = param(
-        0.5,
-        "rad/s",
-        "Bound on each component of the gyro-bias estimate (anti-windup).",
-        minimum=0.0,
-        maximum=10.0,
-        minimum_exclusive=True,
         group="bias",
     )
     world_frame: str = param(

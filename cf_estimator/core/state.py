@@ -71,7 +71,7 @@ LOOP: tuple[Field, ...] = (
 
 CLASSIFIER: tuple[Field, ...] = (
     _f("rest_timer_s", "s", "duration of the current run of still blocks"),
-    _f("at_rest", "", "still for rest_time_s: the bias is measured from the gyro", "bool"),
+    _f("at_rest", "", "still for two blocks: the bias is measured from the gyro", "bool"),
     _f("moved", "", "a non-still block was seen since initialisation", "bool"),
     _f("blk_n", "1", "samples in the current block"),
     _f("blk_t", "s", "duration of the current block"),

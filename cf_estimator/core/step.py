@@ -10,7 +10,7 @@ stage is a function of its name here and a static function of the same name in c
                   (≈ small-angle tilt error; linear in the linear acceleration)
     3. saturate() e_s = e·min(1, L/|e|)                     (by norm, keeps the direction)
                   L = saturation_limit_rad while a linear acceleration is present and the gyro
-                  is still (impacts, vibration, manoeuvres), else wide_saturation_limit_rad
+                  is still (impacts, vibration, manoeuvres); else no clip
     4. aperiodic() l ← l + dt/(T+dt)·(R⁻·e_s − l);  f = R⁻ᵀ·l  (1/(T s+1) in the world frame)
     5. regulate() b ← b − dt·k2'·f;  q ← q⁻ ⊗ Exp(g(k1')·f)
                   (W1 = k1 + k2/s; g(k) = k·dt/(1+k·dt), the backward-Euler gain;
@@ -36,8 +36,8 @@ here the compensation loop (steps 1-5) and the heading channel (step 6).
 Stillness and bias (``stillness.classify``, ``bias.*``): on blocks of rest_window_s, a block
 whose gyro and accelerometer means did not change from the previous block (beyond the thresholds
 plus the noise measured from sample-to-sample differences: vibration-robust; a constant bias
-cancels) is still; rest_time_s of still blocks is rest. At rest each still block's gyro mean is
-a bias measurement, fused by variance (scalar Kalman update; σ_b = √bias_var starts at
+cancels) is still; REST_STILL_BLOCKS still blocks in a row are rest. At rest each still block's
+gyro mean is a bias measurement, fused by variance (scalar Kalman update; σ_b = √bias_var starts at
 bias_prior_sigma_rad_s, grows by a random walk, shrinks with each measurement and, in motion,
 with the integral's learning). Vibration widens the thresholds by at most REST_NOISE_CAP times
 themselves; a turning magnetic field is motion; a steady block far from the bias estimate (on
@@ -59,6 +59,7 @@ fast). While bypassed the unit follows the error with a 0.2 s lag, turned by eac
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from cf_estimator.core import bias
@@ -74,12 +75,14 @@ from cf_estimator.core.bias import (  # noqa: F401 - the constants of the whole 
 from cf_estimator.core.ops import TINY, rotation_elements, sq
 from cf_estimator.core.state import StepState
 from cf_estimator.core.stillness import (  # noqa: F401
+    BIAS_LIMIT_SIGMAS,
     GRAVITY_TIME_CONSTANT_S,
     REST_GATE_SIGMAS,
     REST_MAG_TOLERANCE_RAD,
     REST_NOISE_CAP,
     REST_NOISE_SIGMAS,
     REST_SAMPLE_SIGMAS,
+    REST_STILL_BLOCKS,
     classify,
 )
 
@@ -110,11 +113,10 @@ ACCEL_SPIKE_SIGMAS = 4.0
 #: The low-passed | |a| − ‖g‖ | must exceed acceleration_threshold_m_s2 by this many standard
 #: deviations of what vibration leaves in the low-pass: rotor vibration is not a manoeuvre.
 ACCEL_DETECT_SIGMAS = 3.0
-#: Time constant [s] of the aperiodic unit while the error bypasses it (start-up, rest, recovery).
+#: Time constant [s] of the aperiodic unit when there is no manoeuvre for it to average out:
+#: while the error bypasses it (start-up, rest, recovery) and while the specific force is
+#: velocity-aided (the vehicle's acceleration taken out: what is left is vibration).
 QUICK_LAG_TIME_CONSTANT_S = 0.2
-#: Time constant [s] of the aperiodic unit while the specific force is velocity-aided (the
-#: vehicle's acceleration taken out: what is left to average is vibration, not manoeuvres).
-AIDED_LAG_TIME_CONSTANT_S = 0.2
 #: The aperiodic unit sits inside the PI loop: its time constant is at most this over the loop's
 #: k1 [1/s]. T·k1 = 3/4 puts the roots of T·s³ + s² + k1·s + k1²/4 (the critically damped loop
 #: of a raised k2 = k1²/4, with the unit) at k1·(−1/2 ± j·√3/2) and −k1/3: a damping ratio of
@@ -326,7 +328,8 @@ def classify_motion(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple 
                            s.acz + aw * (az - s.acz))
     an_lp = o.sqrt(s.acx * s.acx + s.acy * s.acy + s.acz * s.acz)
     level = o.where(spike, deviation, o.maximum(an_lp - s.g_ref, s.g_ref - an_lp))
-    decayed = s.accel_hold * (p.acceleration_hold_s / (p.acceleration_hold_s + dt))
+    hold = REST_STILL_BLOCKS * p.rest_window_s  # quiet again when it could be at rest
+    decayed = s.accel_hold * (hold / (hold + dt))
     s.accel_hold = o.maximum(level, decayed)
     # vibration left in the low-pass (white-noise approximation of the 1st-order low-pass,
     # per axis, from the stillness blocks' noise): not a manoeuvre
@@ -367,10 +370,12 @@ def saturate(s: StepState, p: Any, en: Any, quick: Any, accelerating: Any,
              o: Any) -> tuple[Any, Any, Any, Any]:
     """Stage 3: saturation by norm → (scale of e, clip level L [rad], tight, clipped).
 
-    The tight clip only for a linear acceleration on a still gyro (impacts, vibration,
-    manoeuvres); never while quick."""
+    The clip (L = saturation_limit_rad) only for a linear acceleration on a still gyro
+    (impacts, vibration, manoeuvres: the thesis's disturbances); never while quick, and never
+    while rotating or unaccelerated (L = ∞): a real attitude error, e.g. what a gyro's scale
+    error leaves after a fast turn, is then corrected at the loop's full rate."""
     tight = accelerating & (s.rate_lp < p.rotation_threshold_rad_s)
-    limit = o.where(tight, p.saturation_limit_rad, p.wide_saturation_limit_rad)
+    limit = o.where(tight, p.saturation_limit_rad, math.inf)  # no clip: L = ∞
     clipped = p.use_saturation & o.not_(quick) & (en > limit)
     scale = o.where(clipped, limit / o.maximum(en, TINY), 1.0)
     return scale, limit, tight, clipped
@@ -385,7 +390,7 @@ def aperiodic(s: StepState, p: Any, scale: Any, quick: Any, tight: Any, dt: Any,
     ex, ey, ez = s.ex * scale, s.ey * scale, s.ez * scale
     wx, wy, wz = _rotate(s.qw, s.qx, s.qy, s.qz, ex, ey, ez)
     # aided (velocity aiding took the vehicle's acceleration out): nothing slow to average
-    lag = o.where(s.aided, AIDED_LAG_TIME_CONSTANT_S, p.aperiodic_time_constant_s)
+    lag = o.where(s.aided, QUICK_LAG_TIME_CONSTANT_S, p.aperiodic_time_constant_s)
     # never slower than the linear loop it sits in (LOOP_LAG_FRACTION; k1 as raised for
     # learning); under the tight clip the loop is saturated and the thesis's unit is kept
     k1, _ = bias.learning_gains(s, p, o)
@@ -544,7 +549,7 @@ def heading(s: StepState, p: Any, mag: tuple, fast: Any, learn: Any, o: Any) -> 
     tol = MAG_TURN_TOLERANCE_RAD + MAG_TURN_FRACTION * MAG_TURN_TIME_CONSTANT_S * s.rate_lp
     drift = MAG_DRIFT_SIGMAS * o.sqrt(o.maximum(s.bias_var, 0.0)) * age
     turned = o.sqrt(sq(mmx - s.mvx) + sq(mmy - s.mvy) + sq(mmz - s.mvz)) > tol + drift
-    off = (off_norm > p.mag_norm_tolerance) | (off_dip > p.mag_dip_tolerance_rad) | turned
+    off = (off_norm > p.mag_field_tolerance) | (off_dip > p.mag_field_tolerance) | turned
     # latched: after the field turned, used again only once it agrees for MAG_SETTLE_S
     # unbroken (a single sample off in norm or dip is noise: rejected alone)
     s.mag_ok_timer_s = o.where(learning, MAG_SETTLE_S,

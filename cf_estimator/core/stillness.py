@@ -36,12 +36,20 @@ REST_SAMPLE_SIGMAS = 8.0
 #: long it lasts: biases drift (BIAS_RANDOM_WALK_RAD_S_SQRT_S), they do not jump. At power-on
 #: the prior bias_prior_sigma_rad_s bounds what a still phase may take as bias.
 REST_GATE_SIGMAS = 3.0
+#: Still blocks in a row that make rest (rest_window_s each): one still block can be a pause in
+#: a swing, two in a row are rest. The acceleration detector holds a linear acceleration as
+#: present for as long (classify_motion): a sensor is quiet again when it could be at rest.
+REST_STILL_BLOCKS = 2.0
+#: A gyro bias beyond this many standard deviations of its prior (bias_prior_sigma_rad_s) on any
+#: axis is not a bias (the prior's tail, p < 1e-6): the estimate is bounded there (anti-windup,
+#: bias.clamp) and a block whose mean is beyond it on every axis is a turn, not rest.
+BIAS_LIMIT_SIGMAS = 5.0
 #: Time constant [s] with which ‖g‖ follows |a| while the sensor is steady: slow enough that a
 #: steady linear acceleration of a few seconds (the thesis's 25 m/s in 5 s) is not absorbed.
 GRAVITY_TIME_CONSTANT_S = 10.0
 #: Smallest variance [(rad/s)²] of a block's gyro mean as a bias measurement (a noiseless gyro).
 REST_MIN_VARIANCE = 1e-12
-#: √3: the norm of a gyro mean with every component at bias_limit_rad_s (a block whose mean is
+#: √3: the norm of a gyro mean with every component at the bias limit (a block whose mean is
 #: beyond it cannot be a bias).
 SQRT3 = 1.7320508075688772
 
@@ -68,9 +76,9 @@ def classify(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple | None,
     difference. The noise (sensor noise and rotor vibration) is measured in each block from
     sample-to-sample differences, which slow motion hardly changes: vibration averages out in a
     block mean and widens the tolerance by what it adds to it; a constant gyro bias cancels in
-    the difference. After ``rest_time_s`` of still blocks the sensor is at rest: each further
-    still block is a measurement of the bias (returned: its gyro mean, variance from its noise,
-    for :func:`cf_estimator.core.bias.fuse_rest`), and ‖g‖ follows |a| slowly.
+    the difference. After REST_STILL_BLOCKS still blocks in a row the sensor is at rest: each
+    further still block is a measurement of the bias (returned: its gyro mean, variance from its
+    noise, for :func:`cf_estimator.core.bias.fuse_rest`), and ‖g‖ follows |a| slowly.
     The noise widens the thresholds by at most REST_NOISE_CAP times themselves; with a
     magnetometer a turning field direction is motion (REST_MAG_TOLERANCE_RAD); a block far
     from the bias estimate (REST_GATE_SIGMAS, per axis) is a steady turn, never rest. ``gyro``
@@ -144,7 +152,8 @@ def classify(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple | None,
         & (dg < tol_g)
         & (da < tol_a)
         & o.not_(turned)
-        & (o.sqrt(mgx * mgx + mgy * mgy + mgz * mgz) < p.bias_limit_rad_s * SQRT3)
+        & (o.sqrt(mgx * mgx + mgy * mgy + mgz * mgz)
+           < BIAS_LIMIT_SIGMAS * p.bias_prior_sigma_rad_s * SQRT3)
     )
     # a steady turn at a constant rate looks still; a block whose gyro mean is far from the bias
     # estimate on any axis (beyond REST_GATE_SIGMAS of the estimate's and the block's spread) is
@@ -157,7 +166,7 @@ def classify(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple | None,
     still = steady & consistent
     s.moved = s.moved | (done & has_prev & o.not_(still))
     s.rest_timer_s = o.where(done, o.where(still, s.rest_timer_s + s.blk_t, 0.0), s.rest_timer_s)
-    s.at_rest = p.rest_bias_learning & (s.rest_timer_s >= p.rest_time_s)
+    s.at_rest = p.rest_bias_learning & (s.rest_timer_s >= REST_STILL_BLOCKS * p.rest_window_s)
     # a still block at rest measures the bias (the bias estimator fuses it, after this)
     measure = done & s.at_rest
     gw = o.where(done & still, s.blk_t / (GRAVITY_TIME_CONSTANT_S + s.blk_t), 0.0)

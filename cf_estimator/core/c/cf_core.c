@@ -21,9 +21,10 @@
 #define ACCEL_LOWPASS_TIME_CONSTANT_S 0.05
 #define ACCEL_SPIKE_SIGMAS 4.0
 #define QUICK_LAG_TIME_CONSTANT_S 0.2
-#define AIDED_LAG_TIME_CONSTANT_S 0.2
 #define REST_SAMPLE_SIGMAS 8.0
 #define REST_GATE_SIGMAS 3.0
+#define REST_STILL_BLOCKS 2.0
+#define BIAS_LIMIT_SIGMAS 5.0
 #define REST_NOISE_CAP 1.0
 #define BIAS_LEARNING_MAX_ERROR_RAD 0.35
 #define BIAS_LEARNING_NOISE_SIGMAS 3.0
@@ -59,13 +60,13 @@
 #define DF(n) {#n, offsetof(cf_params, n), 0}
 #define BF(n) {#n, offsetof(cf_params, n), 1}
 const cf_param_field cf_param_fields[] = {
-    DF(k1), DF(k2), DF(saturation_limit_rad), DF(wide_saturation_limit_rad),
-    DF(rotation_threshold_rad_s), DF(acceleration_threshold_m_s2), DF(acceleration_hold_s),
+    DF(k1), DF(k2), DF(saturation_limit_rad),
+    DF(rotation_threshold_rad_s), DF(acceleration_threshold_m_s2),
     DF(aperiodic_time_constant_s), DF(startup_duration_s), DF(startup_k1),
     DF(recovery_trigger_s), DF(r1), DF(r2), DF(mag_saturation_limit_rad),
-    DF(mag_norm_tolerance), DF(mag_dip_tolerance_rad), DF(rest_gyro_threshold_rad_s),
-    DF(rest_accel_threshold_m_s2), DF(rest_time_s), DF(rest_window_s),
-    DF(bias_prior_sigma_rad_s), DF(bias_learning_k2), DF(bias_limit_rad_s), DF(gravity_m_s2),
+    DF(mag_field_tolerance), DF(rest_gyro_threshold_rad_s),
+    DF(rest_accel_threshold_m_s2), DF(rest_window_s),
+    DF(bias_prior_sigma_rad_s), DF(bias_learning_k2), DF(gravity_m_s2),
     DF(prefilter), BF(use_saturation), BF(use_mag),
     BF(mag_rejection), BF(rest_bias_learning), {NULL, 0, 0}};
 #undef DF
@@ -78,10 +79,8 @@ void cf_params_default(cf_params *p)
     p->k1 = 0.35;
     p->k2 = 0.005;
     p->saturation_limit_rad = 0.01;
-    p->wide_saturation_limit_rad = 10.0;
     p->rotation_threshold_rad_s = 0.2;
     p->acceleration_threshold_m_s2 = 0.5;
-    p->acceleration_hold_s = 1.0;
     p->aperiodic_time_constant_s = 2.0;
     p->startup_duration_s = 2.0;
     p->startup_k1 = 5.0;
@@ -89,15 +88,12 @@ void cf_params_default(cf_params *p)
     p->r1 = 0.07;
     p->r2 = 0.0;
     p->mag_saturation_limit_rad = 0.2;
-    p->mag_norm_tolerance = 0.2;
-    p->mag_dip_tolerance_rad = 0.17;
+    p->mag_field_tolerance = 0.17;
     p->rest_gyro_threshold_rad_s = 0.01;
     p->rest_accel_threshold_m_s2 = 0.2;
-    p->rest_time_s = 1.0;
     p->rest_window_s = 0.5;
     p->bias_prior_sigma_rad_s = 0.1;
     p->bias_learning_k2 = 0.8;
-    p->bias_limit_rad_s = 0.5;
     p->gravity_m_s2 = 9.80665;
     p->prefilter = 0.5;
     p->use_saturation = 1;
@@ -112,7 +108,8 @@ void cf_params_default(cf_params *p)
 const cf_constant cf_constants[] = {
     C(ACCEL_LOWPASS_TIME_CONSTANT_S), C(ACCEL_SPIKE_SIGMAS), C(REST_GATE_SIGMAS),
     C(REST_NOISE_CAP), C(BIAS_LEARNING_MAX_ERROR_RAD), C(REST_MAG_TOLERANCE_RAD),
-    C(ACCEL_DETECT_SIGMAS), C(QUICK_LAG_TIME_CONSTANT_S), C(AIDED_LAG_TIME_CONSTANT_S),
+    C(ACCEL_DETECT_SIGMAS), C(REST_STILL_BLOCKS), C(BIAS_LIMIT_SIGMAS),
+    C(QUICK_LAG_TIME_CONSTANT_S),
     C(RATE_LOWPASS_TIME_CONSTANT_S), C(REST_NOISE_SIGMAS), C(REST_SAMPLE_SIGMAS),
     C(BIAS_RANDOM_WALK_RAD_S_SQRT_S), C(GRAVITY_TIME_CONSTANT_S), N(MAG_REFERENCE_SAMPLES),
     C(MAG_RELEARN_AFTER_S), C(MAG_MAX_DT_S), C(MAG_SMOOTH_TIME_CONSTANT_S), C(MAG_SETTLE_S),
@@ -285,7 +282,7 @@ static void heading(cf_state *s, const cf_params *p, const double *mag, int fast
     double drift = MAG_DRIFT_SIGMAS * sqrt(maxd(s->bias_var, 0.0)) * age;
     int turned =
         sqrt(sq(mmx - s->mvx) + sq(mmy - s->mvy) + sq(mmz - s->mvz)) > tol + drift;
-    int off = (off_norm > p->mag_norm_tolerance) || (off_dip > p->mag_dip_tolerance_rad) || turned;
+    int off = (off_norm > p->mag_field_tolerance) || (off_dip > p->mag_field_tolerance) || turned;
     s->mag_ok_timer_s = learning ? MAG_SETTLE_S : (turned ? 0.0 : s->mag_ok_timer_s + dt_s);
     int disturbed = p->mag_rejection && !learning && (off || (s->mag_ok_timer_s < MAG_SETTLE_S));
     s->mag_disturbed = (char)disturbed;
@@ -391,7 +388,7 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
     if (has_prev && (jump_g || jump_a)) s->rest_timer_s = 0.0;
 
     if (!(s->blk_t >= p->rest_window_s)) { /* block not complete: only the rest flag */
-        s->at_rest = (char)(p->rest_bias_learning && (s->rest_timer_s >= p->rest_time_s));
+        s->at_rest = (char)(p->rest_bias_learning && (s->rest_timer_s >= REST_STILL_BLOCKS * p->rest_window_s));
         return; /* step.py runs the block-end lines below with weight 0: same values */
     }
     double n = s->blk_n;
@@ -422,7 +419,7 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
     int turned = mag_seen && (dm > tol_m);
     int steady = has_prev && (dg < tol_g) && (da < tol_a) && !turned &&
                  (sqrt(mgx * mgx + mgy * mgy + mgz * mgz) <
-                  p->bias_limit_rad_s * SQRT3);
+                  BIAS_LIMIT_SIGMAS * p->bias_prior_sigma_rad_s * SQRT3);
     double r = maxd(noise_g2 / (3.0 * n), REST_MIN_VARIANCE);
     double gate = p->rest_gyro_threshold_rad_s + REST_GATE_SIGMAS * sqrt(s->bias_var + r);
     int consistent = (maxd(mgx - s->bx, s->bx - mgx) < gate) &&
@@ -431,7 +428,7 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
     int still = steady && consistent;
     s->moved = (char)(s->moved || (has_prev && !still));
     s->rest_timer_s = still ? s->rest_timer_s + s->blk_t : 0.0;
-    s->at_rest = (char)(p->rest_bias_learning && (s->rest_timer_s >= p->rest_time_s));
+    s->at_rest = (char)(p->rest_bias_learning && (s->rest_timer_s >= REST_STILL_BLOCKS * p->rest_window_s));
     if (s->at_rest) s->bias_unverified = (char)(!s->moved && !mag_seen);
     if (s->at_rest) { /* a still block at rest measures the bias */
         double k = s->bias_var / (s->bias_var + r);
@@ -519,7 +516,8 @@ static int classify_motion(cf_state *s, const cf_params *p, const double *g, con
     s->acz = acz;
     double an_lp = sqrt(s->acx * s->acx + s->acy * s->acy + s->acz * s->acz);
     double level = spike ? deviation : maxd(an_lp - s->g_ref, s->g_ref - an_lp);
-    double decayed = s->accel_hold * (p->acceleration_hold_s / (p->acceleration_hold_s + dt));
+    double hold = REST_STILL_BLOCKS * p->rest_window_s; /* quiet again when it could be at rest */
+    double decayed = s->accel_hold * (hold / (hold + dt));
     s->accel_hold = maxd(level, decayed);
     double lp_sigma = sqrt(s->noise_a2 / 3.0 * dt / (2.0 * ACCEL_LOWPASS_TIME_CONSTANT_S + dt));
     *accelerating =
@@ -561,7 +559,7 @@ static double saturate(const cf_state *s, const cf_params *p, double en, int qui
                        int accelerating, double *limit, int *tight, int *clipped)
 {
     *tight = accelerating && (s->rate_lp < p->rotation_threshold_rad_s);
-    *limit = *tight ? p->saturation_limit_rad : p->wide_saturation_limit_rad;
+    *limit = *tight ? p->saturation_limit_rad : INFINITY; /* no clip: L = inf */
     *clipped = p->use_saturation && !quick && (en > *limit);
     return *clipped ? *limit / maxd(en, TINY) : 1.0;
 }
@@ -641,7 +639,7 @@ static void aperiodic(cf_state *s, const cf_params *p, double scale, int quick, 
 {
     double w[3], k1, k2;
     rotate(s->qw, s->qx, s->qy, s->qz, s->ex * scale, s->ey * scale, s->ez * scale, w);
-    double lag = s->aided ? AIDED_LAG_TIME_CONSTANT_S : p->aperiodic_time_constant_s;
+    double lag = s->aided ? QUICK_LAG_TIME_CONSTANT_S : p->aperiodic_time_constant_s;
     learning_gains(s, p, loop_gain(s, p), &k1, &k2);
     lag = tight ? lag : mind(lag, LOOP_LAG_FRACTION / maxd(k1, TINY));
     double weight = dt / ((quick ? QUICK_LAG_TIME_CONSTANT_S : lag) + dt);
@@ -738,7 +736,7 @@ void cf_step(cf_state *s, const cf_params *p, const double *g, const double *acc
         regulate(s, p, f, li, en, u, v, quick, tight, learn, dt);
         recover(s, p, clipped, en, limit, learn, dt);
     }
-    double lim = p->bias_limit_rad_s;
+    double lim = BIAS_LIMIT_SIGMAS * p->bias_prior_sigma_rad_s;
     s->bx = mind(maxd(s->bx, -lim), lim);
     s->by = mind(maxd(s->by, -lim), lim);
     s->bz = mind(maxd(s->bz, -lim), lim);

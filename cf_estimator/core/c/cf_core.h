@@ -82,12 +82,12 @@ enum cf_extra_column {
  * defaults) plus prefilter (aperiodic_prefilter) and ned (world_frame "ned": cf_output_q's
  * frame only; the state is ENU). Booleans are 0/1. */
 typedef struct {
-    double k1, k2, saturation_limit_rad, wide_saturation_limit_rad, rotation_threshold_rad_s,
-        acceleration_threshold_m_s2, acceleration_hold_s, aperiodic_time_constant_s,
+    double k1, k2, saturation_limit_rad, rotation_threshold_rad_s,
+        acceleration_threshold_m_s2, aperiodic_time_constant_s,
         startup_duration_s, startup_k1, recovery_trigger_s, r1, r2, mag_saturation_limit_rad,
-        mag_norm_tolerance, mag_dip_tolerance_rad, rest_gyro_threshold_rad_s,
-        rest_accel_threshold_m_s2, rest_time_s, rest_window_s, bias_prior_sigma_rad_s,
-        bias_learning_k2, bias_limit_rad_s, gravity_m_s2, prefilter;
+        mag_field_tolerance, rest_gyro_threshold_rad_s,
+        rest_accel_threshold_m_s2, rest_window_s, bias_prior_sigma_rad_s,
+        bias_learning_k2, gravity_m_s2, prefilter;
     int use_saturation, use_mag, mag_rejection, rest_bias_learning, ned;
 } cf_params;
 
