@@ -971,9 +971,8 @@ class _Px4Input:
         t, q = t[keep], q[keep]
         dec = self.bag.declination_at(t) if self.kind == "ardupilot" else None
         if dec is not None:  # the autopilot's true north -> ours (magnetic_declination_rad)
-            half = -0.5 * (dec - r.pparams.magnetic_declination_rad)  # NED yaw: about +z down
-            turn = np.stack([np.cos(half), 0.0 * half, 0.0 * half, np.sin(half)], axis=1)
-            q = quat.multiply(turn, q)
+            turn = -(dec - r.pparams.magnetic_declination_rad)  # NED yaw: about +z down
+            q = quat.multiply(quat.from_euler(0.0, 0.0, turn), q)
         world = r.fparams.world_frame
         qo = px4.attitude_in_output_frames(q, world,
                                            px4.output_body(r.pparams.body_frame, world))

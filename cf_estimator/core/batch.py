@@ -316,12 +316,7 @@ def run_aided(f: ComplementaryFilter, aiding: VelocityAiding, gyro: np.ndarray, 
             aiding.aided_accel(ts[i], g_rows[i], a_in, 1e-9, f.orientation_tuple(),
                                f.aiding_estimates())
         else:
-            inp = aiding.step_input(ts[i], g_rows[i], a_rows[i], dts[i],
-                                    f.orientation_tuple(), f.aiding_estimates())
-            a_in = inp.accel_m_s2
-            f.update(g_rows[i], a_rows[i], dts[i], m, aiding=inp)
-            if f.aiding_attitude_error:
-                aiding.note_attitude_error()
+            _q, a_in = aiding.update_filter(f, ts[i], g_rows[i], a_rows[i], dts[i], m)
         q_out[i] = f.orientation_tuple()
         aided_out[i] = aiding.active
         if moving_out is not None:

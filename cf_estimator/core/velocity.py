@@ -205,7 +205,7 @@ def _mul(aw: float, ax: float, ay: float, az: float, bw: float, bx: float, by: f
 class VelocityAiding:
     """Turns IMU samples into aided specific force given world-frame velocity samples.
 
-    Per IMU sample, the aiding is an input of the filter's update::
+    Per IMU sample, the aiding is an input of the filter's update (:meth:`update_filter`)::
 
         inp = aiding.step_input(t_s, gyro, accel, dt_s, filter.orientation_tuple(),
                                 filter.aiding_estimates())
@@ -736,6 +736,19 @@ class VelocityAiding:
         measured, horizontally aided (its specific force and acceleration are means over the
         window: what the filter is told, without the sample-to-sample content); 0 before."""
         return self._window_error
+
+    def update_filter(self, f: Any, t_s: float, gyro_rad_s: Sequence[float],
+                      accel_m_s2: Sequence[float], dt_s: float, mag: Sequence[float] | None
+                      ) -> tuple[Any, Sequence[float]]:
+        """One update of the initialised ComplementaryFilter ``f`` with this aiding's input at
+        IMU stamp t_s [s] (the class docstring's four lines) → (its q, the specific force the
+        step took [m/s², sensor frame])."""
+        inp = self.step_input(t_s, gyro_rad_s, accel_m_s2, dt_s, f.orientation_tuple(),
+                              f.aiding_estimates())
+        q = f.update(gyro_rad_s, accel_m_s2, dt_s, mag, aiding=inp)
+        if f.aiding_attitude_error:
+            self.note_attitude_error()
+        return q, inp.accel_m_s2
 
     def note_attitude_error(self) -> None:
         """Count one take-hold on an attitude error revealed while aided

@@ -640,11 +640,7 @@ class ImuPipeline:
         if self._aiding is None:
             q = f.update(gyro, accel, dt, mag)
         else:
-            q = f.update(gyro, accel, dt, mag, aiding=self._aiding.step_input(
-                sample.t_ns * 1e-9, gyro, accel, dt, f.orientation_tuple(),
-                f.aiding_estimates()))
-            if f.aiding_attitude_error:
-                self._aiding.note_attitude_error()
+            q, _accel = self._aiding.update_filter(f, sample.t_ns * 1e-9, gyro, accel, dt, mag)
         s = f._state  # noqa: SLF001 - per-sample flags without building FilterStatus (20 us)
         if mag is not None:
             ms = s.mag_status
