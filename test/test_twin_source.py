@@ -40,8 +40,8 @@ C_HELPERS = ("mul", "expmap", "rotate", "turn_heading")
 #: The step's stages, in the order step() and cf_step() call them: one name in both files.
 STAGES = ("predict", "classify_motion", "tilt_error", "saturate", "aperiodic", "regulate",
           "recover", "heading")
-C_STEP = ("toward_unit", "up", "stillness", "turn_share", "error_sigma", "loop_gain",
-          "learning_gains", "cf_step") + STAGES
+C_STEP = ("rest_time_s", "bias_limit_rad_s", "toward_unit", "up", "stillness", "turn_share",
+          "error_sigma", "loop_gain", "learning_gains", "cf_step") + STAGES
 #: Where a C constant's Python counterpart may live (the step's modules, then the checks', then
 #: the covariance model's, whose row loop the C repeats for the bulk replay).
 PY_HOMES = (step, stillness, bias, ops, filter, covariance)
@@ -51,8 +51,7 @@ STRUCTURAL = {0.0, 1.0, 2.0, 3.0}
 HELPER_ONLY = {0.5, 48.0}
 #: Reads the C has more of, for a reason of its structure: stillness() returns early while the
 #: block is incomplete, repeating the at-rest line that step.py runs once for both cases.
-C_EXTRA_READS = {"rest_bias_learning": 1, "rest_window_s": 1}
-C_EXTRA_NAMES = {"REST_STILL_BLOCKS": 1}
+C_EXTRA_READS = {"rest_bias_learning": 1}
 #: C library macros (math.h), not constants of the step: INFINITY is Python's math.inf.
 C_LIBRARY = {"NULL", "INFINITY"}
 NUMBER = re.compile(r"(?<![\w.])(\d+\.?\d*(?:[eE][-+]?\d+)?)(?![\w.])")
@@ -186,7 +185,7 @@ def test_no_bare_tuning_literal_in_either_step(side):
 def test_each_constant_and_parameter_is_read_as_often_in_c_as_in_python():
     py_names, py_reads = _py_counts()
     c_names, c_reads = _c_counts()
-    assert dict(c_names) == dict(py_names + collections.Counter(C_EXTRA_NAMES))
+    assert dict(c_names) == dict(py_names)
     expected = py_reads + collections.Counter(C_EXTRA_READS)
     assert dict(c_reads) == dict(expected)
 

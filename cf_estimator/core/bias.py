@@ -32,7 +32,7 @@ from typing import Any
 
 from cf_estimator.core.ops import TINY, sq
 from cf_estimator.core.state import StepState
-from cf_estimator.core.stillness import BIAS_LIMIT_SIGMAS, RestMeasurement
+from cf_estimator.core.stillness import RestMeasurement, bias_limit_rad_s
 
 #: The integral (bias) learns only while the raw error is below this [rad]: a bias within the
 #: prior leaves an error of at most a few REST_GATE_SIGMAS·bias_prior_sigma_rad_s / k1 (< 0.2
@@ -208,8 +208,9 @@ def integrate(s: StepState, p: Any, f: tuple, k1: Any, k2: Any, learn: Any, smal
 
 
 def clamp(s: StepState, p: Any, o: Any) -> None:
-    """Each component within ±BIAS_LIMIT_SIGMAS × ``bias_prior_sigma_rad_s`` (anti-windup)."""
-    lim = BIAS_LIMIT_SIGMAS * p.bias_prior_sigma_rad_s
+    """Each component within ±:func:`~cf_estimator.core.stillness.bias_limit_rad_s`
+    (anti-windup)."""
+    lim = bias_limit_rad_s(p)
     s.bx = o.minimum(o.maximum(s.bx, -lim), lim)
     s.by = o.minimum(o.maximum(s.by, -lim), lim)
     s.bz = o.minimum(o.maximum(s.bz, -lim), lim)

@@ -84,6 +84,7 @@ from cf_estimator.core.stillness import (  # noqa: F401
     REST_SAMPLE_SIGMAS,
     REST_STILL_BLOCKS,
     classify,
+    rest_time_s,
 )
 
 PHASE_UNINITIALIZED = 0
@@ -328,7 +329,7 @@ def classify_motion(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple 
                            s.acz + aw * (az - s.acz))
     an_lp = o.sqrt(s.acx * s.acx + s.acy * s.acy + s.acz * s.acz)
     level = o.where(spike, deviation, o.maximum(an_lp - s.g_ref, s.g_ref - an_lp))
-    hold = REST_STILL_BLOCKS * p.rest_window_s  # quiet again when it could be at rest
+    hold = rest_time_s(p)  # quiet again when it could be at rest
     decayed = s.accel_hold * (hold / (hold + dt))
     s.accel_hold = o.maximum(level, decayed)
     # vibration left in the low-pass (white-noise approximation of the 1st-order low-pass,

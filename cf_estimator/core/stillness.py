@@ -54,6 +54,18 @@ REST_MIN_VARIANCE = 1e-12
 SQRT3 = 1.7320508075688772
 
 
+def rest_time_s(p: Any) -> Any:
+    """How long still blocks must follow each other before the sensor is at rest [s]:
+    REST_STILL_BLOCKS blocks of ``rest_window_s``."""
+    return REST_STILL_BLOCKS * p.rest_window_s
+
+
+def bias_limit_rad_s(p: Any) -> Any:
+    """The bound of each component of the gyro-bias estimate [rad/s]: BIAS_LIMIT_SIGMAS
+    standard deviations of its prior ``bias_prior_sigma_rad_s``."""
+    return BIAS_LIMIT_SIGMAS * p.bias_prior_sigma_rad_s
+
+
 class RestMeasurement(NamedTuple):
     """What a block end gives the bias estimator: ``measure`` (a still block at rest), the
     block's gyro mean (sensor frame) [rad/s], its variance per axis [(rad/s)²], and whether
@@ -153,7 +165,7 @@ def classify(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple | None,
         & (da < tol_a)
         & o.not_(turned)
         & (o.sqrt(mgx * mgx + mgy * mgy + mgz * mgz)
-           < BIAS_LIMIT_SIGMAS * p.bias_prior_sigma_rad_s * SQRT3)
+           < bias_limit_rad_s(p) * SQRT3)
     )
     # a steady turn at a constant rate looks still; a block whose gyro mean is far from the bias
     # estimate on any axis (beyond REST_GATE_SIGMAS of the estimate's and the block's spread) is
@@ -166,7 +178,7 @@ def classify(s: StepState, p: Any, gyro: tuple, accel: tuple, mag: tuple | None,
     still = steady & consistent
     s.moved = s.moved | (done & has_prev & o.not_(still))
     s.rest_timer_s = o.where(done, o.where(still, s.rest_timer_s + s.blk_t, 0.0), s.rest_timer_s)
-    s.at_rest = p.rest_bias_learning & (s.rest_timer_s >= REST_STILL_BLOCKS * p.rest_window_s)
+    s.at_rest = p.rest_bias_learning & (s.rest_timer_s >= rest_time_s(p))
     # a still block at rest measures the bias (the bias estimator fuses it, after this)
     measure = done & s.at_rest
     gw = o.where(done & still, s.blk_t / (GRAVITY_TIME_CONSTANT_S + s.blk_t), 0.0)

@@ -149,6 +149,17 @@ static inline double maxd(double a, double b) { return a >= b ? a : b; }
 static inline double sq(double x) { return x * x; } /* ops.sq */
 static inline double mind(double a, double b) { return a <= b ? a : b; }
 
+/* rest_time_s() and bias_limit_rad_s() of stillness.py: rest time [s], bias bound [rad/s] */
+static double rest_time_s(const cf_params *p)
+{
+    return REST_STILL_BLOCKS * p->rest_window_s;
+}
+
+static double bias_limit_rad_s(const cf_params *p)
+{
+    return BIAS_LIMIT_SIGMAS * p->bias_prior_sigma_rad_s;
+}
+
 static void mul(double aw, double ax, double ay, double az, double bw, double bx, double by,
                 double bz, double *o)
 {
@@ -388,7 +399,7 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
     if (has_prev && (jump_g || jump_a)) s->rest_timer_s = 0.0;
 
     if (!(s->blk_t >= p->rest_window_s)) { /* block not complete: only the rest flag */
-        s->at_rest = (char)(p->rest_bias_learning && (s->rest_timer_s >= REST_STILL_BLOCKS * p->rest_window_s));
+        s->at_rest = (char)(p->rest_bias_learning && (s->rest_timer_s >= rest_time_s(p)));
         return; /* step.py runs the block-end lines below with weight 0: same values */
     }
     double n = s->blk_n;
@@ -419,7 +430,7 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
     int turned = mag_seen && (dm > tol_m);
     int steady = has_prev && (dg < tol_g) && (da < tol_a) && !turned &&
                  (sqrt(mgx * mgx + mgy * mgy + mgz * mgz) <
-                  BIAS_LIMIT_SIGMAS * p->bias_prior_sigma_rad_s * SQRT3);
+                  bias_limit_rad_s(p) * SQRT3);
     double r = maxd(noise_g2 / (3.0 * n), REST_MIN_VARIANCE);
     double gate = p->rest_gyro_threshold_rad_s + REST_GATE_SIGMAS * sqrt(s->bias_var + r);
     int consistent = (maxd(mgx - s->bx, s->bx - mgx) < gate) &&
@@ -428,7 +439,7 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
     int still = steady && consistent;
     s->moved = (char)(s->moved || (has_prev && !still));
     s->rest_timer_s = still ? s->rest_timer_s + s->blk_t : 0.0;
-    s->at_rest = (char)(p->rest_bias_learning && (s->rest_timer_s >= REST_STILL_BLOCKS * p->rest_window_s));
+    s->at_rest = (char)(p->rest_bias_learning && (s->rest_timer_s >= rest_time_s(p)));
     if (s->at_rest) s->bias_unverified = (char)(!s->moved && !mag_seen);
     if (s->at_rest) { /* a still block at rest measures the bias */
         double k = s->bias_var / (s->bias_var + r);
@@ -516,7 +527,7 @@ static int classify_motion(cf_state *s, const cf_params *p, const double *g, con
     s->acz = acz;
     double an_lp = sqrt(s->acx * s->acx + s->acy * s->acy + s->acz * s->acz);
     double level = spike ? deviation : maxd(an_lp - s->g_ref, s->g_ref - an_lp);
-    double hold = REST_STILL_BLOCKS * p->rest_window_s; /* quiet again when it could be at rest */
+    double hold = rest_time_s(p); /* quiet again when it could be at rest */
     double decayed = s->accel_hold * (hold / (hold + dt));
     s->accel_hold = maxd(level, decayed);
     double lp_sigma = sqrt(s->noise_a2 / 3.0 * dt / (2.0 * ACCEL_LOWPASS_TIME_CONSTANT_S + dt));
@@ -736,7 +747,7 @@ void cf_step(cf_state *s, const cf_params *p, const double *g, const double *acc
         regulate(s, p, f, li, en, u, v, quick, tight, learn, dt);
         recover(s, p, clipped, en, limit, learn, dt);
     }
-    double lim = BIAS_LIMIT_SIGMAS * p->bias_prior_sigma_rad_s;
+    double lim = bias_limit_rad_s(p);
     s->bx = mind(maxd(s->bx, -lim), lim);
     s->by = mind(maxd(s->by, -lim), lim);
     s->bz = mind(maxd(s->bz, -lim), lim);
