@@ -100,9 +100,11 @@ class HeadingOffset:
 
 def _skew(v: np.ndarray) -> np.ndarray:
     """[v×] of each row of v (N, 3) → (N, 3, 3)."""
-    z = np.zeros(len(v))
-    return np.stack([np.stack([z, -v[:, 2], v[:, 1]], 1), np.stack([v[:, 2], z, -v[:, 0]], 1),
-                     np.stack([-v[:, 1], v[:, 0], z], 1)], 1)
+    s = np.zeros((len(v), 3, 3))
+    s[:, 0, 1], s[:, 0, 2] = -v[:, 2], v[:, 1]
+    s[:, 1, 0], s[:, 1, 2] = v[:, 2], -v[:, 0]
+    s[:, 2, 0], s[:, 2, 1] = -v[:, 1], v[:, 0]
+    return s
 
 
 class InMotionAlignment:
@@ -183,10 +185,12 @@ class InMotionAlignment:
         # Gauss–Newton, the axes' weights held, iterated while a step exceeds CONVERGED_RAD:
         # one step is enough once X̂ is near, not when the first horizontal accelerations reveal
         # a heading tens of degrees off
-        self._var = self._scatter()
+        res = self._residuals() if float(self._weights.sum()) >= MIN_WINDOWS else None
+        self._var = self._scatter(res)
         for _ in range(MAX_ITERATIONS):
-            if self._step() < CONVERGED_RAD:
+            if self._step(res) < CONVERGED_RAD:
                 break
+            res = None  # X̂ and b moved: the next step computes them again
 
     def freeze_prior(self) -> None:
         """Keep the bias prior as it is: the filter has taken the fit's bias (realigned), and a
@@ -207,7 +211,8 @@ class InMotionAlignment:
         c = quat.rotate(quat.exp(self._missed(self._now, mid)), a) @ self._x.T
         return b - c, c, (self._now[:9] - mid[:, :9]).reshape(-1, 3, 3)
 
-    def _scatter(self) -> tuple[float, float]:
+    def _scatter(self, res: tuple[np.ndarray, np.ndarray, np.ndarray] | None
+                 ) -> tuple[float, float]:
         """Residual variances [m²/s⁴] at X̂: horizontal (per axis) and vertical (1 before the
         fit has MIN_WINDOWS: nothing to judge yet), never below the per-axis differentiation
         noise of the configured velocity noise (``noise2_m2_s4``/2; at least MIN_NOISE2_M2_S4).
@@ -222,21 +227,22 @@ class InMotionAlignment:
         about as much as the floor, which then changes little."""
         w = self._weights
         n = float(w.sum())
-        if n < MIN_WINDOWS:
+        if n < MIN_WINDOWS or res is None:
             return 1.0, 1.0
-        r = self._residuals()[0]
+        r = res[0]
         dof = n - 2.0
         floor = max(0.5 * self.noise2_m2_s4, MIN_NOISE2_M2_S4)
         return (max(float(w @ (r[:, 0] ** 2 + r[:, 1] ** 2)) / (2.0 * dof), floor),
                 max(float(w @ r[:, 2] ** 2) / dof, floor))
 
-    def _step(self) -> float:
-        """One Gauss–Newton step on (θ, ε): X̂ ← X̂·Exp(θ), b ← b + ε; returns |θ| [rad]."""
+    def _step(self, res: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> float:
+        """One Gauss–Newton step on (θ, ε): X̂ ← X̂·Exp(θ), b ← b + ε; returns |θ| [rad].
+        ``res``: :meth:`_residuals` at the current X̂ and b, when already computed."""
         x, w = self._x, self._weights
         assert x is not None
         # the residual's Jacobian in (θ, ε): X̂·[α'×]·(I, ΔJ) = [(X̂α')×]·X̂·(I, ΔJ),
         # α' = Exp(φ)·α; each world axis weighed by its scatter (horizontal, vertical)
-        r, c, dj = self._residuals()
+        r, c, dj = res if res is not None else self._residuals()
         j_theta = _skew(c) @ x
         jac = np.concatenate([j_theta, j_theta @ dj], axis=2)  # (N, 3, 6)
         var_h, var_v = self._var

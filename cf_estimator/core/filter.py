@@ -166,7 +166,7 @@ EXTRA_COLUMNS = 20
 AIDING_TAKE_HOLD_S = 2.0
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class AidingInput:
     """What velocity aiding gives the filter at one IMU sample (``update(..., aiding=)``), as
     x-io Fusion's update takes an external heading: built by
