@@ -29,9 +29,9 @@ from typing import Any
 import numpy as np
 
 from cf_estimator.bag.types import IMU_TYPE
+from cf_estimator.pipeline import columns as col
+from cf_estimator.pipeline.columns import IMU_DOUBLES, MAG_DOUBLES
 
-IMU_DOUBLES = 37
-MAG_DOUBLES = 12
 _CDR_LE = b"\x00\x01\x00\x00"
 _ZERO9 = np.zeros(9)
 
@@ -156,17 +156,17 @@ class Block:
         if self.imu:
             m = ImuView()
             m.header = header
-            m.orientation = Vector(v[0], v[1], v[2], v[3])
-            m.orientation_covariance = self.values[k, 4:13]
-            m.angular_velocity = Vector(v[13], v[14], v[15])
-            m.angular_velocity_covariance = self.values[k, 16:25]
-            m.linear_acceleration = Vector(v[25], v[26], v[27])
-            m.linear_acceleration_covariance = self.values[k, 28:37]
+            m.orientation = Vector(*v[col.ORIENTATION])
+            m.orientation_covariance = self.values[k, col.ORIENTATION_COVARIANCE]
+            m.angular_velocity = Vector(*v[col.ANGULAR_VELOCITY])
+            m.angular_velocity_covariance = self.values[k, col.ANGULAR_VELOCITY_COVARIANCE]
+            m.linear_acceleration = Vector(*v[col.LINEAR_ACCELERATION])
+            m.linear_acceleration_covariance = self.values[k, col.LINEAR_ACCELERATION_COVARIANCE]
             return m
         m = MagView()
         m.header = header
-        m.magnetic_field = Vector(v[0], v[1], v[2])
-        m.magnetic_field_covariance = self.values[k, 3:12]
+        m.magnetic_field = Vector(*v[col.MAGNETIC_FIELD])
+        m.magnetic_field_covariance = self.values[k, col.MAGNETIC_FIELD_COVARIANCE]
         return m
 
 
@@ -398,12 +398,12 @@ def imu_cdr_rows(sec: np.ndarray, nsec: np.ndarray, frame_id: str, q_xyzw: np.nd
     frame = str(frame_id).encode("utf-8")
     rows, head = _header_rows(sec, nsec, frame, IMU_DOUBLES, out)
     body = rows[:, head:].view("<f8")  # (n, IMU_DOUBLES), in place
-    body[:, 0:4] = q_xyzw
-    body[:, 4:13] = np.asarray(orientation_cov, dtype=np.float64)
-    body[:, 13:16] = gyro
-    body[:, 16:25] = np.asarray(gyro_cov, dtype=np.float64)
-    body[:, 25:28] = accel
-    body[:, 28:37] = np.asarray(accel_cov, dtype=np.float64)
+    body[:, col.ORIENTATION] = q_xyzw
+    body[:, col.ORIENTATION_COVARIANCE] = np.asarray(orientation_cov, dtype=np.float64)
+    body[:, col.ANGULAR_VELOCITY] = gyro
+    body[:, col.ANGULAR_VELOCITY_COVARIANCE] = np.asarray(gyro_cov, dtype=np.float64)
+    body[:, col.LINEAR_ACCELERATION] = accel
+    body[:, col.LINEAR_ACCELERATION_COVARIANCE] = np.asarray(accel_cov, dtype=np.float64)
     return rows
 
 

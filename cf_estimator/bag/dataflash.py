@@ -51,7 +51,6 @@ from typing import Any
 
 import numpy as np
 
-from cf_estimator.bag import cdr
 from cf_estimator.bag.logbag import Stream, StreamBag
 from cf_estimator.bag.types import (
     IMU_TYPE,
@@ -62,6 +61,7 @@ from cf_estimator.bag.types import (
     one_line,
 )
 from cf_estimator.core import quaternion as quat
+from cf_estimator.pipeline import columns
 
 DATAFLASH_FORMAT = "ardupilot-dataflash"
 IMU_TOPIC = "IMU"
@@ -374,11 +374,7 @@ class DataflashBag(StreamBag):
         ok = np.all(np.isfinite(gyro), axis=1) & np.all(np.isfinite(accel), axis=1)
         if self.trim is not None:
             gyro, accel = gyro @ self.trim.T, accel @ self.trim.T
-        values = np.zeros((int(ok.sum()), cdr.IMU_DOUBLES))
-        values[:, 3] = 1.0  # orientation (0, 0, 0, 1), unknown: covariance[0] = -1
-        values[:, 4] = -1.0
-        values[:, 13:16] = gyro[ok]
-        values[:, 25:28] = accel[ok]
+        values = columns.imu_block(gyro[ok], accel[ok])
         self.streams[IMU_TOPIC] = Stream(IMU_TOPIC, IMU_TYPE, t[ok] * 1000, values,
                                          ARDUPILOT_BODY_FRAME_ID)
 
@@ -389,9 +385,8 @@ class DataflashBag(StreamBag):
             keep &= c["Health"].astype(float) != 0
         m = mag.xyz("Mag")
         keep &= np.all(np.isfinite(m), axis=1) & np.any(m != 0.0, axis=1)
-        values = np.zeros((int(keep.sum()), cdr.MAG_DOUBLES))
-        values[:, 0:3] = (m[keep] if self.trim is None else m[keep] @ self.trim.T) \
-            * MILLIGAUSS_TO_TESLA
+        values = columns.mag_block((m[keep] if self.trim is None else m[keep] @ self.trim.T)
+                                   * MILLIGAUSS_TO_TESLA)
         self.streams[MAG_TOPIC] = Stream(MAG_TOPIC, MAG_TYPE, mag.stamp_us()[keep] * 1000,
                                          values, ARDUPILOT_BODY_FRAME_ID)
         inst = self.instances.get(MAG_TOPIC, 0)

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cf_estimator.bag import io
+from cf_estimator.pipeline import columns
 
 
 @dataclass
@@ -59,12 +60,13 @@ def log_arrays(path: str | os.PathLike[str], instance: int | None = None) -> Log
         # each magnetometer sample on the first IMU row at or after it (a newer one replaces it)
         row = np.searchsorted(t_ns, mag_stream.t_ns, side="left")
         ok = row < t_ns.shape[0]
-        mag[row[ok]] = mag_stream.values[ok, 0:3]
+        mag[row[ok]] = mag_stream.values[ok, columns.MAGNETIC_FIELD]
     ref_topic = getattr(bag, "reference_topic", None)
     ref = bag.streams.get(ref_topic) if ref_topic else None
     until = bag.scored_until_s() if hasattr(bag, "scored_until_s") else None
     return LogArrays(
-        t_ns * 1e-9, imu.values[:, 13:16].copy(), imu.values[:, 25:28].copy(), mag,
+        t_ns * 1e-9, imu.values[:, columns.ANGULAR_VELOCITY].copy(),
+        imu.values[:, columns.LINEAR_ACCELERATION].copy(), mag,
         ref.t_ns * 1e-9 if ref is not None else np.zeros(0),
         ref.values.copy() if ref is not None else np.zeros((0, 4)),
         ref_topic if ref is not None else None, dict(bag.parameters), list(bag.notes), until)

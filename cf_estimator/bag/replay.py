@@ -445,8 +445,8 @@ class _Run:
         self.next_bias_t = next_bias
         if marks:  # the bias estimate after each marked row, as imu() samples it
             self.bias_t.add(ts[marks])
-            self.bias.add(c.extra[marks, 15:18])
-            self.bias_sigma.add(c.extra[marks, 10])
+            self.bias.add(c.extra[marks, Extra.GYRO_BIAS])
+            self.bias_sigma.add(c.extra[marks, Extra.BIAS_SIGMA])
         bag = self.bag
         if bag is not None:  # every output message of the run encoded in place, written at once
             sec, nsec = run.sec, run.nsec

@@ -40,7 +40,6 @@ from typing import Any
 
 import numpy as np
 
-from cf_estimator.bag import cdr
 from cf_estimator.bag.logbag import Stream, StreamBag
 from cf_estimator.bag.types import (
     IMU_TYPE,
@@ -50,7 +49,7 @@ from cf_estimator.bag.types import (
     BagError,
     one_line,
 )
-from cf_estimator.pipeline import px4
+from cf_estimator.pipeline import columns, px4
 
 IMU_TOPIC = "sensor_combined"
 MAG_TOPIC = "vehicle_magnetometer"
@@ -316,18 +315,13 @@ class UlogBag(StreamBag):
             if dropped:
                 self.notes.append(f"{IMU_TOPIC}: {dropped} rows without an accelerometer "
                                   "sample (invalid accelerometer_timestamp_relative) left out")
-        values = np.zeros((int(keep.sum()), cdr.IMU_DOUBLES))
-        values[:, 3] = 1.0  # orientation (0, 0, 0, 1), unknown: covariance[0] = -1
-        values[:, 4] = -1.0
-        values[:, 13:16] = gyro[keep]
-        values[:, 25:28] = accel[keep]
+        values = columns.imu_block(gyro[keep], accel[keep])
         self.streams[IMU_TOPIC] = Stream(IMU_TOPIC, IMU_TYPE, t[keep] * 1000, values)
 
     def _mag_stream(self, topic: str, t_us: np.ndarray, ga: np.ndarray) -> None:
         ok = np.all(np.isfinite(ga), axis=1)
-        values = np.zeros((int(ok.sum()), cdr.MAG_DOUBLES))
         ga = ga[ok] if self.mag_bias_ga is None else ga[ok] - self.mag_bias_ga
-        values[:, 0:3] = ga * px4.GAUSS_TO_TESLA
+        values = columns.mag_block(ga * px4.GAUSS_TO_TESLA)
         self.streams[topic] = Stream(topic, MAG_TYPE, t_us[ok] * 1000, values)
 
     def _mag(self, d: dict[str, np.ndarray]) -> None:

@@ -37,7 +37,7 @@ import numpy as np
 from cf_estimator.core.filter import EXTRA_COLUMNS, Extra
 from cf_estimator.core.kernel import compiled_kernel
 from cf_estimator.core.step import MAG_DISABLED, MAG_REJECTED, MAG_USED
-from cf_estimator.pipeline import checks
+from cf_estimator.pipeline import checks, columns
 from cf_estimator.pipeline.pipeline import ACCEL_MAX2, GYRO_MAX2, TWO_PI, ImuPipeline
 
 IMU, MAG, OTHER = 0, 1, 2  #: event kinds; OTHER (e.g. a reference) passes through
@@ -56,7 +56,7 @@ class Scan:
     log_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     #: row of each message in ``values``
     rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
-    values: Any = None  #: the IMU block's (n, 37) values: gyro columns 13:16, accel 25:28
+    values: Any = None  #: the IMU block's (n, IMU_DOUBLES) values (pipeline/columns.py)
     #: (n, 3) the magnetometer sample each row gives the filter (NaN: none), None: none at all
     mag: np.ndarray | None = None
     #: stamp of the row's magnetometer sample (0: none)
@@ -79,7 +79,8 @@ def _ordinary_start(pipe: ImuPipeline) -> bool:
 
 def _imu_ok(v: np.ndarray, sec: np.ndarray, nsec: np.ndarray) -> np.ndarray:
     """``on_imu``'s value checks, vectorized with its own arithmetic (same results)."""
-    gx, gy, gz, ax, ay, az = (v[:, j] for j in (13, 14, 15, 25, 26, 27))
+    g0, a0 = columns.ANGULAR_VELOCITY.start, columns.LINEAR_ACCELERATION.start
+    gx, gy, gz, ax, ay, az = (v[:, j] for j in (g0, g0 + 1, g0 + 2, a0, a0 + 1, a0 + 2))
     with np.errstate(over="ignore", invalid="ignore"):
         finite = np.isfinite(gx)  # all six finite (column by column: faster than axis=1)
         for c in (gy, gz, ax, ay, az):
@@ -129,8 +130,10 @@ class Events:
         if col is None:
             neg = name.startswith("-")
             base = name.lstrip("-")
-            j = {"gx": 13, "gy": 14, "gz": 15, "ax": 25, "ay": 26, "az": 27,
-                 "mx": 0, "my": 1, "mz": 2}[base]
+            g0, a0 = columns.ANGULAR_VELOCITY.start, columns.LINEAR_ACCELERATION.start
+            m0 = columns.MAGNETIC_FIELD.start
+            j = {"gx": g0, "gy": g0 + 1, "gz": g0 + 2, "ax": a0, "ay": a0 + 1, "az": a0 + 2,
+                 "mx": m0, "my": m0 + 1, "mz": m0 + 2}[base]
             block = self.mag if base[0] == "m" else self.imu
             values = block.values[:, j]
             col = self._cols[name] = (-values if neg else values).tolist()
@@ -218,7 +221,9 @@ class Events:
         is_imu = kind == IMU
         if self.imu is not None:
             rows = st["row"]
-            cov_ok = (self.same_covariance(16, av_raw) & self.same_covariance(28, la_raw))
+            cov_ok = (self.same_covariance(columns.ANGULAR_VELOCITY_COVARIANCE.start, av_raw)
+                      & self.same_covariance(columns.LINEAR_ACCELERATION_COVARIANCE.start,
+                                             la_raw))
             imu_good = ok & self.frame_is(IMU, imu_frame)
             imu_good[is_imu] &= cov_ok[rows[is_imu]]
             good[is_imu] = imu_good[is_imu]
@@ -365,7 +370,7 @@ def scan(pipe: ImuPipeline, ev: Events, start: int, limit_log_ns: int | None = N
         mag = np.full((n_imu, 3), np.nan)
         if mag_block is not None and prev_mag.any():
             mrows = st["row"][prev_ev[prev_mag]]
-            vals = mag_block.values[mrows, 0:3]
+            vals = mag_block.values[mrows, columns.MAGNETIC_FIELD]
             if not p.mag_correction.identity:  # as on_mag: calibration, then the flip
                 vals = p.mag_correction.apply_rows(vals)
             if rules.flip:  # body_frame FLU <-> FRD, as on_mag turns the field
@@ -482,8 +487,8 @@ def commit(pipe: ImuPipeline, run: Scan) -> Committed:
     p = pipe
     n = run.n
     f = p.filter
-    gyro = run.values[run.rows, 13:16]  # new (n, 3) arrays
-    acc = run.values[run.rows, 25:28]
+    gyro = run.values[run.rows, columns.ANGULAR_VELOCITY]  # new (n, 3) arrays
+    acc = run.values[run.rows, columns.LINEAR_ACCELERATION]
     if p.rules.flip:  # body_frame FLU <-> FRD, as on_imu turns the vectors
         gyro[:, 1:] = -gyro[:, 1:]
         acc[:, 1:] = -acc[:, 1:]
