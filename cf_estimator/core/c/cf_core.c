@@ -929,25 +929,41 @@ int cf_publishes_null(const cf_state *learning, const cf_state *null)
     return CF_EVIDENCE_RATIO * null->pv_var < learning->pv_var;
 }
 
-int cf_update_pair(cf_state *learning, const cf_params *p, cf_state *null, const cf_params *pn,
-                   const double *gyro, const double *accel, const double *mag, double dt,
-                   double *q_out, int *published_null)
+/* both hypotheses stepped on one sample; 1 when the null one is published after it */
+static int step_pair(cf_state *learning, const cf_params *p, cf_state *null, const cf_params *pn,
+                     const sample *x)
 {
-    sample x, xn;
-    int why = checked_sample(&x, p, gyro, accel, mag, dt); /* the same checks for both */
-    if (why) return why;
-    step(learning, p, &x);
+    step(learning, p, x);
     /* the null hypothesis's parameters differ in bias_learning_k2 (cf_params_null), which no
      * sample term reads: the same terms, unless the caller's pn differs (bit for bit) in what
      * they read */
     if (memcmp(&pn->k1, &p->k1, sizeof p->k1) == 0 &&
         memcmp(&pn->rest_window_s, &p->rest_window_s, sizeof p->rest_window_s) == 0) {
-        step(null, pn, &x);
+        step(null, pn, x);
     } else {
-        sample_terms(&xn, pn, x.g, x.acc, x.mag, dt);
+        sample xn;
+        sample_terms(&xn, pn, x->g, x->acc, x->mag, x->dt);
         step(null, pn, &xn);
     }
-    int use_null = cf_publishes_null(learning, null);
+    return cf_publishes_null(learning, null);
+}
+
+int cf_step_pair(cf_state *learning, const cf_params *p, cf_state *null, const cf_params *pn,
+                 const double *gyro, const double *accel, const double *mag, double dt)
+{
+    sample x;
+    sample_terms(&x, p, gyro, accel, mag, dt);
+    return step_pair(learning, p, null, pn, &x);
+}
+
+int cf_update_pair(cf_state *learning, const cf_params *p, cf_state *null, const cf_params *pn,
+                   const double *gyro, const double *accel, const double *mag, double dt,
+                   double *q_out, int *published_null)
+{
+    sample x;
+    int why = checked_sample(&x, p, gyro, accel, mag, dt); /* the same checks for both */
+    if (why) return why;
+    int use_null = step_pair(learning, p, null, pn, &x);
     if (q_out) cf_output_q(use_null ? null : learning, p->ned, q_out);
     if (published_null) *published_null = use_null;
     return CF_OK;
