@@ -43,9 +43,10 @@ STAGES = ("predict", "classify_motion", "tilt_error", "saturate", "aperiodic", "
           "recover", "heading")
 C_STEP = ("rest_time_s", "bias_limit_rad_s", "toward_unit", "up", "stillness", "turn_share",
           "error_sigma", "loop_gain", "learning_gains", "step") + STAGES
-#: ... and the terms of a sample that the stages read (computed once for both bias hypotheses):
-#: their constants and parameter reads count as the stages' they stand in for.
-C_STEP += ("sample_terms",)
+#: ... and what the C computes once where the Python repeats it: the terms of a sample that the
+#: stages read (once for both bias hypotheses), the gains' terms aperiodic() and regulate()
+#: share; their constants and parameter reads count as those of the code they stand in for.
+C_STEP += ("sample_terms", "gain_terms_of")
 #: Where a C constant's Python counterpart may live (the step's modules, then the checks', then
 #: the covariance model's, whose row loop the C repeats for the bulk replay).
 PY_HOMES = (step, stillness, bias, ops, filter, covariance)

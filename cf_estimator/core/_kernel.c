@@ -100,6 +100,10 @@ static int read3(PyObject *o, double *v)
         PyObject **items = PyTuple_CheckExact(o) ? ((PyTupleObject *)o)->ob_item
                                                  : ((PyListObject *)o)->ob_item;
         for (int i = 0; i < 3; i++) {
+            if (PyFloat_CheckExact(items[i])) { /* the common case, without the call */
+                v[i] = PyFloat_AS_DOUBLE(items[i]);
+                continue;
+            }
             v[i] = PyFloat_AsDouble(items[i]);
             if (v[i] == -1.0 && PyErr_Occurred()) return -1;
         }
@@ -195,7 +199,7 @@ static int read_sample(PyObject *og, PyObject *oa, PyObject *odt, PyObject *om, 
         }
         return -1;
     }
-    x->dt = PyFloat_AsDouble(odt);
+    x->dt = PyFloat_CheckExact(odt) ? PyFloat_AS_DOUBLE(odt) : PyFloat_AsDouble(odt);
     if (x->dt == -1.0 && PyErr_Occurred()) return -1;
     if (!(x->dt > 0.0 && isfinite(x->dt))) {
         PyErr_Format(PyExc_ValueError, "dt must be a positive finite number of seconds, got %R",

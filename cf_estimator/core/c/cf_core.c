@@ -212,8 +212,11 @@ static void mul(double aw, double ax, double ay, double az, double bw, double bx
 static void expmap(double vx, double vy, double vz, double *o)
 {
     double angle = sqrt(vx * vx + vy * vy + vz * vz);
-    double k = angle < SMALL_ANGLE_RAD ? 0.5 - angle * angle / 48.0 : sin(0.5 * angle) / angle;
-    o[0] = cos(0.5 * angle);
+    /* both of the half angle, always: one sincos call where the C library has it (glibc's
+     * gives sin's and cos's bits; as in turn_heading) */
+    double c = cos(0.5 * angle), sn = sin(0.5 * angle);
+    double k = angle < SMALL_ANGLE_RAD ? 0.5 - angle * angle / 48.0 : sn / angle;
+    o[0] = c;
     o[1] = k * vx;
     o[2] = k * vy;
     o[3] = k * vz;
@@ -250,7 +253,13 @@ static void mul_into(cf_state *s, const double *d)
 
 static void turn_heading(cf_state *s, double angle)
 {
-    double cw = cos(0.5 * angle), cz = sin(0.5 * angle);
+    /* no turn (predict's z_m = 0 without r2): cos(+-0) = 1 and sin(+-0) = +-0 exactly, as the
+     * C library (C99 Annex F) and Python's math give them, without the call */
+    double cw = 1.0, cz = 0.5 * angle;
+    if (angle != 0.0) {
+        cw = cos(0.5 * angle);
+        cz = sin(0.5 * angle);
+    }
     double qw = cw * s->qw - cz * s->qz, qx = cw * s->qx - cz * s->qy;
     double qy = cw * s->qy + cz * s->qx, qz = cw * s->qz + cz * s->qw;
     s->qw = qw;
@@ -624,23 +633,40 @@ static double error_sigma(const cf_state *s)
     return sqrt(maxd(s->bias_err_var, 0.0));
 }
 
+/* What bias.loop_gain and bias.learning_gains read of the state that aperiodic() and
+ * regulate() both see unchanged (the bias variances and the held turn rate: classify_motion
+ * has set them, regulate changes the variances only after its gains): computed once a step
+ * for both calls, where step.py computes them at each (the same operations on the same
+ * values). */
+typedef struct {
+    double err_sigma; /* error_sigma(), loop_gain's drift */
+    double sigma_b, share, turn; /* learning_gains': sqrt(bias_var), its share of the prior,
+                                    turn_share() */
+} gain_terms;
+
+static void gain_terms_of(const cf_state *s, const cf_params *p, gain_terms *t)
+{
+    t->err_sigma = error_sigma(s);
+    t->sigma_b = sqrt(maxd(s->bias_var, 0.0));
+    t->share = mind(s->bias_var / sq(p->bias_prior_sigma_rad_s), 1.0);
+    t->turn = turn_share(s, p);
+}
+
 /* bias.loop_gain of bias.py: the k1 the disturbance allows, sqrt(d / sigma_V), at most k1 */
-static double loop_gain(const cf_state *s, const cf_params *p)
+static double loop_gain(const cf_state *s, const cf_params *p, const gain_terms *t)
 {
     double sigma_v = maxd(sqrt(s->pv_var), TINY);
-    double drift = error_sigma(s) + GYRO_SCALE_UNCERTAINTY * s->rate_lp;
+    double drift = t->err_sigma + GYRO_SCALE_UNCERTAINTY * s->rate_lp;
     return s->aided ? p->k1 : mind(p->k1, sqrt(drift / sigma_v));
 }
 
 /* bias.learning_gains of bias.py: k2 raised while the bias is uncertain, capped by the
  * velocity swing and withheld in a turn; k1 as the disturbance allows, critically damped */
-static void learning_gains(const cf_state *s, const cf_params *p, double loop, double *k1,
-                           double *k2)
+static void learning_gains(const cf_state *s, const cf_params *p, const gain_terms *t,
+                           double loop, double *k1, double *k2)
 {
-    double sigma_b = sqrt(maxd(s->bias_var, 0.0));
     double sigma_v = maxd(sqrt(s->pv_var), TINY);
-    double share = mind(s->bias_var / sq(p->bias_prior_sigma_rad_s), 1.0);
-    *k2 = maxd(p->k2, mind(p->bias_learning_k2 * share, sigma_b / sigma_v) * turn_share(s, p));
+    *k2 = maxd(p->k2, mind(p->bias_learning_k2 * t->share, t->sigma_b / sigma_v) * t->turn);
     *k1 = maxd(loop, 2.0 * sqrt(*k2));
 }
 
@@ -679,13 +705,13 @@ static void learning_input(cf_state *s, const double *l, double weight, double *
 
 /* aperiodic() of step.py: the unit in the world frame on the saturated error; f into s->fx..,
    the learning input into g */
-static void aperiodic(cf_state *s, const cf_params *p, double scale, int quick, int tight,
-                      double dt, double *f, double *g)
+static void aperiodic(cf_state *s, const cf_params *p, const gain_terms *t, double scale,
+                      int quick, int tight, double dt, double *f, double *g)
 {
     double w[3], k1, k2;
     rotate(s->qw, s->qx, s->qy, s->qz, s->ex * scale, s->ey * scale, s->ez * scale, w);
     double lag = s->aided ? QUICK_LAG_TIME_CONSTANT_S : p->aperiodic_time_constant_s;
-    learning_gains(s, p, loop_gain(s, p), &k1, &k2);
+    learning_gains(s, p, t, loop_gain(s, p, t), &k1, &k2);
     lag = tight ? lag : mind(lag, LOOP_LAG_FRACTION / maxd(k1, TINY));
     double weight = dt / ((quick ? QUICK_LAG_TIME_CONSTANT_S : lag) + dt);
     s->lx = s->lx + weight * (w[0] - s->lx);
@@ -703,9 +729,9 @@ static void aperiodic(cf_state *s, const cf_params *p, double scale, int quick, 
 }
 
 /* regulate() of step.py (bias.integrate inlined) */
-static void regulate(cf_state *s, const cf_params *p, const double *f, const double *g,
-                     double en, const double *u, const double *v, int quick, int tight,
-                     int learn, const sample *x)
+static void regulate(cf_state *s, const cf_params *p, const gain_terms *t, const double *f,
+                     const double *g, double en, const double *u, const double *v, int quick,
+                     int tight, int learn, const sample *x)
 {
     double dt = x->dt;
     double d[4], w[3];
@@ -716,8 +742,8 @@ static void regulate(cf_state *s, const cf_params *p, const double *f, const dou
     s->pvy = s->pvy + w[1] * dt - leak * s->pvy;
     double sw = dt / (mind(SWING_VAR_TIME_CONSTANT_S, maxd(s->time_s, dt)) + dt);
     s->pv_var = s->pv_var + sw * (s->pvx * s->pvx + s->pvy * s->pvy - s->pv_var);
-    double k1, k2, loop = loop_gain(s, p);
-    learning_gains(s, p, loop, &k1, &k2);
+    double k1, k2, loop = loop_gain(s, p, t);
+    learning_gains(s, p, t, loop, &k1, &k2);
     s->loop_k1 = maxd(loop, 2.0 * sqrt(p->k2));
     /* bias.learning_limit_rad: unaided, widened by one sample's scatter */
     double widen = BIAS_LEARNING_NOISE_SIGMAS * sqrt(s->noise_a2) / s->g_ref;
@@ -778,8 +804,10 @@ static void step(cf_state *s, const cf_params *p, const sample *x)
         int quick = classify_motion(s, p, x, v, fast, &accelerating);
         double en = tilt_error(s, acc, v, u);
         double scale = saturate(s, p, en, quick, accelerating, &limit, &tight, &clipped);
-        aperiodic(s, p, scale, quick, tight, dt, f, li);
-        regulate(s, p, f, li, en, u, v, quick, tight, learn, x);
+        gain_terms t; /* the gains' terms aperiodic() and regulate() share */
+        gain_terms_of(s, p, &t);
+        aperiodic(s, p, &t, scale, quick, tight, dt, f, li);
+        regulate(s, p, &t, f, li, en, u, v, quick, tight, learn, x);
         recover(s, p, clipped, en, limit, learn, dt);
     }
     double lim = bias_limit_rad_s(p);
