@@ -399,3 +399,63 @@ def test_absurd_magnitudes_are_refused_or_skipped_the_same_way():
     for backend in ("python", "compiled"):
         with pytest.raises(ValueError, match="beyond"):
             estimate(gyro, acc, mag, timestamps_s=t, backend=backend)
+
+
+@pytest.mark.parametrize("k2", [FilterParams().bias_learning_k2, 0.0],
+                         ids=["two_hypotheses", "one"])
+def test_the_direct_update_is_update_bit_for_bit(k2):
+    """ComplementaryFilter.update on a compiled filter: a plain call goes from C straight to
+    the filter's _kernel.Pair (filter.py's FastUpdate); the function itself (read on the class,
+    what any other call runs) and the Python reference give the same q, the same published
+    hypothesis and the same state, sample by sample, bit for bit: 9-D over the rich recording
+    (the magnetometer None or left out at times), 6-D over a handheld one whose de-biased gyro
+    ends up publishing the hypothesis without in-flight learning."""
+    from cf_estimator.bench.ablation import handheld_case
+
+    assert isinstance(vars(ComplementaryFilter)["update"], kernel.compiled_kernel.FastUpdate)
+    function = ComplementaryFilter.update
+    assert function.__name__ == "update" and "aiding" in function.__code__.co_varnames
+    t, gyro, acc, mag = rich_recording(3000)
+    th, gyro_h, acc_h, _ = handheld_case(0, duration_s=20.0)
+    runs = ((FilterParams(bias_learning_k2=k2), t, gyro, acc, mag),
+            (FilterParams(bias_learning_k2=k2, use_mag=False), th, gyro_h, acc_h, None))
+    published = set()
+    for params, t, gyro, acc, mag in runs:
+        dts = np.diff(t, prepend=t[0] - 0.01).tolist()
+        direct, through, ref = (ComplementaryFilter(params, backend=b)
+                                for b in ("compiled", "compiled", "python"))
+        for i, (g, a, dt) in enumerate(zip(gyro.tolist(), acc.tolist(), dts, strict=True)):
+            m = mag[i].tolist() if mag is not None and i % 3 else None
+            q = direct.update(g, a, dt, m) if m is not None or i % 2 else direct.update(g, a, dt)
+            assert q == function(through, g, a, dt, m, None) == ref.update(g, a, dt, m), i
+            states = [f.get_state() for f in (direct, through, ref)]
+            assert states[0] == states[1] == states[2], i
+            published.add(states[0]["published"])
+    assert published == ({"in_flight", "rest_only"} if k2 > 0.0 else {"in_flight"})
+
+
+def test_a_subclass_update_or_step_of_its_own_is_called_for_every_sample():
+    """The direct call never bypasses a subclass's own _update (the replay's recording filter)
+    or update; nor an aiding input (update's own lines)."""
+    calls = []
+
+    class OwnStep(ComplementaryFilter):
+        def _update(self, *args):
+            calls.append("_update")
+            return super()._update(*args)
+
+    class OwnUpdate(ComplementaryFilter):
+        def update(self, *args, **kwargs):
+            calls.append("update")
+            return super().update(*args, **kwargs)
+
+    plain = ComplementaryFilter(backend="compiled")
+    for cls in (OwnStep, OwnUpdate):
+        f = cls(backend="compiled")
+        for _ in range(3):
+            sample = ((0.01, 0.0, 0.02), (0.1, 0.0, G), 0.01, tuple(FIELD))
+            assert f.update(*sample) == plain.update(*sample)
+        plain.reset()
+    assert calls == ["_update"] * 3 + ["update"] * 3
+    with pytest.raises(TypeError):
+        plain.update((0.0, 0.0, 0.0), (0.0, 0.0, G), 0.01, None, None, None)

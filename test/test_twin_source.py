@@ -37,11 +37,16 @@ PY_MODULES = (step, stillness, bias)
 PY_EXTRA = (("ops.py", "FloatOps.sin_half_over"),)
 #: The C functions that repeat them; the first four are the rotation helpers.
 C_HELPERS = ("mul", "expmap", "rotate", "turn_heading")
-#: The step's stages, in the order step() and cf_step() call them: one name in both files.
+#: The step's stages, in the order step() of step.py and step() of cf_core.c (cf_step's body,
+#: also the pair's) call them: one name in both files.
 STAGES = ("predict", "classify_motion", "tilt_error", "saturate", "aperiodic", "regulate",
           "recover", "heading")
 C_STEP = ("rest_time_s", "bias_limit_rad_s", "toward_unit", "up", "stillness", "turn_share",
-          "error_sigma", "loop_gain", "learning_gains", "cf_step") + STAGES
+          "error_sigma", "loop_gain", "learning_gains", "step") + STAGES
+#: ... and what the C computes once where the Python repeats it: the terms of a sample that the
+#: stages read (once for both bias hypotheses), the gains' terms aperiodic() and regulate()
+#: share; their constants and parameter reads count as those of the code they stand in for.
+C_STEP += ("sample_terms", "gain_terms_of")
 #: Where a C constant's Python counterpart may live (the step's modules, then the checks', then
 #: the covariance model's, whose row loop the C repeats for the bulk replay).
 PY_HOMES = (step, stillness, bias, ops, filter, covariance)
@@ -141,7 +146,7 @@ def test_step_and_cf_step_call_the_same_stages_in_the_same_order():
     py = {f.name: f for f in tree.body if isinstance(f, ast.FunctionDef)}
     assert set(STAGES) <= set(py), sorted(set(STAGES) - set(py))
     py_order = [name for name in _py_calls(py["step"]) if name in STAGES]
-    c_body = _c_functions()["cf_step"]
+    c_body = _c_functions()["step"]
     c_order = [name for name in re.findall(r"\b(\w+)\(", c_body) if name in STAGES]
     assert py_order == list(STAGES)
     assert c_order == py_order

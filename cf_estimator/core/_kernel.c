@@ -17,6 +17,9 @@
  *                                                        = that update for rows start..N-1 of
  *                                                          C-contiguous float64 arrays
  *     .copy()
+ *   Pair(learning, params, null|None, null_params|None)
+ *                 ComplementaryFilter's update once initialised, as a callable:
+ *                 (gyro, accel, dt, mag=None) -> (q, the published State)
  *   covariance_rows(...), rpy_rows(q, out)  (see below)
  */
 #define PY_SSIZE_T_CLEAN
@@ -97,6 +100,10 @@ static int read3(PyObject *o, double *v)
         PyObject **items = PyTuple_CheckExact(o) ? ((PyTupleObject *)o)->ob_item
                                                  : ((PyListObject *)o)->ob_item;
         for (int i = 0; i < 3; i++) {
+            if (PyFloat_CheckExact(items[i])) { /* the common case, without the call */
+                v[i] = PyFloat_AS_DOUBLE(items[i]);
+                continue;
+            }
             v[i] = PyFloat_AsDouble(items[i]);
             if (v[i] == -1.0 && PyErr_Occurred()) return -1;
         }
@@ -167,9 +174,61 @@ static PyObject *q_tuple(const cf_state *s, int ned)
     return t;
 }
 
+/* One sample's Python arguments (gyro, accel|None, dt, mag|None or absent) read and checked as
+ * ComplementaryFilter.update does (ValueError for the gyro and dt; an invalid accel/mag is
+ * skipped: its pointer NULL). 0, or -1 with an error set. */
+typedef struct {
+    double g[3], a[3], m[3], dt;
+    const double *acc, *mag;
+} py_sample;
+
+static int read_sample(PyObject *og, PyObject *oa, PyObject *odt, PyObject *om, py_sample *x)
+{
+    int hg = read3(og, x->g);
+    if (hg < 0) return -1;
+    if (hg == 0) {
+        PyErr_Format(PyExc_ValueError, "gyro sample must have 3 components: %R", og);
+        return -1;
+    }
+    int problem = cf_gyro_problem(x->g);
+    if (problem) {
+        PyObject *t = PySequence_Tuple(og);
+        if (t != NULL) {
+            PyErr_Format(PyExc_ValueError, "%s: %R", GYRO_PROBLEM[problem], t);
+            Py_DECREF(t);
+        }
+        return -1;
+    }
+    x->dt = PyFloat_CheckExact(odt) ? PyFloat_AS_DOUBLE(odt) : PyFloat_AsDouble(odt);
+    if (x->dt == -1.0 && PyErr_Occurred()) return -1;
+    if (!(x->dt > 0.0 && isfinite(x->dt))) {
+        PyErr_Format(PyExc_ValueError, "dt must be a positive finite number of seconds, got %R",
+                     odt);
+        return -1;
+    }
+    int ha = read_optional3(oa, x->a);
+    int hm = om != NULL ? read_optional3(om, x->m) : 0;
+    if (ha < 0 || hm < 0) return -1;
+    x->acc = ha ? x->a : NULL;
+    x->mag = hm ? x->m : NULL;
+    return 0;
+}
+
+/* Both hypotheses (null: NULL for one) stepped on a checked sample; 1 when the null one is
+ * published after it. */
+static int step_sample(cf_state *s, const cf_params *p, cf_state *null, const cf_params *pn,
+                       const py_sample *x)
+{
+    if (null == NULL) {
+        cf_step(s, p, x->g, x->acc, x->mag, x->dt);
+        return 0;
+    }
+    return cf_step_pair(s, p, null, pn, x->g, x->acc, x->mag, x->dt);
+}
+
 static PyObject *State_update(StateObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
-    double g[3], a[3], m[3];
+    py_sample x;
     if (nargs < 4 || nargs > 7 || nargs == 6) {
         PyErr_SetString(PyExc_TypeError,
                         "update(params, gyro, accel, dt, mag=None[, null, null_params])");
@@ -185,43 +244,248 @@ static PyObject *State_update(StateObject *self, PyObject *const *args, Py_ssize
         if (!check_params(args[6])) return NULL;
         null = (StateObject *)args[5];
     }
-    int hg = read3(args[1], g);
-    if (hg < 0) return NULL;
-    if (hg == 0) {
-        PyErr_Format(PyExc_ValueError, "gyro sample must have 3 components: %R", args[1]);
+    if (read_sample(args[1], args[2], args[3], nargs >= 5 ? args[4] : NULL, &x) < 0)
         return NULL;
-    }
-    int problem = cf_gyro_problem(g);
-    if (problem) {
-        PyObject *t = PySequence_Tuple(args[1]);
-        if (t != NULL) {
-            PyErr_Format(PyExc_ValueError, "%s: %R", GYRO_PROBLEM[problem], t);
-            Py_DECREF(t);
-        }
-        return NULL;
-    }
-    double dt = PyFloat_AsDouble(args[3]);
-    if (dt == -1.0 && PyErr_Occurred()) return NULL;
-    if (!(dt > 0.0 && isfinite(dt))) {
-        PyErr_Format(PyExc_ValueError, "dt must be a positive finite number of seconds, got %R",
-                     args[3]);
-        return NULL;
-    }
-    int ha = read_optional3(args[2], a);
-    int hm = nargs >= 5 ? read_optional3(args[4], m) : 0;
-    if (ha < 0 || hm < 0) return NULL;
     const cf_params *p = &((ParamsObject *)args[0])->p;
-    if (null == NULL) {
-        cf_update(&self->s, p, g, ha ? a : NULL, hm ? m : NULL, dt, NULL); /* checked above */
-        return q_tuple(&self->s, p->ned);
-    }
-    int use_null = 0;
-    cf_update_pair(&self->s, p, &null->s, &((ParamsObject *)args[6])->p, g, ha ? a : NULL,
-                   hm ? m : NULL, dt, NULL, &use_null);
+    int use_null = step_sample(&self->s, p, null ? &null->s : NULL,
+                               null ? &((ParamsObject *)args[6])->p : NULL, &x);
     PyObject *q = q_tuple(use_null ? &null->s : &self->s, p->ned);
-    if (q == NULL) return NULL;
-    return Py_BuildValue("(NO)", q, use_null ? Py_True : Py_False);
+    if (q == NULL || null == NULL) return q;
+    PyObject *out = PyTuple_New(2);
+    if (out == NULL) {
+        Py_DECREF(q);
+        return NULL;
+    }
+    PyTuple_SET_ITEM(out, 0, q);
+    PyObject *flag = use_null ? Py_True : Py_False;
+    Py_INCREF(flag);
+    PyTuple_SET_ITEM(out, 1, flag);
+    return out;
 }
+
+/* ---- Python: Pair ------------------------------------------------------------------------- */
+/* ComplementaryFilter's compiled update once initialised, one call per sample:
+ * Pair(learning, params, null|None, null_params|None)(gyro, accel, dt, mag=None) ->
+ * (q, the published State) = State.update's checks and step of both hypotheses (of the
+ * learning one alone when null is None), without the per-call argument checks of the states
+ * and parameters (done once here). */
+typedef struct {
+    PyObject_HEAD
+    vectorcallfunc vectorcall;
+    StateObject *learning, *null;      /* null NULL: one hypothesis */
+    ParamsObject *params, *null_params;
+} PairObject;
+
+static PyTypeObject PairType;
+
+/* The pair's update on (gyro, accel, dt[, mag]) (nargs 3 or 4): q, and *published (borrowed),
+ * or NULL with an error set. */
+static PyObject *pair_update(PairObject *self, PyObject *const *args, Py_ssize_t nargs,
+                             StateObject **published)
+{
+    py_sample x;
+    if (read_sample(args[0], args[1], args[2], nargs == 4 ? args[3] : NULL, &x) < 0)
+        return NULL;
+    const cf_params *p = &self->params->p;
+    int use_null = step_sample(&self->learning->s, p, self->null ? &self->null->s : NULL,
+                               self->null ? &self->null_params->p : NULL, &x);
+    *published = use_null ? self->null : self->learning;
+    return q_tuple(&(*published)->s, p->ned);
+}
+
+static PyObject *Pair_vectorcall(PyObject *callable, PyObject *const *args, size_t nargsf,
+                                 PyObject *kwnames)
+{
+    Py_ssize_t nargs = PyVectorcall_NARGS(nargsf);
+    if (nargs < 3 || nargs > 4 || (kwnames != NULL && PyTuple_GET_SIZE(kwnames) > 0)) {
+        PyErr_SetString(PyExc_TypeError, "Pair(gyro, accel, dt, mag=None): positional only");
+        return NULL;
+    }
+    StateObject *published;
+    PyObject *q = pair_update((PairObject *)callable, args, nargs, &published);
+    if (q == NULL) return NULL;
+    PyObject *out = PyTuple_New(2);
+    if (out == NULL) {
+        Py_DECREF(q);
+        return NULL;
+    }
+    PyTuple_SET_ITEM(out, 0, q);
+    Py_INCREF(published);
+    PyTuple_SET_ITEM(out, 1, (PyObject *)published);
+    return out;
+}
+
+static PyObject *Pair_new(PyTypeObject *type, PyObject *args, PyObject *kwds)
+{
+    PyObject *learning, *params, *null = Py_None, *null_params = Py_None;
+    static char *kwlist[] = {"learning", "params", "null", "null_params", NULL};
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O!O!|OO:Pair", kwlist, &StateType, &learning,
+                                     &ParamsType, &params, &null, &null_params))
+        return NULL;
+    if ((null == Py_None) != (null_params == Py_None) ||
+        (null != Py_None && (!PyObject_TypeCheck(null, &StateType) ||
+                             !PyObject_TypeCheck(null_params, &ParamsType)))) {
+        PyErr_SetString(PyExc_TypeError, "Pair: null (a State) and null_params (Params), or "
+                                         "neither");
+        return NULL;
+    }
+    if (null == learning) {
+        PyErr_SetString(PyExc_ValueError, "Pair: null must be another State than learning");
+        return NULL;
+    }
+    PairObject *self = (PairObject *)type->tp_alloc(type, 0);
+    if (self == NULL) return NULL;
+    self->vectorcall = Pair_vectorcall;
+    Py_INCREF(learning);
+    self->learning = (StateObject *)learning;
+    Py_INCREF(params);
+    self->params = (ParamsObject *)params;
+    if (null != Py_None) {
+        Py_INCREF(null);
+        self->null = (StateObject *)null;
+        Py_INCREF(null_params);
+        self->null_params = (ParamsObject *)null_params;
+    }
+    return (PyObject *)self;
+}
+
+static void Pair_dealloc(PairObject *self)
+{
+    Py_XDECREF(self->learning);
+    Py_XDECREF(self->null);
+    Py_XDECREF(self->params);
+    Py_XDECREF(self->null_params);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+static PyTypeObject PairType = {
+    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "cf_estimator.core._kernel.Pair",
+    .tp_basicsize = sizeof(PairObject),
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_VECTORCALL,
+    .tp_doc = "Pair(learning, params, null=None, null_params=None): called with (gyro, accel, "
+              "dt, mag=None) -> (q in the output frame, the published State): State.update of "
+              "both bias hypotheses, one call per sample.",
+    .tp_new = Pair_new,
+    .tp_dealloc = (destructor)Pair_dealloc,
+    .tp_vectorcall_offset = offsetof(PairObject, vectorcall),
+    .tp_call = PyVectorcall_Call,
+};
+
+/* ---- Python: FastUpdate ------------------------------------------------------------------- */
+/* FastUpdate(function): a method of the filter class (ComplementaryFilter.update) whose call
+ * on an instance with the plain arguments (gyro, accel, dt[, mag]: positional, no aiding)
+ * goes straight to the instance's Pair (its attribute _fast, when not None) and sets its
+ * _state to the published State, as the function's own first lines do; any other call, and
+ * every call while _fast is None, is the function's. Read on the class it is the function
+ * itself (introspection, super()). */
+typedef struct {
+    PyObject_HEAD
+    vectorcallfunc vectorcall;
+    PyObject *func;
+} FastUpdateObject;
+
+static PyObject *str_fast, *str_state;
+
+static PyObject *FastUpdate_vectorcall(PyObject *callable, PyObject *const *args,
+                                       size_t nargsf, PyObject *kwnames)
+{
+    FastUpdateObject *self = (FastUpdateObject *)callable;
+    Py_ssize_t nargs = PyVectorcall_NARGS(nargsf);
+    if ((nargs == 4 || nargs == 5) && (kwnames == NULL || PyTuple_GET_SIZE(kwnames) == 0)) {
+        PyObject *fast = PyObject_GetAttr(args[0], str_fast);
+        if (fast == NULL) return NULL;
+        if (Py_IS_TYPE(fast, &PairType)) {
+            StateObject *published;
+            PyObject *q = pair_update((PairObject *)fast, args + 1, nargs - 1, &published);
+            Py_DECREF(fast);
+            if (q != NULL && PyObject_SetAttr(args[0], str_state, (PyObject *)published) < 0)
+                Py_CLEAR(q);
+            return q;
+        }
+        Py_DECREF(fast);
+    }
+    return PyObject_Vectorcall(self->func, args, nargsf, kwnames);
+}
+
+static PyObject *FastUpdate_new(PyTypeObject *type, PyObject *args, PyObject *kwds)
+{
+    PyObject *func;
+    if (!PyArg_ParseTuple(args, "O:FastUpdate", &func)) return NULL;
+    if (!PyCallable_Check(func)) {
+        PyErr_SetString(PyExc_TypeError, "FastUpdate: a function");
+        return NULL;
+    }
+    FastUpdateObject *self = (FastUpdateObject *)type->tp_alloc(type, 0);
+    if (self == NULL) return NULL;
+    self->vectorcall = FastUpdate_vectorcall;
+    Py_INCREF(func);
+    self->func = func;
+    return (PyObject *)self;
+}
+
+static int FastUpdate_traverse(FastUpdateObject *self, visitproc visit, void *arg)
+{
+    Py_VISIT(self->func);
+    return 0;
+}
+
+static int FastUpdate_clear(FastUpdateObject *self)
+{
+    Py_CLEAR(self->func);
+    return 0;
+}
+
+static void FastUpdate_dealloc(FastUpdateObject *self)
+{
+    PyObject_GC_UnTrack(self);
+    FastUpdate_clear(self);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+/* on the class: the function; on an instance: a method bound to it */
+static PyObject *FastUpdate_get(PyObject *self, PyObject *obj, PyObject *type)
+{
+    if (obj == NULL || obj == Py_None) {
+        Py_INCREF(((FastUpdateObject *)self)->func);
+        return ((FastUpdateObject *)self)->func;
+    }
+    return PyMethod_New(self, obj);
+}
+
+static PyObject *FastUpdate_getattro(PyObject *self, PyObject *name)
+{
+    /* __doc__, __name__, __wrapped__ ...: the function's (inspect.signature follows it) */
+    PyObject *func = ((FastUpdateObject *)self)->func;
+    if (PyUnicode_Check(name)) {
+        if (PyUnicode_CompareWithASCIIString(name, "__wrapped__") == 0) {
+            Py_INCREF(func);
+            return func;
+        }
+        if (PyUnicode_CompareWithASCIIString(name, "__doc__") == 0)
+            return PyObject_GetAttr(func, name);
+    }
+    PyObject *r = PyObject_GenericGetAttr(self, name);
+    if (r != NULL || !PyErr_ExceptionMatches(PyExc_AttributeError)) return r;
+    PyErr_Clear();
+    return PyObject_GetAttr(func, name);
+}
+
+static PyTypeObject FastUpdateType = {
+    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "cf_estimator.core._kernel.FastUpdate",
+    .tp_basicsize = sizeof(FastUpdateObject),
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC | Py_TPFLAGS_HAVE_VECTORCALL |
+                Py_TPFLAGS_METHOD_DESCRIPTOR,
+    .tp_doc = "FastUpdate(function): the filter's update method, its plain calls on an "
+              "initialised compiled filter through the instance's Pair (_fast).",
+    .tp_new = FastUpdate_new,
+    .tp_dealloc = (destructor)FastUpdate_dealloc,
+    .tp_traverse = (traverseproc)FastUpdate_traverse,
+    .tp_clear = (inquiry)FastUpdate_clear,
+    .tp_descr_get = FastUpdate_get,
+    .tp_getattro = FastUpdate_getattro,
+    .tp_vectorcall_offset = offsetof(FastUpdateObject, vectorcall),
+    .tp_call = PyVectorcall_Call,
+};
 
 /* A C-contiguous float64 buffer of exactly `count` doubles (None allowed if `optional`). */
 static int get_array(PyObject *o, Py_buffer *b, Py_ssize_t count, int writable, int optional,
@@ -514,7 +778,12 @@ static struct PyModuleDef kernel_module = {
 
 PyMODINIT_FUNC PyInit__kernel(void)
 {
-    if (PyType_Ready(&ParamsType) < 0 || PyType_Ready(&StateType) < 0) return NULL;
+    if (PyType_Ready(&ParamsType) < 0 || PyType_Ready(&StateType) < 0 ||
+        PyType_Ready(&PairType) < 0 || PyType_Ready(&FastUpdateType) < 0)
+        return NULL;
+    str_fast = PyUnicode_InternFromString("_fast");
+    str_state = PyUnicode_InternFromString("_state");
+    if (str_fast == NULL || str_state == NULL) return NULL;
     PyObject *m = PyModule_Create(&kernel_module);
     if (m == NULL) return NULL;
     PyObject *fields = PyList_New(0);
@@ -533,9 +802,13 @@ PyMODINIT_FUNC PyInit__kernel(void)
     }
     Py_INCREF(&ParamsType);
     Py_INCREF(&StateType);
+    Py_INCREF(&PairType);
+    Py_INCREF(&FastUpdateType);
     if (consts == NULL || PyModule_AddObject(m, "CONSTANTS", consts) < 0 ||
         PyModule_AddObject(m, "Params", (PyObject *)&ParamsType) < 0 ||
-        PyModule_AddObject(m, "State", (PyObject *)&StateType) < 0) {
+        PyModule_AddObject(m, "State", (PyObject *)&StateType) < 0 ||
+        PyModule_AddObject(m, "Pair", (PyObject *)&PairType) < 0 ||
+        PyModule_AddObject(m, "FastUpdate", (PyObject *)&FastUpdateType) < 0) {
         Py_DECREF(m);
         return NULL;
     }

@@ -23,7 +23,7 @@ The estimate b (sensor frame, rad/s) is the PI regulator's integral state; its v
 - :func:`clamp` — bounded by BIAS_LIMIT_SIGMAS × ``bias_prior_sigma_rad_s``.
 
 Owns the ``BIAS`` fields of :mod:`cf_estimator.core.state`. Written
-once for floats and arrays; ``c/cf_core.c`` repeats it inline in ``cf_step``/``stillness``.
+once for floats and arrays; ``c/cf_core.c`` repeats it inline in ``step``/``stillness``.
 """
 
 from __future__ import annotations

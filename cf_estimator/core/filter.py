@@ -269,6 +269,10 @@ class ComplementaryFilter:
         self._learning: Any = self._new_state()
         self._state: Any = self._learning  # the published hypothesis
         self._initialized = False
+        #: the compiled update of both hypotheses once initialised (_kernel.Pair), else None;
+        #: _fast: the same where update() may call it directly (_update not overridden)
+        self._pair: Any = None
+        self._fast: Any = None
         #: the last update's aiding took hold on an attitude error (apply_aiding)
         self.aiding_attitude_error = False
         self.set_params(params if params is not None else FilterParams())
@@ -279,7 +283,8 @@ class ComplementaryFilter:
     # parameter objects are rebuilt on arrival)
     def __getstate__(self) -> dict[str, Any]:
         d = {k: v for k, v in self.__dict__.items()
-             if k not in ("_kernel_params", "_null_kernel_params", "_learning", "_null", "_state")}
+             if k not in ("_kernel_params", "_null_kernel_params", "_learning", "_null", "_state",
+                          "_pair", "_fast")}
         d["_saved"] = self.get_state()
         return d
 
@@ -287,6 +292,7 @@ class ComplementaryFilter:
         saved = d.pop("_saved")
         self.__dict__.update(d)
         self._kernel_params = self._null_kernel_params = self._null = None
+        self._pair = self._fast = None
         self._learning = self._state = self._new_state()
         self.set_params(self._params)
         self.set_state(saved)
@@ -315,6 +321,19 @@ class ComplementaryFilter:
             self._state = self._learning
         elif self._null is None:  # from now on: it starts where the learning one is
             self._null = self._learning.copy()
+        self._bind()
+
+    def _bind(self) -> None:
+        """The compiled update of the states and parameters now in force (after any change of
+        them or of the initialisation): :attr:`_pair`, and :attr:`_fast` for update()."""
+        pair = None
+        if self._kernel_params is not None and self._initialized:
+            pair = compiled_kernel.Pair(  # type: ignore[union-attr]
+                self._learning, self._kernel_params, self._null,
+                None if self._null is None else self._null_kernel_params)
+        self._pair = pair
+        # a subclass's own _update (the replay's recording filter) must see every sample
+        self._fast = pair if type(self)._update is ComplementaryFilter._update else None
 
     def _new_state(self) -> Any:
         if self.backend == "compiled":
@@ -338,6 +357,7 @@ class ComplementaryFilter:
         self._learning = self._state = self._new_state()
         self._null = None if self._params.bias_learning_k2 <= 0.0 else self._new_state()
         self._initialized = False
+        self._bind()
 
     def _hypotheses(self) -> tuple[Any, ...]:
         return (self._learning,) if self._null is None else (self._learning, self._null)
@@ -361,6 +381,7 @@ class ComplementaryFilter:
             s.heading_initialized = heading_known
             s.phase = PHASE_STARTUP
         self._initialized = True
+        self._bind()
 
     def correct_heading(self, turn_rad: float) -> None:
         """Turn the heading by ``turn_rad`` about the output world frame's z axis (ENU: up,
@@ -508,7 +529,12 @@ class ComplementaryFilter:
         specific force, in place of the ``accel_m_s2`` argument); :attr:`aiding_attitude_error`
         says whether it took hold on an attitude error.
         """
-        if aiding is not None and self._initialized:
+        if aiding is None:
+            fast = self._fast  # the compiled update, initialised: one call (as _update's)
+            if fast is not None:
+                q, self._state = fast(gyro_rad_s, accel_m_s2, dt_s, mag)
+                return q
+        elif self._initialized:
             self.aiding_attitude_error = self.apply_aiding(aiding)
             accel_m_s2 = aiding.accel_m_s2
         return self._update(gyro_rad_s, accel_m_s2, dt_s, mag)
@@ -516,13 +542,8 @@ class ComplementaryFilter:
     def _update(self, gyro_rad_s: Vector, accel_m_s2: Vector | None, dt_s: float,
                 mag: Vector | None) -> tuple[float, float, float, float] | None:
         """The step itself (:meth:`update` after the aiding's input): both hypotheses."""
-        if self._kernel_params is not None and self._initialized:  # the compiled twin, same checks
-            if self._null is None:
-                return self._learning.update(self._kernel_params, gyro_rad_s, accel_m_s2, dt_s,
-                                             mag)
-            q, null = self._learning.update(self._kernel_params, gyro_rad_s, accel_m_s2, dt_s,
-                                            mag, self._null, self._null_kernel_params)
-            self._state = self._null if null else self._learning
+        if self._pair is not None:  # the compiled twin (initialised), same checks
+            q, self._state = self._pair(gyro_rad_s, accel_m_s2, dt_s, mag)
             return q
         if not self._initialized:
             self.initialize_from(accel_m_s2, mag) if accel_m_s2 is not None else None
@@ -682,7 +703,17 @@ class ComplementaryFilter:
         self._state = null if (null is not None and state["published"] == "rest_only") \
             else learning
         self._initialized = bool(state.get("initialized", True))
+        self._bind()
 
     def state_snapshot(self) -> Any:
         """A copy of the full internal state (for tests and debugging)."""
         return self._state.copy()
+
+
+if getattr(compiled_kernel, "FastUpdate", None) is not None:
+    # update()'s first lines in C: a plain call (gyro, accel, dt[, mag], no aiding) on an
+    # initialised compiled filter goes straight to its _kernel.Pair (_fast) and publishes its
+    # state, without the Python frame; every other call runs update() above. On the class,
+    # ComplementaryFilter.update is still that function.
+    ComplementaryFilter.update = compiled_kernel.FastUpdate(  # type: ignore[method-assign,union-attr]
+        ComplementaryFilter.update)

@@ -249,8 +249,8 @@ def step(
 
     ``p`` has the FilterParams field names (floats, or arrays for a batch).
     ``accel``/``mag`` are None when absent or invalid at this sample (the caller checks
-    finiteness and non-zero norm). ``dt`` > 0 [s]. The C twin's cf_step() (core/c/cf_core.c)
-    calls the same stages, of the same names, in the same order.
+    finiteness and non-zero norm). ``dt`` > 0 [s]. The C twin's step() (core/c/cf_core.c, the
+    body of cf_step) calls the same stages, of the same names, in the same order.
     """
     s.time_s = s.time_s + dt
     bias.add_process_noise(s, p, dt, o)

@@ -26,9 +26,10 @@ def add_parser(sub: Any) -> None:
         "bag replay throughput",
         description=(
             "In one run: samples/s of one 9-D update called from Python for our filter and each "
-            "peer; ImuPipeline.on_imu median and p99 per message; the batched filter's "
-            "parameter-samples per second; messages/s of `cf-estimator replay` (read, "
-            "deserialize, pipeline, serialize, write an mcap bag) against a plain rosbags "
+            "peer (the best of interleaved runs, the same for all); ImuPipeline.on_imu median "
+            "and p99 per message; the batched filter's parameter-samples per second; "
+            "messages/s of `cf-estimator replay` (read, deserialize, pipeline, serialize, "
+            "write an mcap bag) against a plain rosbags "
             "AnyReader read of the same topics, raw and deserialized, on --bag (default: a "
             "simulated 30 s flight in a temporary directory). Shared machines are noisy: "
             "compare ratios."

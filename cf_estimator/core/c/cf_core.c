@@ -160,6 +160,46 @@ static double bias_limit_rad_s(const cf_params *p)
     return BIAS_LIMIT_SIGMAS * p->bias_prior_sigma_rad_s;
 }
 
+/* One sample as the stages read it: the inputs (acc, mag NULL when absent or invalid) and the
+ * terms that depend on them, dt and the parameters only, never on the state. The stages read
+ * these terms instead of computing them, so the two bias hypotheses (cf_update_pair) compute
+ * them once per sample; each is the very expression step.py evaluates in the stage named
+ * beside it (the same operations: the same bits). */
+typedef struct {
+    const double *g, *acc, *mag;
+    double dt;
+    double an;                   /* classify_motion: |a| */
+    double mn, ux, uy, uz;       /* stillness and heading: |m|, m / |m| */
+    double aw, decay_hold, lw, tw, decay_memory; /* classify_motion: the low-passes' weights */
+    double leak;                 /* regulate: the velocity swing's leak */
+} sample;
+
+/* the terms of sample (see there), each as its stage writes it */
+static void sample_terms(sample *x, const cf_params *p, const double *g, const double *acc,
+                         const double *mag, double dt)
+{
+    x->g = g;
+    x->acc = acc;
+    x->mag = mag;
+    x->dt = dt;
+    if (acc != NULL) x->an = sqrt(acc[0] * acc[0] + acc[1] * acc[1] + acc[2] * acc[2]);
+    if (mag != NULL) {
+        double mx = mag[0], my = mag[1], mz = mag[2];
+        x->mn = sqrt(mx * mx + my * my + mz * mz);
+        x->ux = mx / x->mn;
+        x->uy = my / x->mn;
+        x->uz = mz / x->mn;
+    }
+    x->aw = dt / (ACCEL_LOWPASS_TIME_CONSTANT_S + dt);
+    double hold = rest_time_s(p); /* quiet again when it could be at rest */
+    x->decay_hold = hold / (hold + dt);
+    x->lw = dt / (RATE_LOWPASS_TIME_CONSTANT_S + dt);
+    x->tw = dt / (TURN_LOWPASS_TIME_CONSTANT_S + dt);
+    double memory = 1.0 / maxd(p->k1, BIAS_LEARNING_MIN_K1);
+    x->decay_memory = memory / (memory + dt);
+    x->leak = dt / (SWING_TIME_CONSTANT_S + dt);
+}
+
 static void mul(double aw, double ax, double ay, double az, double bw, double bx, double by,
                 double bz, double *o)
 {
@@ -172,8 +212,11 @@ static void mul(double aw, double ax, double ay, double az, double bw, double bx
 static void expmap(double vx, double vy, double vz, double *o)
 {
     double angle = sqrt(vx * vx + vy * vy + vz * vz);
-    double k = angle < SMALL_ANGLE_RAD ? 0.5 - angle * angle / 48.0 : sin(0.5 * angle) / angle;
-    o[0] = cos(0.5 * angle);
+    /* both of the half angle, always: one sincos call where the C library has it (glibc's
+     * gives sin's and cos's bits; as in turn_heading) */
+    double c = cos(0.5 * angle), sn = sin(0.5 * angle);
+    double k = angle < SMALL_ANGLE_RAD ? 0.5 - angle * angle / 48.0 : sn / angle;
+    o[0] = c;
     o[1] = k * vx;
     o[2] = k * vy;
     o[3] = k * vz;
@@ -210,7 +253,13 @@ static void mul_into(cf_state *s, const double *d)
 
 static void turn_heading(cf_state *s, double angle)
 {
-    double cw = cos(0.5 * angle), cz = sin(0.5 * angle);
+    /* no turn (predict's z_m = 0 without r2): cos(+-0) = 1 and sin(+-0) = +-0 exactly, as the
+     * C library (C99 Annex F) and Python's math give them, without the call */
+    double cw = 1.0, cz = 0.5 * angle;
+    if (angle != 0.0) {
+        cw = cos(0.5 * angle);
+        cz = sin(0.5 * angle);
+    }
     double qw = cw * s->qw - cz * s->qz, qx = cw * s->qx - cz * s->qy;
     double qy = cw * s->qy + cz * s->qx, qz = cw * s->qz + cz * s->qw;
     s->qw = qw;
@@ -248,11 +297,9 @@ static void toward_unit(double *vx, double *vy, double *vz, double ux, double uy
 
 /* heading() of step.py: one magnetometer sample checked against the field reference, then the
    heading correction ('yaw' or 'full' mode) */
-static void heading(cf_state *s, const cf_params *p, const double *mag, int fast, int learn)
+static void heading(cf_state *s, const cf_params *p, const sample *x, int fast, int learn)
 {
-    double mx = mag[0], my = mag[1], mz = mag[2];
-    double mn = sqrt(mx * mx + my * my + mz * mz);
-    double ux = mx / mn, uy = my / mn, uz = mz / mn;
+    double mn = x->mn, ux = x->ux, uy = x->uy, uz = x->uz; /* sample_terms */
     double w[3];
     rotate(s->qw, s->qx, s->qy, s->qz, ux, uy, uz, w);
     double horizontal = sqrt(w[0] * w[0] + w[1] * w[1]);
@@ -348,9 +395,9 @@ static void heading(cf_state *s, const cf_params *p, const double *mag, int fast
 }
 
 /* _stillness() of step.py: block statistics, rest, bias from still blocks */
-static void stillness(cf_state *s, const cf_params *p, const double *g, const double *a,
-                      const double *mag, double dt)
+static void stillness(cf_state *s, const cf_params *p, const sample *x)
 {
+    const double *g = x->g, *a = x->acc, dt = x->dt;
     double gx = g[0], gy = g[1], gz = g[2], ax = a[0], ay = a[1], az = a[2];
     s->blk_n = s->blk_n + 1.0;
     s->blk_t = s->blk_t + dt;
@@ -373,11 +420,9 @@ static void stillness(cf_state *s, const cf_params *p, const double *g, const do
     s->lay = ay;
     s->laz = az;
     s->last_n = s->last_n + 1.0;
-    if (mag != NULL) {
-        double mx = mag[0], my = mag[1], mz = mag[2];
-        double mn = sqrt(mx * mx + my * my + mz * mz);
+    if (x->mag != NULL) {
         double use = p->use_mag ? 1.0 : 0.0;
-        double ux = mx / mn, uy = my / mn, uz = mz / mn;
+        double ux = x->ux, uy = x->uy, uz = x->uz; /* sample_terms */
         s->blk_mx = s->blk_mx + use * ux;
         s->blk_my = s->blk_my + use * uy;
         s->blk_mz = s->blk_mz + use * uz;
@@ -503,23 +548,23 @@ static void predict(cf_state *s, const double *g, double dt)
 
 /* classify_motion() of step.py: stillness blocks, quick, the linear-acceleration detector,
    the rotation-rate low-pass; returns quick, *accelerating */
-static int classify_motion(cf_state *s, const cf_params *p, const double *g, const double *acc,
-                           const double *mag, const double *v, int fast, double dt,
-                           int *accelerating)
+static int classify_motion(cf_state *s, const cf_params *p, const sample *x, const double *v,
+                           int fast, int *accelerating)
 {
+    const double *g = x->g, *acc = x->acc, dt = x->dt;
     double gx = g[0], gy = g[1], gz = g[2];
     double ax = acc[0], ay = acc[1], az = acc[2];
-    double an = sqrt(ax * ax + ay * ay + az * az);
+    double an = x->an; /* sample_terms, as the low-passes' weights below */
     s->g_ref = s->g_ref > 0.0 ? s->g_ref : p->gravity_m_s2;
     double deviation = maxd(an - s->g_ref, s->g_ref - an);
     int spike = deviation > p->acceleration_threshold_m_s2 + ACCEL_SPIKE_SIGMAS * sqrt(s->noise_a2);
-    stillness(s, p, g, acc, mag, dt);
+    stillness(s, p, x);
     double steady_g = sqrt(s->pax * s->pax + s->pay * s->pay + s->paz * s->paz);
     int quick = fast || (s->at_rest &&
                          (maxd(steady_g - s->g_ref, s->g_ref - steady_g) <
                           p->acceleration_threshold_m_s2) &&
                          (s->noise_a2 < sq(p->acceleration_threshold_m_s2)));
-    double aw = s->last_n <= 1.0 ? 1.0 : dt / (ACCEL_LOWPASS_TIME_CONSTANT_S + dt);
+    double aw = s->last_n <= 1.0 ? 1.0 : x->aw;
     double acx = s->acx + aw * (ax - s->acx), acy = s->acy + aw * (ay - s->acy),
            acz = s->acz + aw * (az - s->acz);
     s->acx = acx;
@@ -527,23 +572,21 @@ static int classify_motion(cf_state *s, const cf_params *p, const double *g, con
     s->acz = acz;
     double an_lp = sqrt(s->acx * s->acx + s->acy * s->acy + s->acz * s->acz);
     double level = spike ? deviation : maxd(an_lp - s->g_ref, s->g_ref - an_lp);
-    double hold = rest_time_s(p); /* quiet again when it could be at rest */
-    double decayed = s->accel_hold * (hold / (hold + dt));
+    double decayed = s->accel_hold * x->decay_hold;
     s->accel_hold = maxd(level, decayed);
     double lp_sigma = sqrt(s->noise_a2 / 3.0 * dt / (2.0 * ACCEL_LOWPASS_TIME_CONSTANT_S + dt));
     *accelerating =
         s->accel_hold > p->acceleration_threshold_m_s2 + ACCEL_DETECT_SIGMAS * lp_sigma;
     double rate = sqrt(sq(gx - s->bx) + sq(gy - s->by) + sq(gz - s->bz));
-    double lw = dt / (RATE_LOWPASS_TIME_CONSTANT_S + dt);
+    double lw = x->lw;
     s->rate_lp = s->rate_lp + lw * (rate - s->rate_lp);
     /* the turn: the rate about the estimated vertical v (turn_share) */
     double turn = (gx - s->bx) * v[0] + (gy - s->by) * v[1] + (gz - s->bz) * v[2];
-    double tw = dt / (TURN_LOWPASS_TIME_CONSTANT_S + dt);
+    double tw = x->tw;
     s->turn_rate_lp = s->turn_rate_lp + tw * (turn - s->turn_rate_lp);
     /* its size held over the loop's memory 1/k1 (turn_share) */
-    double memory = 1.0 / maxd(p->k1, BIAS_LEARNING_MIN_K1);
     s->turn_hold = maxd(maxd(s->turn_rate_lp, -s->turn_rate_lp),
-                        s->turn_hold * (memory / (memory + dt)));
+                        s->turn_hold * x->decay_memory);
     return quick;
 }
 
@@ -590,23 +633,40 @@ static double error_sigma(const cf_state *s)
     return sqrt(maxd(s->bias_err_var, 0.0));
 }
 
+/* What bias.loop_gain and bias.learning_gains read of the state that aperiodic() and
+ * regulate() both see unchanged (the bias variances and the held turn rate: classify_motion
+ * has set them, regulate changes the variances only after its gains): computed once a step
+ * for both calls, where step.py computes them at each (the same operations on the same
+ * values). */
+typedef struct {
+    double err_sigma; /* error_sigma(), loop_gain's drift */
+    double sigma_b, share, turn; /* learning_gains': sqrt(bias_var), its share of the prior,
+                                    turn_share() */
+} gain_terms;
+
+static void gain_terms_of(const cf_state *s, const cf_params *p, gain_terms *t)
+{
+    t->err_sigma = error_sigma(s);
+    t->sigma_b = sqrt(maxd(s->bias_var, 0.0));
+    t->share = mind(s->bias_var / sq(p->bias_prior_sigma_rad_s), 1.0);
+    t->turn = turn_share(s, p);
+}
+
 /* bias.loop_gain of bias.py: the k1 the disturbance allows, sqrt(d / sigma_V), at most k1 */
-static double loop_gain(const cf_state *s, const cf_params *p)
+static double loop_gain(const cf_state *s, const cf_params *p, const gain_terms *t)
 {
     double sigma_v = maxd(sqrt(s->pv_var), TINY);
-    double drift = error_sigma(s) + GYRO_SCALE_UNCERTAINTY * s->rate_lp;
+    double drift = t->err_sigma + GYRO_SCALE_UNCERTAINTY * s->rate_lp;
     return s->aided ? p->k1 : mind(p->k1, sqrt(drift / sigma_v));
 }
 
 /* bias.learning_gains of bias.py: k2 raised while the bias is uncertain, capped by the
  * velocity swing and withheld in a turn; k1 as the disturbance allows, critically damped */
-static void learning_gains(const cf_state *s, const cf_params *p, double loop, double *k1,
-                           double *k2)
+static void learning_gains(const cf_state *s, const cf_params *p, const gain_terms *t,
+                           double loop, double *k1, double *k2)
 {
-    double sigma_b = sqrt(maxd(s->bias_var, 0.0));
     double sigma_v = maxd(sqrt(s->pv_var), TINY);
-    double share = mind(s->bias_var / sq(p->bias_prior_sigma_rad_s), 1.0);
-    *k2 = maxd(p->k2, mind(p->bias_learning_k2 * share, sigma_b / sigma_v) * turn_share(s, p));
+    *k2 = maxd(p->k2, mind(p->bias_learning_k2 * t->share, t->sigma_b / sigma_v) * t->turn);
     *k1 = maxd(loop, 2.0 * sqrt(*k2));
 }
 
@@ -645,13 +705,13 @@ static void learning_input(cf_state *s, const double *l, double weight, double *
 
 /* aperiodic() of step.py: the unit in the world frame on the saturated error; f into s->fx..,
    the learning input into g */
-static void aperiodic(cf_state *s, const cf_params *p, double scale, int quick, int tight,
-                      double dt, double *f, double *g)
+static void aperiodic(cf_state *s, const cf_params *p, const gain_terms *t, double scale,
+                      int quick, int tight, double dt, double *f, double *g)
 {
     double w[3], k1, k2;
     rotate(s->qw, s->qx, s->qy, s->qz, s->ex * scale, s->ey * scale, s->ez * scale, w);
     double lag = s->aided ? QUICK_LAG_TIME_CONSTANT_S : p->aperiodic_time_constant_s;
-    learning_gains(s, p, loop_gain(s, p), &k1, &k2);
+    learning_gains(s, p, t, loop_gain(s, p, t), &k1, &k2);
     lag = tight ? lag : mind(lag, LOOP_LAG_FRACTION / maxd(k1, TINY));
     double weight = dt / ((quick ? QUICK_LAG_TIME_CONSTANT_S : lag) + dt);
     s->lx = s->lx + weight * (w[0] - s->lx);
@@ -669,20 +729,21 @@ static void aperiodic(cf_state *s, const cf_params *p, double scale, int quick, 
 }
 
 /* regulate() of step.py (bias.integrate inlined) */
-static void regulate(cf_state *s, const cf_params *p, const double *f, const double *g,
-                     double en, const double *u, const double *v, int quick, int tight,
-                     int learn, double dt)
+static void regulate(cf_state *s, const cf_params *p, const gain_terms *t, const double *f,
+                     const double *g, double en, const double *u, const double *v, int quick,
+                     int tight, int learn, const sample *x)
 {
+    double dt = x->dt;
     double d[4], w[3];
     /* bias.observe_velocity_swing: the raw error integrated in the world frame */
     rotate(s->qw, s->qx, s->qy, s->qz, s->ex, s->ey, s->ez, w);
-    double leak = dt / (SWING_TIME_CONSTANT_S + dt);
+    double leak = x->leak; /* sample_terms */
     s->pvx = s->pvx + w[0] * dt - leak * s->pvx;
     s->pvy = s->pvy + w[1] * dt - leak * s->pvy;
     double sw = dt / (mind(SWING_VAR_TIME_CONSTANT_S, maxd(s->time_s, dt)) + dt);
     s->pv_var = s->pv_var + sw * (s->pvx * s->pvx + s->pvy * s->pvy - s->pv_var);
-    double k1, k2, loop = loop_gain(s, p);
-    learning_gains(s, p, loop, &k1, &k2);
+    double k1, k2, loop = loop_gain(s, p, t);
+    learning_gains(s, p, t, loop, &k1, &k2);
     s->loop_k1 = maxd(loop, 2.0 * sqrt(p->k2));
     /* bias.learning_limit_rad: unaided, widened by one sample's scatter */
     double widen = BIAS_LEARNING_NOISE_SIGMAS * sqrt(s->noise_a2) / s->g_ref;
@@ -721,10 +782,10 @@ static void recover(cf_state *s, const cf_params *p, int clipped, double en, dou
     s->clipped = (char)clipped;
 }
 
-/* step() of step.py: the same stages in the same order */
-void cf_step(cf_state *s, const cf_params *p, const double *g, const double *acc,
-                    const double *mag, double dt)
+/* step() of step.py: the same stages in the same order, on one sample (sample_terms) */
+static void step(cf_state *s, const cf_params *p, const sample *x)
 {
+    const double *g = x->g, *acc = x->acc, *mag = x->mag, dt = x->dt;
     s->time_s = s->time_s + dt;
     double walk = sq(BIAS_RANDOM_WALK_RAD_S_SQRT_S) * dt, prior = sq(p->bias_prior_sigma_rad_s);
     s->bias_var = (s->bias_var < 0.0 ? prior : s->bias_var) + walk;
@@ -740,11 +801,13 @@ void cf_step(cf_state *s, const cf_params *p, const double *g, const double *acc
         int accelerating, tight, clipped;
         double u[3], v[3], f[3], li[3], limit;
         up(s, v); /* q is the predicted one until regulate() corrects it */
-        int quick = classify_motion(s, p, g, acc, mag, v, fast, dt, &accelerating);
+        int quick = classify_motion(s, p, x, v, fast, &accelerating);
         double en = tilt_error(s, acc, v, u);
         double scale = saturate(s, p, en, quick, accelerating, &limit, &tight, &clipped);
-        aperiodic(s, p, scale, quick, tight, dt, f, li);
-        regulate(s, p, f, li, en, u, v, quick, tight, learn, dt);
+        gain_terms t; /* the gains' terms aperiodic() and regulate() share */
+        gain_terms_of(s, p, &t);
+        aperiodic(s, p, &t, scale, quick, tight, dt, f, li);
+        regulate(s, p, &t, f, li, en, u, v, quick, tight, learn, x);
         recover(s, p, clipped, en, limit, learn, dt);
     }
     double lim = bias_limit_rad_s(p);
@@ -753,7 +816,7 @@ void cf_step(cf_state *s, const cf_params *p, const double *g, const double *acc
     s->bz = mind(maxd(s->bz, -lim), lim);
 
     s->mag_status = p->use_mag ? CF_MAG_NONE : CF_MAG_DISABLED;
-    if (mag != NULL) heading(s, p, mag, fast, learn);
+    if (mag != NULL) heading(s, p, x, fast, learn);
     double qn = sqrt(s->qw * s->qw + s->qx * s->qx + s->qy * s->qy + s->qz * s->qz);
     s->qw = s->qw / qn;
     s->qx = s->qx / qn;
@@ -761,6 +824,14 @@ void cf_step(cf_state *s, const cf_params *p, const double *g, const double *acc
     s->qz = s->qz / qn;
     s->phase = s->recovering ? CF_PHASE_RECOVERING
                              : (startup ? CF_PHASE_STARTUP : CF_PHASE_RUNNING);
+}
+
+void cf_step(cf_state *s, const cf_params *p, const double *g, const double *acc,
+             const double *mag, double dt)
+{
+    sample x;
+    sample_terms(&x, p, g, acc, mag, dt);
+    step(s, p, &x);
 }
 
 /* q in the output frame (ENU as is; NED = q_ned_from_enu ⊗ q, as filter.orientation_tuple) */
@@ -797,14 +868,25 @@ int cf_gyro_problem(const double *g)
 
 
 /* ---- per sample and over arrays (ComplementaryFilter.update / run_rows of one state) ------- */
-int cf_update(cf_state *s, const cf_params *p, const double *gyro, const double *accel,
-              const double *mag, double dt, double *q_out)
+/* the checks of cf_update: CF_OK and the sample, or why it is refused */
+static int checked_sample(sample *x, const cf_params *p, const double *gyro,
+                          const double *accel, const double *mag, double dt)
 {
     int problem = cf_gyro_problem(gyro);
     if (problem) return problem;
     if (!(dt > 0.0 && isfinite(dt))) return CF_BAD_DT;
-    cf_step(s, p, gyro, (accel && cf_valid3(accel)) ? accel : NULL,
-            (mag && cf_valid3(mag)) ? mag : NULL, dt);
+    sample_terms(x, p, gyro, (accel && cf_valid3(accel)) ? accel : NULL,
+                 (mag && cf_valid3(mag)) ? mag : NULL, dt);
+    return CF_OK;
+}
+
+int cf_update(cf_state *s, const cf_params *p, const double *gyro, const double *accel,
+              const double *mag, double dt, double *q_out)
+{
+    sample x;
+    int problem = checked_sample(&x, p, gyro, accel, mag, dt);
+    if (problem) return problem;
+    step(s, p, &x);
     if (q_out) cf_output_q(s, p->ned, q_out);
     return CF_OK;
 }
@@ -875,14 +957,41 @@ int cf_publishes_null(const cf_state *learning, const cf_state *null)
     return CF_EVIDENCE_RATIO * null->pv_var < learning->pv_var;
 }
 
+/* both hypotheses stepped on one sample; 1 when the null one is published after it */
+static int step_pair(cf_state *learning, const cf_params *p, cf_state *null, const cf_params *pn,
+                     const sample *x)
+{
+    step(learning, p, x);
+    /* the null hypothesis's parameters differ in bias_learning_k2 (cf_params_null), which no
+     * sample term reads: the same terms, unless the caller's pn differs (bit for bit) in what
+     * they read */
+    if (memcmp(&pn->k1, &p->k1, sizeof p->k1) == 0 &&
+        memcmp(&pn->rest_window_s, &p->rest_window_s, sizeof p->rest_window_s) == 0) {
+        step(null, pn, x);
+    } else {
+        sample xn;
+        sample_terms(&xn, pn, x->g, x->acc, x->mag, x->dt);
+        step(null, pn, &xn);
+    }
+    return cf_publishes_null(learning, null);
+}
+
+int cf_step_pair(cf_state *learning, const cf_params *p, cf_state *null, const cf_params *pn,
+                 const double *gyro, const double *accel, const double *mag, double dt)
+{
+    sample x;
+    sample_terms(&x, p, gyro, accel, mag, dt);
+    return step_pair(learning, p, null, pn, &x);
+}
+
 int cf_update_pair(cf_state *learning, const cf_params *p, cf_state *null, const cf_params *pn,
                    const double *gyro, const double *accel, const double *mag, double dt,
                    double *q_out, int *published_null)
 {
-    int why = cf_update(learning, p, gyro, accel, mag, dt, NULL);
+    sample x;
+    int why = checked_sample(&x, p, gyro, accel, mag, dt); /* the same checks for both */
     if (why) return why;
-    cf_update(null, pn, gyro, accel, mag, dt, NULL); /* the same checks: it runs too */
-    int use_null = cf_publishes_null(learning, null);
+    int use_null = step_pair(learning, p, null, pn, &x);
     if (q_out) cf_output_q(use_null ? null : learning, p->ned, q_out);
     if (published_null) *published_null = use_null;
     return CF_OK;

@@ -182,6 +182,11 @@ int cf_update_pair(cf_state *learning, const cf_params *p, cf_state *null, const
                    const double *gyro, const double *accel, const double *mag, double dt,
                    double *q_out, int *published_null);
 
+/* cf_step of both hypotheses (no checks: cf_step's inputs); returns cf_publishes_null after
+ * it (1: the null one is published). */
+int cf_step_pair(cf_state *learning, const cf_params *p, cf_state *null, const cf_params *pn,
+                 const double *gyro, const double *accel, const double *mag, double dt);
+
 /* cf_run of both hypotheses, each row's q_out and extra_out from the one published after it;
  * *published_null (may be NULL): which, after the last row run. */
 ptrdiff_t cf_run_pair(cf_state *learning, const cf_params *p, cf_state *null,
