@@ -278,31 +278,23 @@ typedef struct {
 
 static PyTypeObject PairType;
 
-/* The pair's update on (gyro, accel, dt[, mag]) (nargs 3 or 4): q, and *published (borrowed),
- * or NULL with an error set. */
-static PyObject *pair_update(PairObject *self, PyObject *const *args, Py_ssize_t nargs,
-                             StateObject **published)
+static PyObject *Pair_vectorcall(PyObject *callable, PyObject *const *args, size_t nargsf,
+                                 PyObject *kwnames)
 {
+    PairObject *self = (PairObject *)callable;
+    Py_ssize_t nargs = PyVectorcall_NARGS(nargsf);
     py_sample x;
+    if (nargs < 3 || nargs > 4 || (kwnames != NULL && PyTuple_GET_SIZE(kwnames) > 0)) {
+        PyErr_SetString(PyExc_TypeError, "Pair(gyro, accel, dt, mag=None): positional only");
+        return NULL;
+    }
     if (read_sample(args[0], args[1], args[2], nargs == 4 ? args[3] : NULL, &x) < 0)
         return NULL;
     const cf_params *p = &self->params->p;
     int use_null = step_sample(&self->learning->s, p, self->null ? &self->null->s : NULL,
                                self->null ? &self->null_params->p : NULL, &x);
-    *published = use_null ? self->null : self->learning;
-    return q_tuple(&(*published)->s, p->ned);
-}
-
-static PyObject *Pair_vectorcall(PyObject *callable, PyObject *const *args, size_t nargsf,
-                                 PyObject *kwnames)
-{
-    Py_ssize_t nargs = PyVectorcall_NARGS(nargsf);
-    if (nargs < 3 || nargs > 4 || (kwnames != NULL && PyTuple_GET_SIZE(kwnames) > 0)) {
-        PyErr_SetString(PyExc_TypeError, "Pair(gyro, accel, dt, mag=None): positional only");
-        return NULL;
-    }
-    StateObject *published;
-    PyObject *q = pair_update((PairObject *)callable, args, nargs, &published);
+    StateObject *published = use_null ? self->null : self->learning;
+    PyObject *q = q_tuple(&published->s, p->ned);
     if (q == NULL) return NULL;
     PyObject *out = PyTuple_New(2);
     if (out == NULL) {
@@ -368,122 +360,6 @@ static PyTypeObject PairType = {
     .tp_new = Pair_new,
     .tp_dealloc = (destructor)Pair_dealloc,
     .tp_vectorcall_offset = offsetof(PairObject, vectorcall),
-    .tp_call = PyVectorcall_Call,
-};
-
-/* ---- Python: FastUpdate ------------------------------------------------------------------- */
-/* FastUpdate(function): a method of the filter class (ComplementaryFilter.update) whose call
- * on an instance with the plain arguments (gyro, accel, dt[, mag]: positional, no aiding)
- * goes straight to the instance's Pair (its attribute _fast, when not None) and sets its
- * _state to the published State, as the function's own first lines do; any other call, and
- * every call while _fast is None, is the function's. Read on the class it is the function
- * itself (introspection, super()). */
-typedef struct {
-    PyObject_HEAD
-    vectorcallfunc vectorcall;
-    PyObject *func;
-} FastUpdateObject;
-
-static PyObject *str_fast, *str_state;
-
-static PyObject *FastUpdate_vectorcall(PyObject *callable, PyObject *const *args,
-                                       size_t nargsf, PyObject *kwnames)
-{
-    FastUpdateObject *self = (FastUpdateObject *)callable;
-    Py_ssize_t nargs = PyVectorcall_NARGS(nargsf);
-    if ((nargs == 4 || nargs == 5) && (kwnames == NULL || PyTuple_GET_SIZE(kwnames) == 0)) {
-        PyObject *fast = PyObject_GetAttr(args[0], str_fast);
-        if (fast == NULL) return NULL;
-        if (Py_IS_TYPE(fast, &PairType)) {
-            StateObject *published;
-            PyObject *q = pair_update((PairObject *)fast, args + 1, nargs - 1, &published);
-            Py_DECREF(fast);
-            if (q != NULL && PyObject_SetAttr(args[0], str_state, (PyObject *)published) < 0)
-                Py_CLEAR(q);
-            return q;
-        }
-        Py_DECREF(fast);
-    }
-    return PyObject_Vectorcall(self->func, args, nargsf, kwnames);
-}
-
-static PyObject *FastUpdate_new(PyTypeObject *type, PyObject *args, PyObject *kwds)
-{
-    PyObject *func;
-    if (!PyArg_ParseTuple(args, "O:FastUpdate", &func)) return NULL;
-    if (!PyCallable_Check(func)) {
-        PyErr_SetString(PyExc_TypeError, "FastUpdate: a function");
-        return NULL;
-    }
-    FastUpdateObject *self = (FastUpdateObject *)type->tp_alloc(type, 0);
-    if (self == NULL) return NULL;
-    self->vectorcall = FastUpdate_vectorcall;
-    Py_INCREF(func);
-    self->func = func;
-    return (PyObject *)self;
-}
-
-static int FastUpdate_traverse(FastUpdateObject *self, visitproc visit, void *arg)
-{
-    Py_VISIT(self->func);
-    return 0;
-}
-
-static int FastUpdate_clear(FastUpdateObject *self)
-{
-    Py_CLEAR(self->func);
-    return 0;
-}
-
-static void FastUpdate_dealloc(FastUpdateObject *self)
-{
-    PyObject_GC_UnTrack(self);
-    FastUpdate_clear(self);
-    Py_TYPE(self)->tp_free((PyObject *)self);
-}
-
-/* on the class: the function; on an instance: a method bound to it */
-static PyObject *FastUpdate_get(PyObject *self, PyObject *obj, PyObject *type)
-{
-    if (obj == NULL || obj == Py_None) {
-        Py_INCREF(((FastUpdateObject *)self)->func);
-        return ((FastUpdateObject *)self)->func;
-    }
-    return PyMethod_New(self, obj);
-}
-
-static PyObject *FastUpdate_getattro(PyObject *self, PyObject *name)
-{
-    /* __doc__, __name__, __wrapped__ ...: the function's (inspect.signature follows it) */
-    PyObject *func = ((FastUpdateObject *)self)->func;
-    if (PyUnicode_Check(name)) {
-        if (PyUnicode_CompareWithASCIIString(name, "__wrapped__") == 0) {
-            Py_INCREF(func);
-            return func;
-        }
-        if (PyUnicode_CompareWithASCIIString(name, "__doc__") == 0)
-            return PyObject_GetAttr(func, name);
-    }
-    PyObject *r = PyObject_GenericGetAttr(self, name);
-    if (r != NULL || !PyErr_ExceptionMatches(PyExc_AttributeError)) return r;
-    PyErr_Clear();
-    return PyObject_GetAttr(func, name);
-}
-
-static PyTypeObject FastUpdateType = {
-    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "cf_estimator.core._kernel.FastUpdate",
-    .tp_basicsize = sizeof(FastUpdateObject),
-    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC | Py_TPFLAGS_HAVE_VECTORCALL |
-                Py_TPFLAGS_METHOD_DESCRIPTOR,
-    .tp_doc = "FastUpdate(function): the filter's update method, its plain calls on an "
-              "initialised compiled filter through the instance's Pair (_fast).",
-    .tp_new = FastUpdate_new,
-    .tp_dealloc = (destructor)FastUpdate_dealloc,
-    .tp_traverse = (traverseproc)FastUpdate_traverse,
-    .tp_clear = (inquiry)FastUpdate_clear,
-    .tp_descr_get = FastUpdate_get,
-    .tp_getattro = FastUpdate_getattro,
-    .tp_vectorcall_offset = offsetof(FastUpdateObject, vectorcall),
     .tp_call = PyVectorcall_Call,
 };
 
@@ -779,11 +655,8 @@ static struct PyModuleDef kernel_module = {
 PyMODINIT_FUNC PyInit__kernel(void)
 {
     if (PyType_Ready(&ParamsType) < 0 || PyType_Ready(&StateType) < 0 ||
-        PyType_Ready(&PairType) < 0 || PyType_Ready(&FastUpdateType) < 0)
+        PyType_Ready(&PairType) < 0)
         return NULL;
-    str_fast = PyUnicode_InternFromString("_fast");
-    str_state = PyUnicode_InternFromString("_state");
-    if (str_fast == NULL || str_state == NULL) return NULL;
     PyObject *m = PyModule_Create(&kernel_module);
     if (m == NULL) return NULL;
     PyObject *fields = PyList_New(0);
@@ -803,12 +676,10 @@ PyMODINIT_FUNC PyInit__kernel(void)
     Py_INCREF(&ParamsType);
     Py_INCREF(&StateType);
     Py_INCREF(&PairType);
-    Py_INCREF(&FastUpdateType);
     if (consts == NULL || PyModule_AddObject(m, "CONSTANTS", consts) < 0 ||
         PyModule_AddObject(m, "Params", (PyObject *)&ParamsType) < 0 ||
         PyModule_AddObject(m, "State", (PyObject *)&StateType) < 0 ||
-        PyModule_AddObject(m, "Pair", (PyObject *)&PairType) < 0 ||
-        PyModule_AddObject(m, "FastUpdate", (PyObject *)&FastUpdateType) < 0) {
+        PyModule_AddObject(m, "Pair", (PyObject *)&PairType) < 0) {
         Py_DECREF(m);
         return NULL;
     }

@@ -708,12 +708,3 @@ class ComplementaryFilter:
     def state_snapshot(self) -> Any:
         """A copy of the full internal state (for tests and debugging)."""
         return self._state.copy()
-
-
-if getattr(compiled_kernel, "FastUpdate", None) is not None:
-    # update()'s first lines in C: a plain call (gyro, accel, dt[, mag], no aiding) on an
-    # initialised compiled filter goes straight to its _kernel.Pair (_fast) and publishes its
-    # state, without the Python frame; every other call runs update() above. On the class,
-    # ComplementaryFilter.update is still that function.
-    ComplementaryFilter.update = compiled_kernel.FastUpdate(  # type: ignore[method-assign,union-attr]
-        ComplementaryFilter.update)
