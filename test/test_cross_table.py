@@ -3,23 +3,21 @@
 Two kinds of checks on one run of the table (test/cli_runs.py runs it once per
 session; the report, BENCHMARKS.md, is the same table with every peer beside it):
 
-**Regression guards on dev data** (``test_no_row_got_worse_beyond_its_noise``): every row of our
-two columns (online, offline) stays at most one noise margin above its value when the guard was
-last set (``BASELINE``). The margin is the row's noise from ``bench cross`` itself
-(``Row.noise``: the standard error of the row's mean over its recordings, flights, trials or
-seeds) — how far a change that is neutral on average moves the row. A row without a spread of
-its own borrows its family's: a worst recording or a single-trial BROAD group takes the noise of
-the family's mean over all its recordings (``NOISE_FROM``); the thesis scenarios (one simulated
-run each, nothing to spread over) get a fixed 5 % (``SIMULATED_MARGIN``), the only margin here
-that is not measured. These guards hold today's values on the data the team has; they are not
-the targets (the targets are scored on recordings we do not have). An improvement passes;
-re-set ``BASELINE`` from the printed table when a change is accepted, and regenerate the report
-(``cf-estimator bench report``: docs/results/benchmarks.json and BENCHMARKS.md).
-
-The aided rows (issue 23: velocity aiding, ours only — VQF takes no velocity, its columns are
-'-') are guarded alike; their "median time to < 2 deg" rows take as noise the standard error of
-the per-flight times over the flights that settle, at least ``HOLD_MARGIN_FLOOR_S`` (one
-velocity sample at 10 Hz: a median of identical times has no spread to measure).
+**Regression guards on dev data** (``test_no_row_got_worse_beyond_its_noise``): today's run
+against the committed report (``docs/results/benchmarks.json``, ``cross``: the baseline;
+`cf-estimator bench report` re-sets it when a change is accepted, and BENCHMARKS.md with it). A row
+that is a mean or median over recordings (flights, trials, seeds) keeps our columns' value per
+recording (``members``); its guard is **paired**, recording by recording (``ablation.paired``,
+the same comparison as `bench ablate`): the row got worse when the mean per-recording change
+exceeds ``NOISE_SE`` paired standard errors. The spread between recordings never enters (with
+it, BROAD 9-D could move 1.98° → 2.32° and pass): a family of 40 flights whose every flight got
+0.02° worse got worse. A row of one value — a worst recording, a single-trial BROAD group — may
+move by ``NOISE_SE`` paired standard errors of its family's mean row (``NOISE_FROM``); the
+thesis scenarios (one simulated run each, nothing to pair) by a fixed 5 %
+(``SIMULATED_MARGIN``), the only margin here that is not measured. A change within the committed
+rounding (``ROUNDING``) is no change. An improvement passes. These guards hold today's values on
+the data the team has; they are not the targets (the targets are scored on recordings we do not
+have).
 
 **Targets that are met today** (issues 16, 22, 23; the rows the table prints), one test each
 below.
@@ -60,12 +58,15 @@ import math
 import pytest
 from cli_runs import CROSS_COMMAND, REPO, SHARED, run_documented
 
+from cf_estimator.bench.ablation import NOISE_SE, paired
 from cf_estimator.bench.cross import COMPASS_SEEDS, standard_error
 from cf_estimator.cli.main import main
 
 DATA = SHARED / "data"
 OURS = ("cf_estimator", "cf_estimator_offline")
-#: Rows without a spread of their own → the row whose noise they borrow (the family's mean).
+#: The committed report: its cross rows are the guards' baseline.
+REPORT = REPO / "docs" / "results" / "benchmarks.json"
+#: Rows without recordings of their own to pair → the row whose paired noise they borrow.
 NOISE_FROM = {
     "phantom4, after 10 s: worst recording": "phantom4, after 10 s: mean",
     "phantom4 horizontal, after 10 s: worst recording": "phantom4 horizontal, after 10 s: mean",
@@ -76,100 +77,32 @@ NOISE_FROM = {
     "BROAD tapping (1): 9-D total": "BROAD all (18): 9-D total",
     "BROAD vibration (1): 9-D total": "BROAD all (18): 9-D total",
 }
-#: The smallest margin of a "median time to < 2 deg" row [s] (one velocity sample at 10 Hz).
-HOLD_MARGIN_FLOOR_S = 0.1
 #: The thesis scenarios' margin, as a fraction of the value (one deterministic run: no noise).
 SIMULATED_MARGIN = 0.05
-#: Our (online, offline) value of each row when the guards were last set (issue 26, on the
-#: tree with issues 22-25 merged; re-set with issue 22's loop lag and gate, then with the
-#: running mean in start-up and the turn share, with a velocity that says moving, and
-#: with the loop's drift from the bias estimate's error, bias.error_sigma, and with the turn held
-#: over the loop's memory, step.py turn_hold; the compass rows re-set when the simulated
-#: magnetometer gained a calibrated sensor's residue, scenarios.compass.MAG_RESIDUE;
-#: `cf-estimator bench cross --json`, 4 decimals).
-BASELINE: dict[str, tuple[float, float | None]] = {
-    "EuRoC MH, ground start, after 10 s: mean": (1.2633, 0.8537),
-    "EuRoC MH, mid-air start 20 s: 2-12 s": (2.6307, 0.7289),
-    "EuRoC MH, mid-air start 20 s: 12 s-end": (1.4448, 0.8829),
-    "EuRoC MH, mid-air start 40 s: 2-12 s": (4.7453, 1.3688),
-    "EuRoC MH, mid-air start 40 s: 12 s-end": (1.7882, 0.8337),
-    "EuRoC MH, mid-air start 60 s: 2-12 s": (3.8292, 0.5890),
-    "EuRoC MH, mid-air start 60 s: 12 s-end": (1.7842, 0.9434),
-    "phantom4, after 10 s: mean": (1.6254, 1.3124),
-    "phantom4, after 10 s: worst recording": (2.1653, 3.3518),
-    "phantom4 horizontal, after 10 s: mean": (3.1509, 1.5396),
-    "phantom4 horizontal, after 10 s: worst recording": (5.2574, 4.0796),
-    "BROAD all (18): 6-D inclination": (0.6863, 0.5406),
-    "BROAD undisturbed (11): 6-D inclination": (0.6432, 0.5152),
-    "BROAD disturbed (7): 6-D inclination": (0.7541, 0.5806),
-    "BROAD rotation (5): 6-D inclination": (0.6174, 0.5759),
-    "BROAD translation (5): 6-D inclination": (0.4201, 0.3607),
-    "BROAD combined (1): 6-D inclination": (1.8873, 0.9838),
-    "BROAD slow (6): 6-D inclination": (0.3706, 0.3097),
-    "BROAD fast (5): 6-D inclination": (0.9703, 0.7618),
-    "BROAD no_breaks (7): 6-D inclination": (0.6932, 0.5236),
-    "BROAD with_breaks (4): 6-D inclination": (0.5556, 0.5004),
-    "BROAD tapping (1): 6-D inclination": (0.6169, 0.5568),
-    "BROAD vibration (1): 6-D inclination": (0.3462, 0.3237),
-    "BROAD stationary_magnet (2): 6-D inclination": (1.1451, 0.8580),
-    "BROAD attached_magnet (3): 6-D inclination": (0.6752, 0.4892),
-    "BROAD all (18): 9-D total": (1.9820, 1.8949),
-    "BROAD undisturbed (11): 9-D total": (1.5056, 1.4527),
-    "BROAD disturbed (7): 9-D total": (2.7307, 2.5899),
-    "BROAD rotation (5): 9-D total": (1.3761, 1.3611),
-    "BROAD translation (5): 9-D total": (1.2490, 1.2312),
-    "BROAD combined (1): 9-D total": (3.4361, 3.0181),
-    "BROAD slow (6): 9-D total": (1.2376, 1.2144),
-    "BROAD fast (5): 9-D total": (1.8272, 1.7387),
-    "BROAD no_breaks (7): 9-D total": (1.8558, 1.7846),
-    "BROAD with_breaks (4): 9-D total": (0.8927, 0.8720),
-    "BROAD tapping (1): 9-D total": (1.3813, 1.3469),
-    "BROAD vibration (1): 9-D total": (6.7872, 6.6983),
-    "BROAD stationary_magnet (2): 9-D total": (1.8290, 1.6393),
-    "BROAD attached_magnet (3): 9-D total": (2.4294, 2.2684),
-    "thesis impacts: peak (limit 90')": (20.4124, None),
-    "thesis vibration: peak (limit 90')": (15.8781, None),
-    "thesis acceleration: peak (limit 90')": (55.2172, None),
-    "magnet 0.3x on a turning sensor: heading peak": (2.3606, 2.2517),
-    "magnet 0.3x on a turning sensor: heading RMS": (1.3492, 1.2434),
-    "magnet 0.5x on a turning sensor: heading peak": (2.1531, 2.0262),
-    "magnet 0.5x on a turning sensor: heading RMS": (1.2891, 1.1738),
-    "magnet 1x on a turning sensor: heading peak": (2.1531, 2.0147),
-    "magnet 1x on a turning sensor: heading RMS": (1.2891, 1.1635),
-    "simulated zig-zags 4 m/s², 120 Hz: inclination RMS after 10 s": (3.8876, 1.3944),
-    "simulated zig-zags 4 m/s², 120 Hz: inclination peak after 10 s": (12.1291, 3.2743),
-    "simulated zig-zags 4 m/s², 120 Hz: learned-bias error at the end": (0.5023, None),
-    "simulated figure-8s 1.8 m/s², 1 kHz: inclination RMS after 10 s": (3.5883, 3.4407),
-    "simulated figure-8s 1.8 m/s², 1 kHz: inclination peak after 10 s": (5.0755, 5.4864),
-    "simulated figure-8s 1.8 m/s², 1 kHz: learned-bias error at the end": (1.5576, None),
-    "simulated figure-8s 1.8 m/s², 100 Hz: inclination RMS after 10 s": (3.5941, 3.4390),
-    "simulated figure-8s 1.8 m/s², 100 Hz: inclination peak after 10 s": (5.1407, 5.4852),
-    "simulated figure-8s 1.8 m/s², 100 Hz: learned-bias error at the end": (1.5585, None),
-    "simulated tight figure-8s 1.5 m/s², 1 kHz: inclination RMS after 10 s": (0.7533, 0.4599),
-    "simulated tight figure-8s 1.5 m/s², 1 kHz: inclination peak after 10 s": (1.1387, 0.9782),
-    "simulated tight figure-8s 1.5 m/s², 1 kHz: learned-bias error at the end": (0.2522, None),
-    "phantom4 horizontal, aided, after 10 s: mean": (0.8621, 0.7165),
-    "phantom4 horizontal, aided: median time to < 2 deg": (4.3317, 5.9721),
-    "phantom4, aided, after 10 s: mean": (0.7001, 0.6406),
-    "phantom4, aided: median time to < 2 deg": (4.1773, 3.7020),
-    "EuRoC MH, ground start, aided, after 10 s: mean": (0.9561, 0.8048),
-    "EuRoC MH, ground start, aided: median time to < 2 deg": (0.0000, 0.0000),
-    "EuRoC MH, aided, mid-air start 20 s: 12 s-end": (0.8591, 0.7232),
-    "EuRoC MH, aided, mid-air start 40 s: 12 s-end": (0.8663, 0.7598),
-    "EuRoC MH, aided, mid-air start 60 s: 12 s-end": (0.8567, 0.7637),
-    "thesis acceleration, aided: peak (limit 90')": (42.9004, None),
-    "BROAD all (18), aided by its optical positions: 9-D total": (1.9776, None),
-    "BROAD all (18), aided by its optical positions: 6-D inclination": (0.7031, None),
-}
+#: The committed values' rounding (4 decimals; members 6), in the row's unit: a change within it
+#: is no change.
+ROUNDING = 1e-4
 
 
 def _nan(v: float | None) -> float:
     return math.nan if v is None else float(v)
 
 
+def _rows(doc: dict) -> dict:
+    """{label: {"values", "noise", "members"}} of a cross JSON (null → NaN)."""
+    rows = {}
+    for r in doc["rows"]:
+        rows[r["label"]] = {
+            **{k: {c: _nan(v) for c, v in r[k].items()} for k in ("values", "noise")},
+            "members": {c: {m: _nan(v) for m, v in ms.items()}
+                        for c, ms in r.get("members", {}).items()}}
+    assert len(rows) == len(doc["rows"]), "duplicate row labels"
+    return rows
+
+
 @pytest.fixture(scope="module")
 def table(tmp_path_factory):
-    """{label: row} of the guards' run (values and noise; null → NaN)."""
+    """{label: row} of the guards' run (values, noise, members; null → NaN)."""
     missing = [f for f in ("euroc", "phantom4", "phantom4_horizontal", "broad")
                if not (DATA / f).is_dir()]
     if missing:
@@ -178,20 +111,13 @@ def table(tmp_path_factory):
     run = run_documented(CROSS_COMMAND, tmp_path_factory)
     assert run.rc == 0
     doc = json.loads((run.cwd / "cross.json").read_text())
-    rows = {r["label"]: {k: {c: _nan(v) for c, v in r[k].items()} for k in ("values", "noise")}
-            for r in doc["rows"]}
-    assert len(rows) == len(doc["rows"]), "duplicate row labels"
-    return rows, doc
+    return _rows(doc), doc
 
 
-def margin(rows: dict, label: str, column: str) -> float:
-    """How much worse than BASELINE the row may get: its noise, or its family's (see above)."""
-    if label.startswith("thesis"):
-        return SIMULATED_MARGIN * BASELINE[label][0]
-    noise = rows[NOISE_FROM.get(label, label)]["noise"][column]
-    if label.endswith("median time to < 2 deg"):
-        return max(noise, HOLD_MARGIN_FLOOR_S) if math.isfinite(noise) else HOLD_MARGIN_FLOOR_S
-    return noise
+@pytest.fixture(scope="module")
+def baseline() -> dict:
+    """The committed report's cross rows."""
+    return _rows(json.loads(REPORT.read_text())["cross"])
 
 
 def aided(label: str) -> bool:
@@ -215,6 +141,40 @@ def ours_only(label: str) -> bool:
     return aided(label) or consistency(label)
 
 
+def _paired(base: dict, now: dict, label: str, column: str):
+    """The paired comparison of a row's recordings (None without two to pair)."""
+    b, n = base[label]["members"].get(column, {}), now[label]["members"].get(column, {})
+    p = paired(label, b, n)
+    return p if p.n >= 2 else None
+
+
+def worse(base: dict, now: dict, label: str, column: str) -> str | None:
+    """Why ``label``'s ``column`` got worse than the baseline beyond its noise, or None."""
+    before, after = base[label]["values"][column], now[label]["values"][column]
+    if math.isnan(before):
+        return None
+    p = _paired(base, now, label, column)
+    if p is not None:
+        allowed = max(NOISE_SE * p.delta_se, ROUNDING)
+        if p.delta_mean > allowed:
+            return (f"{label} [{column}]: {p.worse} of {p.n} recordings worse, mean change "
+                    f"{p.delta_mean:+.4f} > {allowed:.4f} ({NOISE_SE:g} paired standard errors)")
+        return None
+    m = margin(base, now, label, column)
+    if not after <= before + m:
+        return f"{label} [{column}]: {after:.4f} > {before:.4f} + {m:.4f}"
+    return None
+
+
+def margin(base: dict, now: dict, label: str, column: str) -> float:
+    """How much a row of one value may get worse: the thesis's fixed share, else NOISE_SE paired
+    standard errors of the row it borrows from (NOISE_FROM); at least ROUNDING."""
+    if label.startswith("thesis"):
+        return SIMULATED_MARGIN * base[label]["values"][column]
+    p = _paired(base, now, NOISE_FROM[label], column)
+    return max(NOISE_SE * p.delta_se, ROUNDING) if p is not None else math.nan
+
+
 def _row(rows: dict, start: str) -> dict:
     """The values of the one row whose label starts with ``start``."""
     found = [v["values"] for k, v in rows.items() if k.startswith(start)]
@@ -222,20 +182,22 @@ def _row(rows: dict, start: str) -> dict:
     return found[0]
 
 
-def test_the_report_has_every_row_the_guards_hold(table):
+def guarded(rows: dict) -> list[str]:
+    """The rows the regression guards hold (all but the consistency rows)."""
+    return [label for label in rows if not consistency(label)]
+
+
+def test_the_report_has_every_row_the_guards_hold(table, baseline):
     """The committed report (docs/results/benchmarks.json, rendered into BENCHMARKS.md) is this
     table with more columns: a row added, removed or renamed here needs ``cf-estimator bench
     report`` as well."""
     rows, _ = table
-    report = json.loads((REPO / "docs" / "results" / "benchmarks.json").read_text())
-    assert [r["label"] for r in report["cross"]["rows"]] == list(rows)
+    assert list(baseline) == list(rows)
 
 
-def test_every_row_has_a_baseline_and_vqf_beside(table):
+def test_every_row_has_vqf_beside(table):
     rows, doc = table
     assert doc["columns"] == ["cf_estimator", "cf_estimator_offline", "vqf", "vqf_offline"]
-    guarded = [label for label in rows if not consistency(label)]
-    assert guarded == list(BASELINE), "a row was added, removed or renamed: set BASELINE"
     for label, row in rows.items():
         assert math.isfinite(row["values"]["cf_estimator"]), label
         if ours_only(label):
@@ -246,25 +208,47 @@ def test_every_row_has_a_baseline_and_vqf_beside(table):
             assert math.isnan(row["values"]["vqf_offline"]), label
 
 
-def test_every_guard_has_a_positive_finite_margin(table):
+def test_every_guard_pairs_recordings_or_has_a_positive_finite_margin(table, baseline):
+    """A row is either paired recording by recording (at least two recordings, the same ones in
+    the run and the report) or has a margin it borrows: none is held by nothing."""
     rows, _ = table
-    for label, (_, offline) in BASELINE.items():
-        for column in OURS if offline is not None else OURS[:1]:
-            m = margin(rows, label, column)
+    for label in guarded(rows):
+        for column in OURS:
+            if math.isnan(baseline[label]["values"][column]):
+                continue
+            p = _paired(baseline, rows, label, column)
+            if p is not None:
+                assert set(baseline[label]["members"][column]) == \
+                    set(rows[label]["members"][column]), (label, column)
+                continue
+            m = margin(baseline, rows, label, column)
             assert math.isfinite(m) and m > 0.0, (label, column, m)
 
 
-def test_no_row_got_worse_beyond_its_noise(table):
+def test_no_row_got_worse_beyond_its_noise(table, baseline):
     rows, _ = table
-    worse = []
-    for label, base in BASELINE.items():
-        for column, before in zip(OURS, base, strict=True):
-            if before is None:
-                continue
-            now, m = rows[label]["values"][column], margin(rows, label, column)
-            if not now <= before + m:
-                worse.append(f"{label} [{column}]: {now:.4f} > {before:.4f} + noise {m:.4f}")
-    assert not worse, "worse than the baseline beyond the row's noise:\n" + "\n".join(worse)
+    found = [w for label in guarded(rows) for column in OURS
+             if (w := worse(baseline, rows, label, column)) is not None]
+    assert not found, ("worse than the committed report beyond the row's noise:\n"
+                       + "\n".join(found))
+
+
+def _members_row(values: list[float]) -> dict:
+    return {"values": {"cf_estimator": sum(values) / len(values)}, "noise": {},
+            "members": {"cf_estimator": {f"r{i}": v for i, v in enumerate(values)}}}
+
+
+def test_the_guard_pairs_recordings_not_the_spread_between_them():
+    """Every recording 0.02° worse fails however much the recordings differ from one another;
+    a larger mean change that is only noise (half better, half worse) passes."""
+    base = {"x": _members_row([0.5, 1.0, 2.0, 4.0, 8.0, 3.0])}
+    shifted = {"x": _members_row([v + 0.02 for v in [0.5, 1.0, 2.0, 4.0, 8.0, 3.0]])}
+    assert worse(base, shifted, "x", "cf_estimator") is not None
+    noisy = {"x": _members_row([0.5 + 0.3, 1.0 - 0.3, 2.0 + 0.3, 4.0 - 0.25, 8.0 + 0.3, 3.0 - 0.3])}
+    assert worse(base, noisy, "x", "cf_estimator") is None
+    assert worse(base, base, "x", "cf_estimator") is None
+    better = {"x": _members_row([v - 0.1 for v in [0.5, 1.0, 2.0, 4.0, 8.0, 3.0]])}
+    assert worse(base, better, "x", "cf_estimator") is None
 
 
 def test_standard_error_is_the_sample_deviation_over_root_n():

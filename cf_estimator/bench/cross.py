@@ -53,10 +53,10 @@ from __future__ import annotations
 import dataclasses
 import math
 import statistics
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from cf_estimator.core.params import FilterParams
 
@@ -65,6 +65,8 @@ if TYPE_CHECKING:
     from cf_estimator.bench.euroc_eval import VelocityInput
 
 COLUMNS = ("cf_estimator", "cf_estimator_offline", "vqf", "vqf_offline")
+#: Our columns (online, offline): the ones whose rows keep their per-recording values (Row.members).
+OURS = COLUMNS[:2]
 FAMILIES = ("euroc", "phantom4", "phantom4_horizontal", "broad", "scenarios", "compass",
             "multirotor", "aided")
 #: Simulated families (no data directory needed).
@@ -100,8 +102,10 @@ class Row:
     """One row: ``values[column]`` in ``unit`` (NaN: not run / not applicable).
 
     ``noise[column]``: the standard error of the row's mean over its recordings (sample standard
-    deviation / √n, in ``unit``; NaN for a single recording or a maximum): how far the row moves
-    for a change that is neutral on average — the margin a regression guard allows.
+    deviation / √n, in ``unit``; NaN for a single recording or a maximum): the spread between
+    recordings, for the reader. ``members[column]``: our columns' value per recording (flight,
+    trial, seed) of a row that is a mean or median over recordings: what a regression guard
+    pairs, recording by recording, against the committed report (test/test_cross_table.py).
     """
 
     family: str
@@ -109,6 +113,7 @@ class Row:
     unit: str
     values: dict[str, float] = field(default_factory=dict)
     noise: dict[str, float] = field(default_factory=dict)
+    members: dict[str, dict[str, float]] = field(default_factory=dict)
 
 
 def standard_error(values: Iterable[float]) -> float:
@@ -137,16 +142,23 @@ class CrossResult:
     columns: list[str] = field(default_factory=lambda: list(COLUMNS))
 
     def to_json(self) -> dict:
-        """``{"columns", "rows": [{family, label, unit, values, noise}], "notes"}`` (NaN → null)."""
-        def clean(v: float) -> float | None:
-            return None if not math.isfinite(v) else round(float(v), 4)
+        """``{"columns", "rows": [{family, label, unit, values, noise[, members]}], "notes"}``
+        (NaN → null; values and noise to 4 decimals, members to 6)."""
+        def clean(v: float, digits: int = 4) -> float | None:
+            return None if not math.isfinite(v) else round(float(v), digits)
 
         cols = self.columns
-        return {"columns": list(cols), "notes": list(self.notes),
-                "rows": [{"family": r.family, "label": r.label, "unit": r.unit,
-                          "values": {c: clean(r.values.get(c, math.nan)) for c in cols},
-                          "noise": {c: clean(r.noise.get(c, math.nan)) for c in cols}}
-                         for r in self.rows]}
+        rows = []
+        for r in self.rows:
+            row: dict[str, Any] = {
+                "family": r.family, "label": r.label, "unit": r.unit,
+                "values": {c: clean(r.values.get(c, math.nan)) for c in cols},
+                "noise": {c: clean(r.noise.get(c, math.nan)) for c in cols}}
+            if r.members:
+                row["members"] = {c: {k: clean(v, 6) for k, v in m.items()}
+                                  for c, m in r.members.items()}
+            rows.append(row)
+        return {"columns": list(cols), "notes": list(self.notes), "rows": rows}
 
 
 def _euroc_rows(root: Path, params: FilterParams, peers: Sequence[str], jobs: int,
@@ -165,7 +177,8 @@ def _euroc_rows(root: Path, params: FilterParams, peers: Sequence[str], jobs: in
 
     mean = Row(family, f"{label}{start}, after 10 s: mean", "deg",
                {c: res.mean(c, "inclination_rms_deg") for c in columns},
-               {c: noise(res, c, "inclination_rms_deg") for c in columns})
+               {c: noise(res, c, "inclination_rms_deg") for c in columns},
+               _flight_members(res, "inclination_rms_deg"))
     rows = [mean]
     if not midair:
         rows.append(Row(family, f"{label}, after 10 s: worst recording", "deg",
@@ -177,8 +190,18 @@ def _euroc_rows(root: Path, params: FilterParams, peers: Sequence[str], jobs: in
         for key, window in zip(ev.MIDAIR_SCORES, ("2-12 s", "12 s-end"), strict=True):
             rows.append(Row(family, f"{label}, mid-air start {start:g} s: {window}", "deg",
                             {c: mid.mean(c, key) for c in columns},
-                            {c: noise(mid, c, key) for c in columns}))
+                            {c: noise(mid, c, key) for c in columns},
+                            _flight_members(mid, key)))
     return rows
+
+
+def _flight_members(found: Any, score: str, columns: Mapping[str, str] | None = None
+                    ) -> dict[str, dict[str, float]]:
+    """Row.members of an EuRoC-layout result: our columns' ``score`` per flight
+    (``columns``: column → the algorithm that fills it, ours online and offline by default)."""
+    columns = columns or {c: c for c in OURS}
+    return {c: {f: per.get(a, {}).get(score, math.nan) for f, per in found.flights.items()}
+            for c, a in columns.items()}
 
 
 def _broad_rows(root: Path, params: FilterParams, peers: Sequence[str], jobs: int,
@@ -198,12 +221,17 @@ def _broad_rows(root: Path, params: FilterParams, peers: Sequence[str], jobs: in
         rows.append(Row("broad", f"BROAD {group} ({len(members)}): 6-D inclination", "deg",
                         {c: res.group_mean(members, f"{c}_6d", "inclination_rmse_deg")
                          for c in columns},
-                        {c: noise(members, f"{c}_6d", "inclination_rmse_deg") for c in columns}))
+                        {c: noise(members, f"{c}_6d", "inclination_rmse_deg") for c in columns},
+                        {c: {t: res.trials[t].get(f"{c}_6d", {}).get("inclination_rmse_deg",
+                                                                      math.nan)
+                             for t in members} for c in OURS}))
     for group, members in res.group_members().items():
         rows.append(Row("broad", f"BROAD {group} ({len(members)}): 9-D total", "deg",
                         {c: res.group_mean(members, f"{c}_9d", "total_rmse_deg")
                          for c in columns},
-                        {c: noise(members, f"{c}_9d", "total_rmse_deg") for c in columns}))
+                        {c: noise(members, f"{c}_9d", "total_rmse_deg") for c in columns},
+                        {c: {t: res.trials[t].get(f"{c}_9d", {}).get("total_rmse_deg", math.nan)
+                             for t in members} for c in OURS}))
     return rows
 
 
@@ -260,7 +288,10 @@ def _compass_rows(params: FilterParams, peers: Sequence[str], jobs: int,
             cols = [c for c in columns if all(c in r for r in runs)]
             rows.append(Row("compass", f"magnet {fraction:g}x on a turning sensor: heading {what}",
                             "deg", {c: sum(r[c][i] for r in runs) / len(runs) for c in cols},
-                            {c: standard_error([r[c][i] for r in runs]) for c in cols}))
+                            {c: standard_error([r[c][i] for r in runs]) for c in cols},
+                            {c: {f"seed {s}": r[c][i]
+                                 for s, r in zip(COMPASS_SEEDS, runs, strict=True)}
+                             for c in OURS}))
     from cf_estimator.bench.consistency import consistency
 
     for fraction in COMPASS_FRACTIONS:  # the reported heading sigma while the magnet is on
@@ -331,7 +362,10 @@ def _multirotor_rows(params: FilterParams, peers: Sequence[str], jobs: int,
             cols = [c for c in columns if all(len(r.get(c, ())) > i for r in runs)]
             rows.append(Row("multirotor", f"simulated {label}: {what}", unit,
                             {c: sum(r[c][i] for r in runs) / n for c in cols},
-                            {c: standard_error([r[c][i] for r in runs]) for c in cols}))
+                            {c: standard_error([r[c][i] for r in runs]) for c in cols},
+                            {c: {f"seed {s}": r[c][i] for s, r in zip(MULTIROTOR_SEEDS, runs,
+                                                                      strict=True)}
+                             for c in OURS if c in cols}))
     return rows
 
 
@@ -361,13 +395,15 @@ def _aided_rows(root: Path, params: FilterParams, jobs: int) -> tuple[list[Row],
 
         rows.append(Row("aided", f"{label}{start}, aided, after 10 s: mean", "deg",
                         {c: res.mean(a, "inclination_rms_deg") for c, a in aided.items()},
-                        {c: noise(res, a, "inclination_rms_deg") for c, a in aided.items()}))
+                        {c: noise(res, a, "inclination_rms_deg") for c, a in aided.items()},
+                        _flight_members(res, "inclination_rms_deg", aided)))
         holds = {a: [per.get(a, {}).get("hold_s", math.nan) for per in res.flights.values()]
                  for a in aided.values()}
         rows.append(Row("aided", f"{label}{start}, aided: median time to < 2 deg", "s",
                         {c: ev.median_hold_s(res, a)[0] for c, a in aided.items()},
                         {c: standard_error([h for h in holds[a] if math.isfinite(h)])
-                         for c, a in aided.items()}))
+                         for c, a in aided.items()},
+                        _flight_members(res, "hold_s", aided)))
         if family != "euroc":
             continue
         for at in MIDAIR_STARTS_S:
@@ -375,7 +411,8 @@ def _aided_rows(root: Path, params: FilterParams, jobs: int) -> tuple[list[Row],
             key = ev.MIDAIR_SCORES[1]
             rows.append(Row("aided", f"{label}, aided, mid-air start {at:g} s: 12 s-end", "deg",
                             {c: mid.mean(a, key) for c, a in aided.items()},
-                            {c: noise(mid, a, key) for c, a in aided.items()}))
+                            {c: noise(mid, a, key) for c, a in aided.items()},
+                            _flight_members(mid, key, aided)))
     found = run_scenarios(["acceleration"], base, (), jobs=jobs, velocity=True)
     peak = {r["algorithm"]: r["peak_arcmin"] for r in found}
     rows.append(Row("aided", "thesis acceleration, aided: peak (limit 90')", "arcmin",
@@ -387,12 +424,15 @@ def _aided_rows(root: Path, params: FilterParams, jobs: int) -> tuple[list[Row],
     from cf_estimator.bench import broad
     from cf_estimator.bench.parallel import run_tasks
 
-    scores = run_tasks(_broad_aided, [(p, params) for p in broad.list_trials(folder)], jobs)
+    trials = broad.list_trials(folder)
+    scores = run_tasks(_broad_aided, [(p, params) for p in trials], jobs)
     for i, what in enumerate(("9-D total", "6-D inclination")):
         values = [s[i] for s in scores]
         rows.append(Row("aided", f"BROAD all ({len(values)}), aided by its optical positions: "
                         f"{what}", "deg", {"cf_estimator": sum(values) / len(values)},
-                        {"cf_estimator": standard_error(values)}))
+                        {"cf_estimator": standard_error(values)},
+                        {"cf_estimator": {p.stem: v for p, v in zip(trials, values,
+                                                                    strict=True)}}))
     return rows, notes
 
 

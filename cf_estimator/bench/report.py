@@ -439,8 +439,12 @@ def render(results: dict) -> str:
         "[0008](docs/decisions/0008-tuning.md) tuning, [0009](docs/decisions/0009-replay-speed.md) "
         "replay speed, [0010](docs/decisions/0010-bias-hypotheses-weighed-by-velocity.md) the "
         "bias hypotheses, [0011](docs/decisions/0011-full-vector-variant-removed.md) the "
-        "full-vector variant removed. "
-        "test/test_cross_table.py guards every row of ours against its noise on each change."])
+        "full-vector variant removed, [0012](docs/decisions/0012-in-flight-hard-iron-not-taken.md) "
+        "in-flight hard iron not taken, [0013](docs/decisions/0013-fewer-parameters.md) fewer "
+        "parameters, [0014](docs/decisions/0014-per-sample-speed.md) per-sample speed. "
+        "test/test_cross_table.py guards every row of ours on each change against this report's "
+        "results, recording by recording (the per-recording values the JSON keeps: paired "
+        "deltas, not the spread between recordings)."])
 
     section("Reproduce", [
         "```",
