@@ -269,10 +269,8 @@ class ComplementaryFilter:
         self._learning: Any = self._new_state()
         self._state: Any = self._learning  # the published hypothesis
         self._initialized = False
-        #: the compiled update of both hypotheses once initialised (_kernel.Pair), else None;
-        #: _fast: the same where update() may call it directly (_update not overridden)
+        #: the compiled update of both hypotheses once initialised (_kernel.Pair), else None
         self._pair: Any = None
-        self._fast: Any = None
         #: the last update's aiding took hold on an attitude error (apply_aiding)
         self.aiding_attitude_error = False
         self.set_params(params if params is not None else FilterParams())
@@ -284,7 +282,7 @@ class ComplementaryFilter:
     def __getstate__(self) -> dict[str, Any]:
         d = {k: v for k, v in self.__dict__.items()
              if k not in ("_kernel_params", "_null_kernel_params", "_learning", "_null", "_state",
-                          "_pair", "_fast")}
+                          "_pair")}
         d["_saved"] = self.get_state()
         return d
 
@@ -292,7 +290,7 @@ class ComplementaryFilter:
         saved = d.pop("_saved")
         self.__dict__.update(d)
         self._kernel_params = self._null_kernel_params = self._null = None
-        self._pair = self._fast = None
+        self._pair = None
         self._learning = self._state = self._new_state()
         self.set_params(self._params)
         self.set_state(saved)
@@ -325,15 +323,13 @@ class ComplementaryFilter:
 
     def _bind(self) -> None:
         """The compiled update of the states and parameters now in force (after any change of
-        them or of the initialisation): :attr:`_pair`, and :attr:`_fast` for update()."""
+        them or of the initialisation): :attr:`_pair`."""
         pair = None
         if self._kernel_params is not None and self._initialized:
             pair = compiled_kernel.Pair(  # type: ignore[union-attr]
                 self._learning, self._kernel_params, self._null,
                 None if self._null is None else self._null_kernel_params)
         self._pair = pair
-        # a subclass's own _update (the replay's recording filter) must see every sample
-        self._fast = pair if type(self)._update is ComplementaryFilter._update else None
 
     def _new_state(self) -> Any:
         if self.backend == "compiled":
@@ -529,12 +525,7 @@ class ComplementaryFilter:
         specific force, in place of the ``accel_m_s2`` argument); :attr:`aiding_attitude_error`
         says whether it took hold on an attitude error.
         """
-        if aiding is None:
-            fast = self._fast  # the compiled update, initialised: one call (as _update's)
-            if fast is not None:
-                q, self._state = fast(gyro_rad_s, accel_m_s2, dt_s, mag)
-                return q
-        elif self._initialized:
+        if aiding is not None and self._initialized:
             self.aiding_attitude_error = self.apply_aiding(aiding)
             accel_m_s2 = aiding.accel_m_s2
         return self._update(gyro_rad_s, accel_m_s2, dt_s, mag)
