@@ -206,6 +206,9 @@ class CfEstimatorNode(Node):
                 Vector3Stamped, RPY_OUT, QoSProfile(depth=PUBLISHER_DEPTH),
                 qos_overriding_options=overrides,
             )
+        #: imu/rpy's message, filled and published per IMU message (publish serializes it at
+        #: once: one object, not a new one each time, as /tf's)
+        self._rpy_msg = Vector3Stamped()
         self._pub_diag = self.create_publisher(
             DiagnosticArray, DIAGNOSTICS_OUT, QoSProfile(depth=PUBLISHER_DEPTH)
         )
@@ -388,7 +391,7 @@ class CfEstimatorNode(Node):
                 msg.linear_acceleration_covariance = out.linear_acceleration_covariance
             self._pub_imu.publish(msg)
             if self._pub_rpy is not None and out.rpy_rad is not None:
-                rpy = Vector3Stamped()
+                rpy = self._rpy_msg
                 rpy.header = msg.header
                 rpy.vector.x, rpy.vector.y, rpy.vector.z = out.rpy_rad
                 self._pub_rpy.publish(rpy)
