@@ -39,7 +39,10 @@ offline (its own offline mode). Rows (inclination [deg] unless marked):
   and 6-D inclination, online only: the one aided family with a compass).
 
 Families whose data directory is missing are left out (a note says so). A default changes only
-when no row gets worse beyond its noise (docs/decisions/0002-ablation-held-out-by-family.md).
+when no row gets worse beyond its noise (docs/decisions/0002-ablation-held-out-by-family.md):
+the rows that are means over recordings keep our columns' per-recording values
+(``Row.members``, in the JSON), which test/test_cross_table.py pairs with the committed
+report's, recording by recording.
 
 ``peers`` (``bench report``; ``bench cross`` itself prints our two columns and VQF's) adds
 columns for the other peers of :mod:`cf_estimator.bench.peers` — x-io Fusion, Madgwick,
