@@ -11,11 +11,9 @@
  *   Params(view)  the parameter view of step_params() (FilterParams fields), frozen;
  *   State()       the filter state: one attribute per StepState field (same names, units and
  *                 frames: q* = q_world(ENU)_from_sensor, b* gyro bias [rad/s, sensor], ...), and
- *     .update(params, gyro, accel, dt, mag=None)         = ComplementaryFilter.update once
- *                                                          initialised (checks, step, output q)
  *     .run(params, gyro, accel, mag|None, dt, start, q_out, extra_out|None)
- *                                                        = that update for rows start..N-1 of
- *                                                          C-contiguous float64 arrays
+ *                                                        = Pair's update for rows start..N-1
+ *                                                          of C-contiguous float64 arrays
  *     .copy()
  *   Pair(learning, params, null|None, null_params|None)
  *                 ComplementaryFilter's update once initialised, as a callable:
@@ -224,43 +222,6 @@ static int step_sample(cf_state *s, const cf_params *p, cf_state *null, const cf
         return 0;
     }
     return cf_step_pair(s, p, null, pn, x->g, x->acc, x->mag, x->dt);
-}
-
-static PyObject *State_update(StateObject *self, PyObject *const *args, Py_ssize_t nargs)
-{
-    py_sample x;
-    if (nargs < 4 || nargs > 7 || nargs == 6) {
-        PyErr_SetString(PyExc_TypeError,
-                        "update(params, gyro, accel, dt, mag=None[, null, null_params])");
-        return NULL;
-    }
-    if (!check_params(args[0])) return NULL;
-    StateObject *null = NULL;
-    if (nargs == 7) {
-        if (!PyObject_TypeCheck(args[5], &StateType)) {
-            PyErr_SetString(PyExc_TypeError, "null must be a State");
-            return NULL;
-        }
-        if (!check_params(args[6])) return NULL;
-        null = (StateObject *)args[5];
-    }
-    if (read_sample(args[1], args[2], args[3], nargs >= 5 ? args[4] : NULL, &x) < 0)
-        return NULL;
-    const cf_params *p = &((ParamsObject *)args[0])->p;
-    int use_null = step_sample(&self->s, p, null ? &null->s : NULL,
-                               null ? &((ParamsObject *)args[6])->p : NULL, &x);
-    PyObject *q = q_tuple(use_null ? &null->s : &self->s, p->ned);
-    if (q == NULL || null == NULL) return q;
-    PyObject *out = PyTuple_New(2);
-    if (out == NULL) {
-        Py_DECREF(q);
-        return NULL;
-    }
-    PyTuple_SET_ITEM(out, 0, q);
-    PyObject *flag = use_null ? Py_True : Py_False;
-    Py_INCREF(flag);
-    PyTuple_SET_ITEM(out, 1, flag);
-    return out;
 }
 
 /* ---- Python: Pair ------------------------------------------------------------------------- */
@@ -604,10 +565,6 @@ static PyMethodDef module_methods[] = {
     {NULL, NULL, 0, NULL}};
 
 static PyMethodDef State_methods[] = {
-    {"update", (PyCFunction)(void (*)(void))State_update, METH_FASTCALL,
-     "update(params, gyro, accel, dt, mag=None[, null, null_params]) -> q (w, x, y, z) in the "
-     "output frame; with the null hypothesis's state and parameters: (q of the published one, "
-     "published_null)."},
     {"run", (PyCFunction)State_run, METH_VARARGS,
      "run(params, gyro, accel, mag|None, dt, start, q_out, extra_out|None[, null, null_params]): "
      "rows start..N-1; with the null hypothesis: each row the published one's, -> published_null "
