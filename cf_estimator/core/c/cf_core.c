@@ -161,22 +161,22 @@ static double bias_limit_rad_s(const cf_params *p)
 }
 
 /* One sample as the stages read it: the inputs (acc, mag NULL when absent or invalid) and the
- * terms that depend on them, dt and the parameters only, never on the state. The stages read
- * these terms instead of computing them, so the two bias hypotheses (cf_update_pair) compute
- * them once per sample; each is the very expression step.py evaluates in the stage named
- * beside it (the same operations: the same bits). */
+ * terms that depend on them and dt only, never on the state or the parameters. The stages read
+ * these terms instead of computing them, so the two bias hypotheses (cf_update_pair), whatever
+ * their parameters, compute them once per sample; each is the very expression step.py
+ * evaluates in the stage named beside it (the same operations: the same bits). */
 typedef struct {
     const double *g, *acc, *mag;
     double dt;
     double an;                   /* classify_motion: |a| */
     double mn, ux, uy, uz;       /* stillness and heading: |m|, m / |m| */
-    double aw, decay_hold, lw, tw, decay_memory; /* classify_motion: the low-passes' weights */
+    double aw, lw, tw;           /* classify_motion: the low-passes' weights */
     double leak;                 /* regulate: the velocity swing's leak */
 } sample;
 
 /* the terms of sample (see there), each as its stage writes it */
-static void sample_terms(sample *x, const cf_params *p, const double *g, const double *acc,
-                         const double *mag, double dt)
+static void sample_terms(sample *x, const double *g, const double *acc, const double *mag,
+                         double dt)
 {
     x->g = g;
     x->acc = acc;
@@ -191,12 +191,8 @@ static void sample_terms(sample *x, const cf_params *p, const double *g, const d
         x->uz = mz / x->mn;
     }
     x->aw = dt / (ACCEL_LOWPASS_TIME_CONSTANT_S + dt);
-    double hold = rest_time_s(p); /* quiet again when it could be at rest */
-    x->decay_hold = hold / (hold + dt);
     x->lw = dt / (RATE_LOWPASS_TIME_CONSTANT_S + dt);
     x->tw = dt / (TURN_LOWPASS_TIME_CONSTANT_S + dt);
-    double memory = 1.0 / maxd(p->k1, BIAS_LEARNING_MIN_K1);
-    x->decay_memory = memory / (memory + dt);
     x->leak = dt / (SWING_TIME_CONSTANT_S + dt);
 }
 
@@ -572,7 +568,8 @@ static int classify_motion(cf_state *s, const cf_params *p, const sample *x, con
     s->acz = acz;
     double an_lp = sqrt(s->acx * s->acx + s->acy * s->acy + s->acz * s->acz);
     double level = spike ? deviation : maxd(an_lp - s->g_ref, s->g_ref - an_lp);
-    double decayed = s->accel_hold * x->decay_hold;
+    double hold = rest_time_s(p); /* quiet again when it could be at rest */
+    double decayed = s->accel_hold * (hold / (hold + dt));
     s->accel_hold = maxd(level, decayed);
     double lp_sigma = sqrt(s->noise_a2 / 3.0 * dt / (2.0 * ACCEL_LOWPASS_TIME_CONSTANT_S + dt));
     *accelerating =
@@ -585,8 +582,9 @@ static int classify_motion(cf_state *s, const cf_params *p, const sample *x, con
     double tw = x->tw;
     s->turn_rate_lp = s->turn_rate_lp + tw * (turn - s->turn_rate_lp);
     /* its size held over the loop's memory 1/k1 (turn_share) */
+    double memory = 1.0 / maxd(p->k1, BIAS_LEARNING_MIN_K1);
     s->turn_hold = maxd(maxd(s->turn_rate_lp, -s->turn_rate_lp),
-                        s->turn_hold * x->decay_memory);
+                        s->turn_hold * (memory / (memory + dt)));
     return quick;
 }
 
@@ -830,7 +828,7 @@ void cf_step(cf_state *s, const cf_params *p, const double *g, const double *acc
              const double *mag, double dt)
 {
     sample x;
-    sample_terms(&x, p, g, acc, mag, dt);
+    sample_terms(&x, g, acc, mag, dt);
     step(s, p, &x);
 }
 
@@ -869,13 +867,13 @@ int cf_gyro_problem(const double *g)
 
 /* ---- per sample and over arrays (ComplementaryFilter.update / run_rows of one state) ------- */
 /* the checks of cf_update: CF_OK and the sample, or why it is refused */
-static int checked_sample(sample *x, const cf_params *p, const double *gyro,
+static int checked_sample(sample *x, const double *gyro,
                           const double *accel, const double *mag, double dt)
 {
     int problem = cf_gyro_problem(gyro);
     if (problem) return problem;
     if (!(dt > 0.0 && isfinite(dt))) return CF_BAD_DT;
-    sample_terms(x, p, gyro, (accel && cf_valid3(accel)) ? accel : NULL,
+    sample_terms(x, gyro, (accel && cf_valid3(accel)) ? accel : NULL,
                  (mag && cf_valid3(mag)) ? mag : NULL, dt);
     return CF_OK;
 }
@@ -884,7 +882,7 @@ int cf_update(cf_state *s, const cf_params *p, const double *gyro, const double 
               const double *mag, double dt, double *q_out)
 {
     sample x;
-    int problem = checked_sample(&x, p, gyro, accel, mag, dt);
+    int problem = checked_sample(&x, gyro, accel, mag, dt);
     if (problem) return problem;
     step(s, p, &x);
     if (q_out) cf_output_q(s, p->ned, q_out);
@@ -962,17 +960,7 @@ static int step_pair(cf_state *learning, const cf_params *p, cf_state *null, con
                      const sample *x)
 {
     step(learning, p, x);
-    /* the null hypothesis's parameters differ in bias_learning_k2 (cf_params_null), which no
-     * sample term reads: the same terms, unless the caller's pn differs (bit for bit) in what
-     * they read */
-    if (memcmp(&pn->k1, &p->k1, sizeof p->k1) == 0 &&
-        memcmp(&pn->rest_window_s, &p->rest_window_s, sizeof p->rest_window_s) == 0) {
-        step(null, pn, x);
-    } else {
-        sample xn;
-        sample_terms(&xn, pn, x->g, x->acc, x->mag, x->dt);
-        step(null, pn, &xn);
-    }
+    step(null, pn, x); /* the same sample's terms: they read no parameter */
     return cf_publishes_null(learning, null);
 }
 
@@ -980,7 +968,7 @@ int cf_step_pair(cf_state *learning, const cf_params *p, cf_state *null, const c
                  const double *gyro, const double *accel, const double *mag, double dt)
 {
     sample x;
-    sample_terms(&x, p, gyro, accel, mag, dt);
+    sample_terms(&x, gyro, accel, mag, dt);
     return step_pair(learning, p, null, pn, &x);
 }
 
@@ -989,7 +977,7 @@ int cf_update_pair(cf_state *learning, const cf_params *p, cf_state *null, const
                    double *q_out, int *published_null)
 {
     sample x;
-    int why = checked_sample(&x, p, gyro, accel, mag, dt); /* the same checks for both */
+    int why = checked_sample(&x, gyro, accel, mag, dt); /* the same checks for both */
     if (why) return why;
     int use_null = step_pair(learning, p, null, pn, &x);
     if (q_out) cf_output_q(use_null ? null : learning, p->ned, q_out);
