@@ -387,14 +387,20 @@ def test_bulk_pipeline_equals_message_by_message_for_other_parameters(
     assert ca == cb
 
 
-def test_the_bulk_pipeline_takes_almost_every_message_of_a_clean_flight(clean_flight, tmp_path,
-                                                                        monkeypatch):
-    from cf_estimator.pipeline import bulk
+def test_the_pipeline_takes_almost_every_message_of_a_clean_flight_in_runs(clean_flight,
+                                                                          tmp_path,
+                                                                          monkeypatch):
+    from cf_estimator.pipeline import process
 
     rows = []
-    real = bulk.commit
-    monkeypatch.setattr(bulk, "commit", lambda pipe, run, *a, **k: (rows.append(run.n),
-                                                                    real(pipe, run, *a, **k))[1])
+    real = process._run  # noqa: SLF001 - counting the runs
+
+    def counted(pipe, c, p, e):
+        out = real(pipe, c, p, e)
+        rows.extend(r.n for r in out or ())
+        return out
+
+    monkeypatch.setattr(process, "_run", counted)
     s = replay_bag(clean_flight, tmp_path / "o", options=ReplayOptions(progress=False)).summary
     assert s["messages_processed"] == s["messages_in"] == 16000
     assert sum(rows) > 0.95 * 16000 and len(rows) < 100  # runs of about a second each

@@ -1,9 +1,9 @@
-"""The bulk replay's compiled row loops against their Python references, bit for bit.
+"""The pipeline's compiled row loops against their Python references, bit for bit.
 
 ``_kernel.covariance_rows`` repeats :meth:`OrientationCovariance.steps` (core/covariance.py)
-and ``_kernel.rpy_rows`` the roll/pitch/yaw of ``pipeline/bulk._rpy`` (``math.atan2`` and
-``math.asin`` per row). The bulk replay's outputs must equal the per-message path's byte for
-byte, so equality here is of the bits (NaN included), not to a tolerance; inputs are drawn to
+and ``_kernel.rpy_rows`` the roll/pitch/yaw of ``pipeline/process._rpy`` (``math.atan2`` and
+``math.asin`` per row). A replay's outputs must not depend on the backend beyond the filter's own
+bits, so equality here is of the bits (NaN included), not to a tolerance; inputs are drawn to
 hit every branch: clipped runs, no bias estimate (NaN: the prior), settling phases, no loop
 gain yet (<= 0 or NaN), magnetometer used or not, ages of NaN, -0.0 and "never", heading not
 initialised, extreme magnitudes, strided columns.
@@ -21,7 +21,7 @@ import pytest
 from kernel_guard import require_kernel
 
 from cf_estimator.core.covariance import OrientationCovariance
-from cf_estimator.pipeline import ImuPipeline, bulk
+from cf_estimator.pipeline import ImuPipeline, process
 
 require_kernel()
 
@@ -141,7 +141,7 @@ def test_compiled_rpy_rows_equal_math_atan2_and_asin_bit_for_bit(seed):
     q = _quaternions(np.random.default_rng(seed), 2000)
     pipe = ImuPipeline()
     with np.errstate(all="ignore"):
-        ref = bulk._rpy(pipe, q, "python")  # noqa: SLF001 - the reference path
-        got = bulk._rpy(pipe, q, "compiled")  # noqa: SLF001
+        ref = process._rpy(pipe, q, "python")  # noqa: SLF001 - the reference path
+        got = process._rpy(pipe, q, "compiled")  # noqa: SLF001
     assert np.array_equal(_bits(got), _bits(ref))
     assert np.isnan(got).any() and np.isfinite(got).sum() > 1500  # both kinds compared

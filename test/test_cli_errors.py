@@ -232,10 +232,10 @@ def test_interrupted_replay_leaves_no_output(good_bag, tmp_path):
     from cf_estimator.pipeline import ImuPipeline
 
     class Interrupting(ImuPipeline):
-        def on_imu(self, msg):
-            if self.counters["received_imu"] == 100:
+        def process(self, events, start=0, stop=None):
+            if self.counters["received_imu"] >= 100:
                 raise KeyboardInterrupt
-            return super().on_imu(msg)
+            return super().process(events, start, stop)
 
     with pytest.raises(KeyboardInterrupt):
         replay_bag(good_bag, tmp_path / "out", options=ReplayOptions(progress=False),

@@ -1,10 +1,9 @@
-"""The bulk path works through the pipeline's public state (issue 26 item 5).
+"""The pipeline's rules (pipeline/process.py) work through its public state (issue 26 item 5).
 
-pipeline/bulk.py must leave an ImuPipeline exactly as the per-message path would; it does so
-through the objects of pipeline/state.py and public properties, never a private attribute of
-the pipeline or a private constant of its module (checked on the source here). That the state
-and outputs it leaves are the per-message path's is test/test_bulk_decode.py's (same bags, same
-diagnostics, on hostile and real input).
+pipeline/process.py changes an ImuPipeline through the objects of pipeline/state.py and public
+methods and properties, never a private attribute of the pipeline or a private constant of its
+module (checked on the source here). That a chunk gives the same outputs and state however it
+is cut is test/test_bulk_decode.py's (same bags, same diagnostics, on hostile and real input).
 """
 
 from __future__ import annotations
@@ -16,11 +15,11 @@ from cf_estimator.pipeline import pipeline as pipeline_module
 from cf_estimator.pipeline.pipeline import ImuPipeline
 from cf_estimator.pipeline.state import ImuTime, InputRules, MagInput, MessageCounts
 
-BULK = Path(pipeline_module.__file__).with_name("bulk.py")
+PROCESS = Path(pipeline_module.__file__).with_name("process.py")
 
 
-def test_bulk_reads_and_writes_no_private_attribute_of_the_pipeline():
-    tree = ast.parse(BULK.read_text(encoding="utf-8"))
+def test_the_rules_read_and_write_no_private_attribute_of_the_pipeline():
+    tree = ast.parse(PROCESS.read_text(encoding="utf-8"))
     private = [
         f"line {node.lineno}: {node.value.id}.{node.attr}"
         for node in ast.walk(tree)

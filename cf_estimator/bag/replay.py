@@ -40,12 +40,14 @@ from cf_estimator.bag.metrics import (
     reference_quaternion,
 )
 from cf_estimator.core import quaternion as quat
-from cf_estimator.core.filter import ComplementaryFilter, Extra, bias_error_sigma
+from cf_estimator.core.filter import ComplementaryFilter, Extra
 from cf_estimator.core.kernel import resolve_backend
 from cf_estimator.core.offline import ROW_AIDED, ROW_MOVING
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import BIAS_CONVERGED_SIGMA_RAD_S
-from cf_estimator.pipeline import ImuPipeline, PipelineParams, bulk, checks, frames, px4
+from cf_estimator.pipeline import ImuPipeline, PipelineParams, checks, frames, px4
+from cf_estimator.pipeline.events import IMU, MAG, OTHER, VELOCITY, Events
+from cf_estimator.pipeline.process import Rows
 from cf_estimator.schema import as_dict
 
 OUT_IMU_TOPIC = "/imu/data"
@@ -74,8 +76,8 @@ class ReplayOptions:
     offline: bool = False  #: write the offline (acausal) estimate (_offline_orientations)
     #: decode IMU/magnetometer messages in bulk with NumPy (same values; False: one by one)
     bulk_decode: bool = True
-    #: with bulk_decode, one online variant: ordinary runs through the pipeline at once
-    #: (pipeline/bulk.py; same outputs, bit for bit; False: message by message)
+    #: with bulk_decode, chunks of messages through the pipeline at once (same outputs, bit
+    #: for bit; False: message by message)
     bulk_pipeline: bool = True
     #: called with the number of messages read since the last call (a fleet's progress bar)
     on_messages: Callable[[int], None] | None = None
@@ -209,9 +211,6 @@ class ReplayVariant:
     output_path: str | os.PathLike[str] | None = None
 
 
-#: Events handed to the bulk pipeline at once, and the shortest run worth a bulk pass.
-_BULK_EVENTS = 8192
-_MIN_BULK_RUN = 16
 #: Bias samples kept for plots at most this often [s of stamp time] (status() costs ~20 us).
 _BIAS_SAMPLE_PERIOD_S = 0.02
 
@@ -298,6 +297,20 @@ class _RecordingFilter(ComplementaryFilter):
             return super()._update(gyro_rad_s, accel_m_s2, dt_s, mag)
         finally:
             self._in_update = False
+
+    def run_rows(self, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray, mag: np.ndarray | None,
+                 dt_s: np.ndarray, start: int, q_out: np.ndarray,
+                 extra_out: np.ndarray | None = None) -> None:
+        """Record rows ``start``.. (unaided: the aiding steps through :meth:`_update`), then
+        step them."""
+        n = gyro_rad_s.shape[0] - start
+        m = mag[start:] if mag is not None else np.full((n, 3), math.nan)
+        self.rows.extend(map(tuple, np.concatenate(
+            (gyro_rad_s[start:], accel_m_s2[start:], m), axis=1).tolist()))
+        flag = ROW_AIDED if self.step_state.aided else 0
+        self.flags.extend([flag | (ROW_MOVING if self._moving else 0)] + [flag] * (n - 1))
+        self._moving = False
+        super().run_rows(gyro_rad_s, accel_m_s2, mag, dt_s, start, q_out, extra_out)
 
 
 def _offline_orientations(t_s: np.ndarray, rec: _RecordingFilter, params: FilterParams,
@@ -403,118 +416,87 @@ class _Run:
             missed = (log_ns - self.next_diag_ns) // self.period_ns
             self.next_diag_ns += self.period_ns * (missed + 1)
 
-    def events(self, ev: bulk.Events) -> None:
-        """IMU, magnetometer and other messages (log order) as :meth:`tick` + :meth:`imu` /
-        ``on_mag`` one by one would process them: ordinary runs (up to the next diagnostics
-        tick) through :mod:`cf_estimator.pipeline.bulk`, the others one by one."""
-        i, n = 0, len(ev.kind)
-        kinds, logs = ev.kind, ev.log_ns
-        retry = 0  # after a short run, go message by message for a while before scanning again
+    def events(self, ev: Events) -> None:
+        """IMU, magnetometer, velocity and other messages (log order) through the pipeline,
+        a diagnostics period's worth at a time (:meth:`tick` between them)."""
+        i, n = 0, len(ev)
+        logs = ev.log_ns
         while i < n:
-            kind, log_ns = kinds[i], logs[i]
-            self.tick(log_ns)
-            if kind != bulk.OTHER and i >= retry:
-                run = bulk.scan(self.pipe, ev, i, self.next_diag_ns)
-                if run.n >= _MIN_BULK_RUN:
-                    self.imu_run(run)
-                    i = run.end
-                    continue
-                retry = i + 1 if run.n_events > 0 else i + _MIN_BULK_RUN
-            if kind == bulk.IMU:
-                self.imu(log_ns, ev.message(i))
-            elif kind == bulk.MAG:
-                self.pipe.on_mag(ev.message(i))
-            i += 1
+            self.tick(logs[i])
+            # the events before the next report (log times are sorted in a chunk)
+            stop = bisect.bisect_left(logs, self.next_diag_ns, i, n) if \
+                self.next_diag_ns is not None else n
+            stop = max(stop, i + 1)
+            for rows in self.pipe.process(ev, i, stop):
+                self.write(rows)
+            self._internal_error()
+            i = stop
 
-    def imu_run(self, run: bulk.Scan) -> None:
-        """An ordinary run: the filter over it, then its outputs and series as :meth:`imu`
-        writes them one by one."""
-        ts = run.sec + run.nsec * 1e-9  # s + ns * 1e-9, as imu() computes it
+    def imu(self, log_ns: int, msg: Any) -> None:
+        """One IMU message object logged at ``log_ns`` [ns] (the replay's message-by-message
+        reading)."""
+        for rows in self.pipe.process_message(msg, log_ns=log_ns):
+            self.write(rows)
+        self._internal_error()
+
+    def _internal_error(self) -> None:
+        bug = self.pipe.take_internal_error()
+        if bug is not None:  # counted as internal_error in the summary; said once here
+            print("cf-estimator: internal error (a bug, please report it): the message "
+                  f"was dropped, the replay goes on\n{bug}", file=sys.stderr)
+
+    def write(self, rows: Rows) -> None:
+        """A run's outputs: the output messages (held until the end when offline) and the
+        series."""
+        ts = rows.sec + rows.nsec * 1e-9  # s + ns * 1e-9 per row
         marks = []
         next_bias = self.next_bias_t
         t_list = ts.tolist()
         n = len(t_list)
-        # stamps do not decrease in a run: the next sample is the first stamp at or after
-        # next_bias (imu()'s test, message by message)
+        # stamps increase in a run: the next bias sample is the first stamp at or after
+        # next_bias
         k = bisect.bisect_left(t_list, next_bias)
         while k < n:
             marks.append(k)
             next_bias = t_list[k] + _BIAS_SAMPLE_PERIOD_S
             k = bisect.bisect_left(t_list, next_bias, k + 1)
-        c = bulk.commit(self.pipe, run)
         self.next_bias_t = next_bias
-        if marks:  # the bias estimate after each marked row, as imu() samples it
+        if marks:  # the bias estimate after each marked row
             self.bias_t.add(ts[marks])
-            self.bias.add(c.extra[marks, Extra.GYRO_BIAS])
-            self.bias_sigma.add(c.extra[marks, Extra.BIAS_SIGMA])
+            self.bias.add(rows.extra[marks, Extra.GYRO_BIAS])
+            self.bias_sigma.add(rows.extra[marks, Extra.BIAS_SIGMA])
         bag = self.bag
-        if bag is not None:  # every output message of the run encoded in place, written at once
-            sec, nsec = run.sec, run.nsec
-            topics = [(OUT_IMU_TOPIC, io.IMU_TYPE, cdr.imu_cdr_size(run.frame))]
+        log_ns = rows.log_ns
+        if self.offline:  # written at the end, with the offline orientation
+            self.outputs.extend((int(log_ns[k]), rows.output(k)) for k in range(n))
+        elif bag is not None:  # every output message of the run encoded in place at once
+            sec, nsec = rows.sec, rows.nsec
+            topics = [(OUT_IMU_TOPIC, io.IMU_TYPE, cdr.imu_cdr_size(rows.frame))]
             if self.publish_rpy:
                 topics.append((OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE,
-                               cdr.vector3_stamped_size(run.frame)))
+                               cdr.vector3_stamped_size(rows.frame)))
             rec, payloads = io.record_rows(n, [size for _t, _m, size in topics])
-            cdr.imu_cdr_rows(sec, nsec, run.frame, c.q_wxyz[:, [1, 2, 3, 0]], c.covariance,
-                             c.gyro, c.av_cov, c.accel, c.la_cov, out=payloads[0])
+            cdr.imu_cdr_rows(sec, nsec, rows.frame, rows.q_wxyz[:, [1, 2, 3, 0]],
+                             rows.covariance, rows.gyro, rows.av_cov, rows.accel, rows.la_cov,
+                             out=payloads[0])
             if self.publish_rpy:
-                cdr.vector3_stamped_rows(sec, nsec, run.frame, c.rpy, out=payloads[1])
-            bag.write_records(run.log_ns, topics, rec)
+                cdr.vector3_stamped_rows(sec, nsec, rows.frame, rows.rpy, out=payloads[1])
+            bag.write_records(log_ns, topics, rec)
+            if rows.gravity_free is not None:
+                for k in range(n):
+                    self._write_accel(bag, int(log_ns[k]), rows.output(k))
         self.t.add(ts)
-        self.q.add(c.q_wxyz)
-        self.rpy.add(c.rpy)
-        self.clipped.add(c.extra[:, Extra.CLIPPED] != 0.0)
-        self.enorm.add(c.error_norm)
-        self.rest.add(c.extra[:, Extra.AT_REST] != 0.0)
-        self.tilt_var.add(c.covariance[:, 0] + c.covariance[:, 4])
-        self.yaw_var.add(c.covariance[:, 8])
-
-    def imu(self, log_ns: int, msg: Any) -> None:
-        out = self.pipe.on_imu(msg)
-        if out is None:
-            bug = self.pipe.take_internal_error()
-            if bug is not None:  # counted as internal_error in the summary; said once here
-                print("cf-estimator: internal error (a bug, please report it): the message "
-                      f"was dropped, the replay goes on\n{bug}", file=sys.stderr)
-            return
-        bag = self.bag
-        if self.offline:
-            self.outputs.append((log_ns, out))
-        elif bag is not None:  # the bytes rosbags would serialize (bag/cdr.py), in one call
-            bag.write_raw(OUT_IMU_TOPIC, io.IMU_TYPE, log_ns, cdr.imu_cdr(out))
-            if self.publish_rpy and out.rpy_rad is not None:
-                bag.write_raw(OUT_RPY_TOPIC, io.VECTOR3_STAMPED_TYPE, log_ns,
-                              cdr.vector3_stamped_cdr(out.stamp_sec, out.stamp_nanosec,
-                                                      out.frame_id, out.rpy_rad))
-            if out.gravity_free is not None:
-                self._write_accel(bag, log_ns, out)
-        t = out.stamp_sec + out.stamp_nanosec * 1e-9
-        self.t.append(t)
-        if out.initialized:
-            x, y, z, w = out.orientation_xyzw
-            self.q.append((w, x, y, z))
-        else:
-            self.q.append(None)
-        self.rpy.append(out.rpy_rad)
-        flt = self.pipe.filter
-        # Per-sample flags read without building a FilterStatus (as the pipeline does itself).
-        s = flt._state  # noqa: SLF001 - read-only
-        self.clipped.append(bool(s.clipped) and out.initialized)
-        self.enorm.append(float(s.error_norm))
-        self.rest.append(bool(s.at_rest) and out.initialized)
-        oc = out.orientation_covariance
-        self.tilt_var.append(oc[0] + oc[4] if out.initialized else math.nan)
-        self.yaw_var.append(oc[8] if out.initialized else math.nan)
-        if t >= self.next_bias_t and out.initialized:
-            self.bias_t.append(t)
-            self.bias.append(tuple(float(c) for c in flt.gyro_bias_rad_s))
-            self.bias_sigma.append(bias_error_sigma(s))
-            self.next_bias_t = t + _BIAS_SAMPLE_PERIOD_S
-        if out.warnings:
-            for text in out.warnings:
-                if text not in self._seen:
-                    self._seen.add(text)
-                    self.warnings.append(text)
+        self.q.add(rows.q_wxyz)
+        self.rpy.add(rows.rpy)
+        self.clipped.add(rows.extra[:, Extra.CLIPPED] != 0.0)
+        self.enorm.add(rows.error_norm)
+        self.rest.add(rows.extra[:, Extra.AT_REST] != 0.0)
+        self.tilt_var.add(rows.covariance[:, 0] + rows.covariance[:, 4])
+        self.yaw_var.add(rows.covariance[:, 8])
+        for text in rows.warnings:
+            if text not in self._seen:
+                self._seen.add(text)
+                self.warnings.append(text)
 
     def finish_offline(self) -> None:
         """Offline: replace every output's orientation by the offline estimate, then write the
@@ -676,25 +658,28 @@ class _Reading:
         self.last_log_ns = last_ns
 
 
-def _read_in_bulk(bag: Any, topics: _Topics, run: _Run, reading: _Reading,
+def _read_in_bulk(bag: Any, topics: _Topics, runs: Sequence[_Run], reading: _Reading,
                   progress: _Progress) -> None:
-    """The bulk path: chunks of decoded IMU and magnetometer rows through one online run's
-    pipeline at once (pipeline/bulk.py); references as arrays where the reader has them."""
+    """Chunks of decoded messages through every run's pipeline at once (pipeline/process.py);
+    references as arrays where the reader has them."""
+    table = {t: k for t, k in ((topics.velocity, VELOCITY), (topics.mag, MAG),
+                               (topics.imu, IMU)) if t}
     for chunk in bag.chunks(topics.names):
         reading.logged(chunk.log_ns[0], chunk.log_ns[-1])
         arrays = None
-        table = {t: k for t, k in ((topics.mag, bulk.MAG), (topics.imu, bulk.IMU)) if t}
         if hasattr(chunk, "kind_array"):  # the mcap reader's: arrays, no list to convert back
-            kind_arr = chunk.kind_array(table, bulk.OTHER)
+            kind_arr = chunk.kind_array(table, OTHER)
             kinds = kind_arr.tolist()
             arrays = (kind_arr, chunk.log_ns_array, chunk.row_array)
         else:
-            kinds = [bulk.IMU if t == topics.imu else bulk.MAG if t == topics.mag
-                     else bulk.OTHER for t in chunk.topic]
-        reading.n_imu += kinds.count(bulk.IMU)
-        reading.n_mag += kinds.count(bulk.MAG)
-        run.events(bulk.Events(kinds, chunk.log_ns, chunk.row, chunk.blocks.get(io.IMU_TYPE),
-                               chunk.blocks.get(io.MAG_TYPE), chunk.msg, arrays))
+            kinds = [table.get(t, OTHER) for t in chunk.topic]
+        reading.n_imu += kinds.count(IMU)
+        reading.n_mag += kinds.count(MAG)
+        reading.n_vel += kinds.count(VELOCITY)
+        ev = Events(kinds, chunk.log_ns, chunk.row, chunk.blocks.get(io.IMU_TYPE),
+                    chunk.blocks.get(io.MAG_TYPE), chunk.msg, arrays)
+        for run in runs:
+            run.events(ev)
         ref = topics.reference
         fast_ref = getattr(chunk, "references", None)  # a ulog's, as arrays
         if ref is not None and fast_ref is not None and ref != topics.imu:
@@ -777,16 +762,11 @@ def replay_variants(
                 runs.append(_Run(v, opts, topics.names, topics.types, pipeline_factory))
             progress = _Progress(total, opts.progress, in_path.name, opts.on_messages)
             copy = opts.copy_inputs and any(r.bag is not None for r in runs)
-            # IMU and magnetometer decoded in bulk (bag/cdr.py), except when the inputs are
-            # copied: those need rosbags' message objects; runs of ordinary messages through
-            # the pipeline at once (pipeline/bulk.py) for one online variant (velocity
-            # aiding: message by message, the aided accelerometer is per sample; so is the
-            # gravity-free acceleration, publish_linear_acceleration)
+            # IMU and magnetometer decoded in bulk (bag/cdr.py) and through the pipelines in
+            # chunks, except when the inputs are copied: those need rosbags' message objects
             decode_bulk = not copy and opts.bulk_decode
-            if (decode_bulk and opts.bulk_pipeline and len(runs) == 1 and not runs[0].offline
-                    and pipeline_factory is None and topics.velocity is None
-                    and not runs[0].publish_accel):
-                _read_in_bulk(bag, topics, runs[0], reading, progress)
+            if decode_bulk and opts.bulk_pipeline:
+                _read_in_bulk(bag, topics, runs, reading, progress)
             else:
                 _read_messages(bag, topics, runs, copy, decode_bulk, reading, progress)
             if reading.n_imu == 0:

@@ -174,30 +174,13 @@ class OrientationCovariance:
         self._yaw_lp = 0.0
         self._yaw_gap = 0.0
 
-    def update(self, dt_s: float, state: object, mag_used: bool, mag_age_s: float | None,
-               mag_rejected: bool = False) -> tuple[float, ...]:
-        """Covariance after one filter step. ``state``: the filter's step state (phase,
-        error_norm, clipped, bias_err_var, lx, ly, noise_a2, heading_initialized, yaw_error_rad,
-        loop_k1);
-        ``mag_used``: the step used a magnetometer sample; ``mag_age_s``: time since the last
-        used one (None: never); ``mag_rejected``: the step rejected one (a disturbed field)."""
-        s = state
-        bv = s.bias_err_var  # type: ignore[attr-defined]
-        return self.step(dt_s, bool(s.clipped),  # type: ignore[attr-defined]
-                         math.sqrt(bv) if bv >= 0.0 else None, s.phase,  # type: ignore[attr-defined]
-                         s.error_norm, s.lx, s.ly, s.noise_a2,  # type: ignore[attr-defined]
-                         bool(s.heading_initialized),  # type: ignore[attr-defined]
-                         s.yaw_error_rad, mag_used, mag_age_s,  # type: ignore[attr-defined]
-                         s.loop_k1,  # type: ignore[attr-defined]
-                         mag_rejected)
-
     def step(self, dt_s: float, clipped: bool, bias_sigma_rad_s: float | None, phase: float,
              error_norm_rad: float, lx_rad: float, ly_rad: float, noise_a2: float,
              heading_initialized: bool, yaw_error_rad: float, mag_used: bool,
              mag_age_s: float | None, loop_k1: float = 0.0, mag_rejected: bool = False
              ) -> tuple[float, ...]:
-        """:meth:`update` from the state's figures (the bulk pipeline and ``estimate`` have them
-        per row): ``bias_sigma_rad_s`` = √bias_err_var, the bias estimate's error (None: no
+        """Covariance after one filter step (``estimate``'s model, row by row), from the state's
+        figures: ``bias_sigma_rad_s`` = √bias_err_var, the bias estimate's error (None: no
         estimate yet, the prior is used),
         ``lx_rad``, ``ly_rad`` the aperiodic unit's world-frame state, ``noise_a2``
         [(m/s²)²] the accelerometer noise of the stillness blocks, ``yaw_error_rad`` read only

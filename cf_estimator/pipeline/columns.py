@@ -3,7 +3,7 @@
 A block holds one row per message: the float64 fields of ``sensor_msgs/Imu`` (37) or
 ``sensor_msgs/MagneticField`` (12) in the message's own field order. The bag readers fill
 blocks in this layout (``bag/cdr.py`` from CDR bytes, ``bag/ulog.py`` and ``bag/dataflash.py``
-from autopilot logs); the pipeline's bulk path (``pipeline/bulk.py``) reads them. Both name the
+from autopilot logs); the pipeline (``pipeline/process.py``) reads them. Both name the
 columns from here: no layer reads another's column numbers.
 """
 

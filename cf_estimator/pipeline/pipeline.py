@@ -25,8 +25,11 @@ test the node's behaviour. Rules, in the order :meth:`ImuPipeline.on_imu` applie
    exactly as without velocity. Every velocity message is counted used, stale or rejected by
    reason (diagnostics ``velocity_*``); a reset of the filter resets the aiding.
 
-Per-message cost is kept small: plain floats, no NumPy, no per-message dicts; statistics are
-accumulated incrementally and turned into a report only by :meth:`ImuPipeline.diagnostics`.
+The rules are applied in one place, over arrays (:mod:`cf_estimator.pipeline.process`): the
+node passes each message as a chunk of one (:meth:`ImuPipeline.on_imu`, ``on_mag``), a replay
+thousands at a time (:meth:`ImuPipeline.process`), with the same outputs and counters, bit for
+bit. Statistics are accumulated incrementally and turned into a report only by
+:meth:`ImuPipeline.diagnostics`.
 """
 
 from __future__ import annotations
@@ -35,14 +38,14 @@ import dataclasses
 import math
 import traceback
 from collections.abc import Mapping
-from dataclasses import dataclass, field
 from time import perf_counter
 from typing import Any
+
+import numpy as np
 
 from cf_estimator.core.filter import ComplementaryFilter
 from cf_estimator.core.magcal import MagCorrection
 from cf_estimator.core.params import FilterParams
-from cf_estimator.core.step import MAG_DISABLED, MAG_REJECTED, MAG_USED
 from cf_estimator.core.velocity import VelocityAiding
 from cf_estimator.pipeline import checks, frames
 from cf_estimator.pipeline.covariance import OrientationCovariance
@@ -52,68 +55,18 @@ from cf_estimator.pipeline.diagnostics import (
     compose_report,
     velocity_values,
 )
-from cf_estimator.pipeline.linear_acceleration import gravity_free
-from cf_estimator.pipeline.messages import UNKNOWN_COVARIANCE, covariance9
+from cf_estimator.pipeline.events import Events, imu_message_events, mag_message_events
+from cf_estimator.pipeline.messages import covariance9
 from cf_estimator.pipeline.params import PipelineParams
+from cf_estimator.pipeline.process import PipelineOutput, Rows, process
 from cf_estimator.pipeline.state import ImuTime, InputRules, MagInput, MessageCounts
 from cf_estimator.pipeline.velocity_input import velocity_from_message
 from cf_estimator.schema import ParameterError, as_dict, specs_of, split_by_owner
 
 Vec3 = tuple[float, float, float]
-TWO_PI = 2.0 * math.pi
 #: An unexpected exception's traceback is reported at most once per this many seconds [s]
 #: (wall clock): a bug that hits every message is logged, not flooded.
 INTERNAL_ERROR_REPORT_S = 10.0
-#: squared norms beyond any sensor's range [(rad/s)², (m/s²)²]: rejected (checks.*_MAX_*)
-GYRO_MAX2 = checks.GYRO_MAX_RAD_S**2
-ACCEL_MAX2 = checks.ACCEL_MAX_M_S2**2
-
-
-@dataclass(slots=True)
-class PipelineOutput:
-    """Contents of the output messages for one processed IMU message.
-
-    ``orientation_xyzw`` is q_world_from_sensor in **ROS order** (x, y, z, w), world frame from
-    FilterParams.world_frame. ``orientation_covariance``: row-major 3x3 about the world x, y, z
-    axes [rad^2]; element 0 is -1 while not initialized. The other vectors and covariances are
-    copied from the input. ``rpy_rad``: aerospace ZYX roll, pitch, yaw [rad] of the same
-    orientation. ``warnings``: warn-once messages first raised by this message (or by
-    magnetometer / rejected messages since the last output), for the adapter to log.
-    """
-
-    stamp_sec: int
-    stamp_nanosec: int
-    frame_id: str
-    orientation_xyzw: tuple[float, float, float, float]
-    orientation_covariance: tuple[float, ...]
-    angular_velocity: Vec3
-    angular_velocity_covariance: tuple[float, ...]
-    linear_acceleration: Vec3
-    linear_acceleration_covariance: tuple[float, ...]
-    rpy_rad: Vec3 | None
-    initialized: bool
-    warnings: list[str] = field(default_factory=list)
-    #: ``publish_linear_acceleration``: (a_body, cov_body, a_world, cov_world), gravity removed
-    #: [m/s², m²/s⁴ row-major] (pipeline/linear_acceleration.py); None when off or not
-    #: initialized
-    gravity_free: tuple[Vec3, tuple[float, ...], Vec3, tuple[float, ...]] | None = None
-
-
-@dataclass(slots=True)
-class _ImuSample:
-    """One IMU message's fields after the checks (body convention paired with world_frame):
-    header stamp (sec, nsec) and t_ns [ns], frame_id, gyro [rad/s], accelerometer [m/s²], their
-    covariances as published, and |gyro|² [(rad/s)²]."""
-
-    sec: int
-    nsec: int
-    t_ns: int
-    frame: Any
-    gyro: tuple[float, float, float]
-    accel: tuple[float, float, float]
-    av_cov: Any
-    la_cov: Any
-    g2: float
 
 
 class ImuPipeline:
@@ -155,7 +108,9 @@ class ImuPipeline:
         self._internal_error_at = -math.inf
         self.imu_frame: str | None = None  #: the IMU messages' frame id (None: none yet)
         self.accel_check_n = 0  #: accelerometer samples in the unit check so far
-        self._acc_sx = self._acc_sy = self._acc_sz = 0.0
+        self.acc_sum = [0.0, 0.0, 0.0]  #: their sum [m/s²]
+        self._cov_key: bytes = b""
+        self._cov_bits: np.ndarray | None = None
         #: the diagnostics window (since the last report)
         self.window = WindowStats()
         self._previous_counters: dict[str, Any] = {}
@@ -378,7 +333,33 @@ class ImuPipeline:
         """Warn-once messages raised so far, tag → text."""
         return dict(self._warned)
 
-    def _warn(self, tag_text: tuple[str, str] | None) -> None:
+    @property
+    def input_warning_tags(self) -> Mapping[str, str]:
+        """Warn-once messages raised so far, tag → text (the live dict: read only)."""
+        return self._warned
+
+    def take_warnings(self) -> list[str]:
+        """The warn-once texts raised since the last call (they go with the next output)."""
+        warnings = self._pending_warnings
+        if warnings:
+            self._pending_warnings = []
+            return warnings
+        return []
+
+    def covariance_bits(self) -> np.ndarray | None:
+        """The bits of the input covariances in force (angular velocity, then linear
+        acceleration: 18 uint64), None before the first IMU message."""
+        a, b = self.angular_velocity_covariance.raw, self.linear_acceleration_covariance.raw
+        if a is None or b is None or len(a) != 72 or len(b) != 72:
+            return None
+        key = a + b
+        if key != self._cov_key:
+            self._cov_key, self._cov_bits = key, np.frombuffer(key, dtype="<u8")
+        return self._cov_bits
+
+    def warn(self, tag_text: tuple[str, str] | None) -> None:
+        """Raise a warn-once ``(tag, text)`` (None: nothing to say): the first time its tag is
+        seen it goes with the next output and into the diagnostics."""
         if tag_text is None:
             return
         tag, text = tag_text
@@ -386,7 +367,8 @@ class ImuPipeline:
             self._warned[tag] = text
             self._pending_warnings.append(text)
 
-    def _reject(self, reason: str) -> None:
+    def reject(self, reason: str) -> None:
+        """Count one IMU message rejected for ``reason`` (a checks.* code)."""
         self._rejected[reason] = self._rejected.get(reason, 0) + 1
         self.last_reject_reason = reason
 
@@ -394,41 +376,7 @@ class ImuPipeline:
     def on_mag(self, msg: Any) -> None:
         """Store the latest valid magnetometer sample (any unit; only directions are used),
         corrected by ``mag_hard_iron_t`` / ``mag_soft_iron`` first (core/magcal.py)."""
-        self.tally.received_mag += 1
-        try:
-            st = msg.header.stamp
-            t_ns = int(st.sec) * 1_000_000_000 + int(st.nanosec)
-            m = msg.magnetic_field
-            mx, my, mz = float(m.x), float(m.y), float(m.z)
-            frame = msg.header.frame_id
-            if not self.mag_correction.identity:  # calibration: the message's own axes
-                mx, my, mz = self.mag_correction.apply(mx, my, mz)
-            if self.rules.flip:
-                my, mz = -my, -mz
-        except Exception:  # noqa: BLE001 - malformed: counted, never raised
-            self.tally.mag_invalid += 1
-            return
-        if not self.rules.use_mag:
-            self.tally.mag_disabled += 1
-            return
-        n2 = mx * mx + my * my + mz * mz
-        if t_ns == 0 or not math.isfinite(n2) or n2 == 0.0:
-            self.tally.mag_invalid += 1
-            return
-        mi = self.mag_input
-        if frame != mi.frame:
-            mi.frame = frame
-            self._warn(checks.frame_id_warning(str(frame), "magnetometer"))
-            if self.imu_frame is not None and frame != self.imu_frame:
-                self._warn(checks.mag_frame_warning(str(frame), self.imu_frame))
-        if mi.check_n < checks.MAG_CHECK_SAMPLES:
-            mi.check_n += 1
-            mi.check_norm_sum += math.sqrt(n2)
-            if mi.check_n == checks.MAG_CHECK_SAMPLES:
-                self._warn(checks.mag_units_warning(mi.check_norm_sum / mi.check_n))
-        if self.mag_input.pending is not None:
-            self.tally.mag_dropped += 1
-        self.mag_input.pending = (t_ns, mx, my, mz)
+        self.process_message(msg, imu=False)
 
     # -- velocity ---------------------------------------------------------------------------------
     def on_velocity(self, msg: Any) -> str | None:
@@ -458,17 +406,41 @@ class ImuPipeline:
     # -- IMU --------------------------------------------------------------------------------------
     def on_imu(self, msg: Any) -> PipelineOutput | None:
         """Process one sensor_msgs/Imu-like message; None when it is rejected (reason counted)."""
-        t0 = perf_counter()
-        self.tally.received_imu += 1
+        rows = self.process_message(msg, imu=True)
+        return rows[0].output(0) if rows else None
+
+    def process_message(self, msg: Any, imu: bool = True, log_ns: int = 0) -> list[Rows]:
+        """One IMU (``imu``) or magnetometer message object, logged at ``log_ns`` [ns], as a
+        chunk of one event (:func:`process`): the outputs of the IMU message (none when it is
+        rejected, or for a magnetometer message). A malformed message is counted
+        (``malformed`` / ``mag_invalid``), never raised."""
         try:
-            return self._on_imu(msg, t0)
-        except Exception:  # noqa: BLE001 - the pipeline never raises on data
-            self._reject(checks.INTERNAL_ERROR)
-            now = perf_counter()
-            if now - self._internal_error_at >= INTERNAL_ERROR_REPORT_S:
-                self._internal_error_at = now
-                self.internal_error_traceback = traceback.format_exc()
-            return None
+            ev = (imu_message_events(msg, log_ns) if imu else
+                  mag_message_events(msg, log_ns))
+        except Exception:  # noqa: BLE001 - malformed: counted, never raised
+            if imu:
+                self.tally.received_imu += 1
+                self.reject(checks.MALFORMED)
+            else:
+                self.tally.received_mag += 1
+                self.tally.mag_invalid += 1
+            return []
+        return self.process(ev)
+
+    def process(self, events: Events, start: int = 0, stop: int | None = None) -> list[Rows]:
+        """Events ``start``..``stop`` (log order) through the pipeline's rules at once
+        (:mod:`cf_estimator.pipeline.process`): the outputs of the IMU messages processed."""
+        return process(self, events, start, stop)
+
+    def note_internal_error(self) -> None:
+        """Count the IMU message an unexpected exception (a bug) dropped, and keep the
+        exception's traceback for :meth:`take_internal_error` (at most one per
+        INTERNAL_ERROR_REPORT_S). Call from the ``except`` block."""
+        self.reject(checks.INTERNAL_ERROR)
+        now = perf_counter()
+        if now - self._internal_error_at >= INTERNAL_ERROR_REPORT_S:
+            self._internal_error_at = now
+            self.internal_error_traceback = traceback.format_exc()
 
     def take_internal_error(self) -> str | None:
         """The traceback of an unexpected exception (a bug: the message was dropped and counted
@@ -476,255 +448,6 @@ class ImuPipeline:
         to report. The node logs it, the replay prints it: once, not once per message."""
         text, self.internal_error_traceback = self.internal_error_traceback, None
         return text
-
-    def _on_imu(self, msg: Any, t0: float) -> PipelineOutput | None:
-        """One IMU message through the stages, in order; None when a stage rejects it (the
-        stage counted the reason)."""
-        sample = self._read_imu(msg)
-        if sample is None:
-            return None
-        dt = self._advance_time(sample.t_ns)
-        if dt is None:
-            return None
-        self._check_units(sample)
-        mag, mag_stamp_ns = self._take_mag(sample.t_ns)
-        q, mag_used, mag_rejected = self._run_filter(sample, dt, mag, mag_stamp_ns)
-        self.clock.last_ns = sample.t_ns
-        self.tally.processed += 1
-        out = self._output(sample, q, dt, mag_used, mag_rejected)
-        self._time_statistics(sample.t_ns, t0)
-        return out
-
-    def _read_imu(self, msg: Any) -> _ImuSample | None:
-        """Stage 1: the message's fields (in the body convention paired with world_frame) and
-        the per-sample checks: malformed, zero stamp, non-finite, zero or implausible."""
-        try:
-            header = msg.header
-            st = header.stamp
-            sec, nsec = int(st.sec), int(st.nanosec)
-            frame = header.frame_id
-            av = msg.angular_velocity
-            gx, gy, gz = float(av.x), float(av.y), float(av.z)
-            la = msg.linear_acceleration
-            ax, ay, az = float(la.x), float(la.y), float(la.z)
-            av_cov = self.angular_velocity_covariance.get(msg.angular_velocity_covariance)
-            la_cov = self.linear_acceleration_covariance.get(msg.linear_acceleration_covariance)
-        except Exception:  # noqa: BLE001
-            self._reject(checks.MALFORMED)
-            return None
-        if self.rules.flip:  # into the body convention paired with world_frame (see body_frame)
-            gy, gz, ay, az = -gy, -gz, -ay, -az
-        if sec == 0 and nsec == 0:
-            self._reject(checks.ZERO_STAMP)
-            return None
-        isfinite = math.isfinite
-        if not (isfinite(gx) and isfinite(gy) and isfinite(gz)):
-            self._reject(checks.NONFINITE_GYRO)
-            return None
-        if not (isfinite(ax) and isfinite(ay) and isfinite(az)):
-            self._reject(checks.NONFINITE_ACCEL)
-            return None
-        a2 = ax * ax + ay * ay + az * az  # inf when the components are huge: implausible
-        if a2 == 0.0:
-            self._reject(checks.ZERO_ACCEL)
-            return None
-        g2 = gx * gx + gy * gy + gz * gz
-        if g2 > GYRO_MAX2:
-            self._reject(checks.IMPLAUSIBLE_GYRO)
-            return None
-        if a2 > ACCEL_MAX2:
-            self._reject(checks.IMPLAUSIBLE_ACCEL)
-            return None
-        return _ImuSample(sec, nsec, sec * 1_000_000_000 + nsec, frame, (gx, gy, gz),
-                          (ax, ay, az), av_cov, la_cov, g2)
-
-    def _advance_time(self, t_ns: int) -> float | None:
-        """Stage 2: the time base → dt [s] (0 for the first sample and after a reset; the mean
-        dt across a gap), or None when the stamp is rejected (duplicate, out of order, time
-        going backwards without a reset); resets on a jump back or a long gap; the rate
-        statistics of the diagnostics period."""
-        last = self.clock.last_ns
-        dt = 0.0
-        d_ns = 0
-        if last is not None:
-            d_ns = t_ns - last
-            if d_ns <= 0:
-                if d_ns == 0:
-                    self._reject(checks.DUPLICATE_STAMP)
-                    return None
-                if -d_ns < self.rules.jump_back_ns:
-                    self._reject(checks.OUT_OF_ORDER)
-                    return None
-                if not self._pp.reset_on_time_jump_back:
-                    self._reject(checks.TIME_BACKWARDS)
-                    return None
-                self.reset(checks.RESET_TIME_JUMP_BACK)
-            elif self.rules.reset_gap_on and d_ns > self.rules.reset_gap_ns:
-                self.reset(checks.RESET_LONG_GAP)
-            else:
-                dt = d_ns * 1e-9
-        if dt > 0.0:
-            w = self.window
-            if w.n_dt == 0 or dt < w.dt_min:
-                w.dt_min = dt
-            if dt > w.dt_max:
-                w.dt_max = dt
-            w.dt_sum += dt
-            w.n_dt += 1
-            if d_ns > self.rules.max_dt_ns:  # gap: do not integrate over it
-                self.tally.gaps += 1
-                dt = (self.clock.dt_mean if self.clock.dt_mean > 0.0
-                      else min(self._pp.max_dt_s, 0.01))
-            elif self.clock.dt_mean > 0.0:
-                self.clock.dt_mean += 0.05 * (dt - self.clock.dt_mean)
-            else:
-                self.clock.dt_mean = dt
-        return dt
-
-    def _check_units(self, sample: _ImuSample) -> None:
-        """Stage 3: what the input says about its conventions, once each: a new frame_id, an
-        accelerometer not in m/s² (|mean a| of the first samples), a gyro not in rad/s."""
-        frame = sample.frame
-        if frame != self.imu_frame:
-            self.imu_frame = frame
-            self._warn(checks.frame_id_warning(str(frame), "IMU"))
-        if self.accel_check_n < checks.ACCEL_CHECK_SAMPLES:
-            # |mean a|, not mean |a|: vibration adds to every |a| (13 m/s^2 on a quadrotor)
-            # but averages out of the vector, which is gravity (plus a mean acceleration)
-            ax, ay, az = sample.accel
-            self.accel_check_n += 1
-            self._acc_sx += ax
-            self._acc_sy += ay
-            self._acc_sz += az
-            if self.accel_check_n == checks.ACCEL_CHECK_SAMPLES:
-                n = self.accel_check_n
-                mean_norm = math.sqrt(self._acc_sx**2 + self._acc_sy**2 + self._acc_sz**2) / n
-                self._warn(checks.accel_units_warning(mean_norm, self._fp.gravity_m_s2))
-        if sample.g2 > checks.GYRO_IMPLAUSIBLE_RAD_S**2:
-            self._warn(checks.gyro_units_warning(math.sqrt(sample.g2)))
-
-    def _take_mag(self, t_ns: int) -> tuple[tuple[float, float, float] | None, int | None]:
-        """Stage 4: the magnetometer sample waiting for this IMU sample, used once → (the field,
-        its stamp [ns]); (None, None) when there is none, it is disabled or stale (counted)."""
-        pending = self.mag_input.pending
-        if pending is None:
-            return None, None
-        self.mag_input.pending = None
-        if not self.rules.use_mag:
-            self.tally.mag_disabled += 1
-        elif abs(t_ns - pending[0]) <= self.rules.mag_timeout_ns:
-            return (pending[1], pending[2], pending[3]), pending[0]
-        else:
-            self.tally.mag_stale += 1
-        return None, None
-
-    def _run_filter(self, sample: _ImuSample, dt: float,
-                    mag: tuple[float, float, float] | None, mag_stamp_ns: int | None
-                    ) -> tuple[tuple[float, float, float, float] | None, bool, bool]:
-        """Stage 5: velocity aiding (when configured) and the filter step → (q_world_from_body
-        (w, x, y, z) in the core's world, or None before the first sample initialises it;
-        the magnetometer sample used; rejected), with the magnetometer and error counters."""
-        f = self._filter
-        gyro, accel = sample.gyro, sample.accel
-        mag_used = mag_rejected = False
-        if not f.initialized:
-            q = f.update(gyro, accel, 0.0, mag)
-            if mag is not None:
-                if f._state.heading_initialized:  # noqa: SLF001
-                    self.tally.mag_used += 1
-                    mag_used = True
-                    self.mag_input.last_used_ns = mag_stamp_ns
-                else:  # horizontal component too small to give a heading
-                    self.tally.mag_rejected += 1
-            return q, mag_used, mag_rejected
-        if self._aiding is None:
-            q = f.update(gyro, accel, dt, mag)
-        else:
-            q, _accel = self._aiding.update_filter(f, sample.t_ns * 1e-9, gyro, accel, dt, mag)
-        s = f._state  # noqa: SLF001 - per-sample flags without building FilterStatus (20 us)
-        if mag is not None:
-            ms = s.mag_status
-            if ms == MAG_USED:
-                self.tally.mag_used += 1
-                mag_used = True
-                self.mag_input.last_used_ns = mag_stamp_ns
-            elif ms == MAG_REJECTED:
-                self.tally.mag_rejected += 1
-                mag_rejected = True
-            elif ms == MAG_DISABLED:
-                self.tally.mag_disabled += 1
-        w = self.window
-        w.n_err += 1
-        e = s.error_norm
-        w.err_sum += e
-        if e > w.err_max:
-            w.err_max = e
-        if s.clipped:
-            w.n_clipped += 1
-        return q, mag_used, mag_rejected
-
-    def _output(self, sample: _ImuSample, q: tuple[float, float, float, float] | None,
-                dt: float, mag_used: bool, mag_rejected: bool) -> PipelineOutput:
-        """Stage 6: the published message: orientation in the output frame, its covariance,
-        roll/pitch/yaw, the input's rates and accelerations, pending warnings, and the
-        gravity-free acceleration when asked for."""
-        if q is None:  # cannot happen after the checks above; keep the contract anyway
-            xyzw: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
-            cov: tuple[float, ...] = UNKNOWN_COVARIANCE
-            rpy = None
-            initialized = False
-        else:
-            if not self._out_frame.identity:  # core world -> published (nwu, true north)
-                q = self._out_frame.apply(q)
-            qw, qx, qy, qz = q
-            xyzw = (qx, qy, qz, qw)
-            last_mag = self.mag_input.last_used_ns
-            cov = self.covariance_model.update(
-                dt, self._filter._state, mag_used,  # noqa: SLF001 - flags, no FilterStatus
-                None if last_mag is None else (sample.t_ns - last_mag) * 1e-9, mag_rejected)
-            rpy = self._rpy(qw, qx, qy, qz)
-            initialized = True
-        warnings = self._pending_warnings
-        if warnings:
-            self._pending_warnings = []
-        else:
-            warnings = []
-        out = PipelineOutput(
-            sample.sec, sample.nsec, self.output_frame_id(str(sample.frame)), xyzw, cov,
-            sample.gyro, sample.av_cov, sample.accel, sample.la_cov, rpy, initialized, warnings,
-        )
-        if self._pp.publish_linear_acceleration and initialized:
-            out.gravity_free = gravity_free(xyzw, out.linear_acceleration, cov, sample.la_cov,
-                                            self._fp.gravity_m_s2, self._fp.world_frame)
-        return out
-
-    def _rpy(self, qw: float, qx: float, qy: float, qz: float) -> tuple[float, float, float]:
-        """Roll, pitch, yaw [rad] (aerospace ZYX) of the published q, unwrapped when asked."""
-        roll = math.atan2(2.0 * (qw * qx + qy * qz), 1.0 - 2.0 * (qx * qx + qy * qy))
-        sp = 2.0 * (qw * qy - qz * qx)
-        pitch = math.asin(1.0 if sp > 1.0 else (-1.0 if sp < -1.0 else sp))
-        yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
-        if self._pp.rpy_unwrap:
-            prev = self.clock.unwrap_prev
-            if prev is not None:
-                roll += TWO_PI * round((prev[0] - roll) / TWO_PI)
-                yaw += TWO_PI * round((prev[2] - yaw) / TWO_PI)
-            self.clock.unwrap_prev = (roll, pitch, yaw)
-        rpy = (roll, pitch, yaw)
-        self.last_rpy = rpy
-        return rpy
-
-    def _time_statistics(self, t_ns: int, t0: float) -> None:
-        """Stage 7: the diagnostics period's sample count, span and processing time [s]."""
-        w = self.window
-        if w.n == 0:
-            w.first_ns = t_ns
-        w.n += 1
-        w.last_ns = t_ns
-        elapsed = perf_counter() - t0
-        w.proc_sum += elapsed
-        if elapsed > w.proc_max:
-            w.proc_max = elapsed
 
     # -- diagnostics ------------------------------------------------------------------------------
     def diagnostics(self, now_s: float | None = None) -> DiagnosticsReport:

@@ -1,6 +1,6 @@
-"""The pipeline's public state, one object per concern, shared by the per-message path
-(:class:`cf_estimator.pipeline.pipeline.ImuPipeline`) and the bulk path
-(:mod:`cf_estimator.pipeline.bulk`), which must leave it exactly as the per-message path would.
+"""The pipeline's public state, one object per concern, kept by
+:class:`cf_estimator.pipeline.pipeline.ImuPipeline` and changed by its rules
+(:mod:`cf_estimator.pipeline.process`).
 
 - :class:`MessageCounts` — cumulative counts of what came in and what became of it;
 - :class:`ImuTime` — the IMU time base (cleared by every reset);

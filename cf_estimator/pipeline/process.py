@@ -1,0 +1,736 @@
+"""The pipeline's rules, written once over arrays: a chunk of events in, outputs and counters out.
+
+:func:`process` takes events in log order (:class:`cf_estimator.pipeline.events.Events`: a
+replay's thousands, the live node's one) and applies every rule of
+:class:`cf_estimator.pipeline.pipeline.ImuPipeline` (its module docstring lists them). Most of a
+recording is *ordinary* — valid values, increasing stamps without a gap that resets, the frame
+ids and covariances of the message before, a magnetometer past its unit check, an initialised
+filter — and a run of ordinary events goes through the stages at once (:func:`_run`): the time
+base, magnetometer pairing, the filter over the rows, counters, covariance, frames, roll/pitch/
+yaw. An event that is not ordinary ends the run and is taken alone (:func:`_exceptional`): what
+only it needs (a rejection, a reset, a warning, a unit check, a velocity message) is done, then,
+when it goes on, it runs through the same stages as a run of one. Either way every stage exists
+once; a chunk gives the same outputs, counters and state, bit for bit, however it is cut.
+"""
+
+from __future__ import annotations
+
+import math
+from bisect import bisect_left
+from dataclasses import dataclass, field
+from time import perf_counter
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from cf_estimator.core.filter import EXTRA_COLUMNS, Extra, state_extras
+from cf_estimator.core.kernel import compiled_kernel
+from cf_estimator.core.step import MAG_DISABLED, MAG_REJECTED, MAG_USED
+from cf_estimator.pipeline import checks, columns
+from cf_estimator.pipeline.events import IMU, MAG, VELOCITY, Events
+from cf_estimator.pipeline.linear_acceleration import gravity_free
+
+if TYPE_CHECKING:
+    from cf_estimator.pipeline.pipeline import ImuPipeline
+
+Vec3 = tuple[float, float, float]
+TWO_PI = 2.0 * math.pi
+#: squared norms beyond any sensor's range [(rad/s)², (m/s²)²]: rejected (checks.*_MAX_*)
+GYRO_MAX2 = checks.GYRO_MAX_RAD_S**2
+ACCEL_MAX2 = checks.ACCEL_MAX_M_S2**2
+_GYRO_WARN2 = checks.GYRO_IMPLAUSIBLE_RAD_S**2
+#: the value checks' rejection reasons, in the order they are applied (code k: _REASONS[k])
+_REASONS = (None, checks.ZERO_STAMP, checks.NONFINITE_GYRO, checks.NONFINITE_ACCEL,
+            checks.ZERO_ACCEL, checks.IMPLAUSIBLE_GYRO, checks.IMPLAUSIBLE_ACCEL)
+
+
+@dataclass(slots=True)
+class PipelineOutput:
+    """Contents of the output messages for one processed IMU message.
+
+    ``orientation_xyzw`` is q_world_from_sensor in **ROS order** (x, y, z, w), world frame from
+    FilterParams.world_frame. ``orientation_covariance``: row-major 3x3 about the world x, y, z
+    axes [rad^2]; element 0 is -1 while not initialized. The other vectors and covariances are
+    copied from the input. ``rpy_rad``: aerospace ZYX roll, pitch, yaw [rad] of the same
+    orientation. ``warnings``: warn-once messages first raised by this message (or by
+    magnetometer / rejected messages since the last output), for the adapter to log.
+    """
+
+    stamp_sec: int
+    stamp_nanosec: int
+    frame_id: str
+    orientation_xyzw: tuple[float, float, float, float]
+    orientation_covariance: tuple[float, ...]
+    angular_velocity: Vec3
+    angular_velocity_covariance: tuple[float, ...]
+    linear_acceleration: Vec3
+    linear_acceleration_covariance: tuple[float, ...]
+    rpy_rad: Vec3 | None
+    initialized: bool
+    warnings: list[str] = field(default_factory=list)
+    #: ``publish_linear_acceleration``: (a_body, cov_body, a_world, cov_world), gravity removed
+    #: [m/s², m²/s⁴ row-major] (pipeline/linear_acceleration.py); None when off or not
+    #: initialized
+    gravity_free: tuple[Vec3, tuple[float, ...], Vec3, tuple[float, ...]] | None = None
+
+
+@dataclass(slots=True)
+class Rows:
+    """The outputs of a run of processed IMU messages, one row each.
+
+    ``q_wxyz`` q_world_from_sensor in the published world frame, ``rpy`` roll, pitch, yaw
+    [rad], ``covariance`` (n, 9) row-major about the world axes [rad²]; ``gyro`` [rad/s] and
+    ``accel`` [m/s²] as the filter took them (body convention of the output) with their
+    covariances ``av_cov``/``la_cov`` as published; ``extra`` the filter state after each row
+    (:class:`cf_estimator.core.filter.Extra`), ``error_norm`` |e| [rad]; ``frame`` the output
+    frame id; ``gravity_free`` per row (publish_linear_acceleration) or None; ``warnings``:
+    warn-once texts raised since the last output, for the adapter to log."""
+
+    sec: np.ndarray
+    nsec: np.ndarray
+    log_ns: np.ndarray
+    frame: str
+    q_wxyz: np.ndarray
+    rpy: np.ndarray
+    covariance: np.ndarray
+    gyro: np.ndarray
+    accel: np.ndarray
+    av_cov: tuple[float, ...]
+    la_cov: tuple[float, ...]
+    extra: np.ndarray
+    error_norm: np.ndarray
+    gravity_free: list[Any] | None
+    warnings: list[str]
+
+    @property
+    def n(self) -> int:
+        return int(self.sec.shape[0])
+
+    def output(self, k: int) -> PipelineOutput:
+        """Row ``k`` as the contents of one output message."""
+        qw, qx, qy, qz = self.q_wxyz[k].tolist()
+        gx, gy, gz = self.gyro[k].tolist()
+        ax, ay, az = self.accel[k].tolist()
+        roll, pitch, yaw = self.rpy[k].tolist()
+        return PipelineOutput(
+            int(self.sec[k]), int(self.nsec[k]), self.frame, (qx, qy, qz, qw),
+            tuple(self.covariance[k].tolist()), (gx, gy, gz), self.av_cov, (ax, ay, az),
+            self.la_cov, (roll, pitch, yaw), True, self.warnings if k == 0 else [],
+            None if self.gravity_free is None else self.gravity_free[k])
+
+
+def imu_reasons(gyro: np.ndarray, accel: np.ndarray, sec: np.ndarray, nsec: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Per IMU row: the value checks' verdict (0: valid, k: rejected for ``_REASONS[k]``, the
+    first check failed in the order zero stamp, non-finite gyro, non-finite accelerometer, zero
+    accelerometer, implausible gyro, implausible accelerometer) and |gyro|² [(rad/s)²].
+
+    A row passes them all exactly when its stamp is not zero and 0 < |a|² ≤ ACCEL_MAX2,
+    |g|² ≤ GYRO_MAX2 (a NaN or Inf component makes its norm fail the comparison; an overflow is
+    implausible): that is tested first, the reasons sorted out only for the rows failing it."""
+    gx, gy, gz = gyro[:, 0], gyro[:, 1], gyro[:, 2]
+    ax, ay, az = accel[:, 0], accel[:, 1], accel[:, 2]
+    code = np.zeros(gyro.shape[0], dtype=np.int8)
+    with np.errstate(over="ignore", invalid="ignore"):
+        a2 = ax * ax + ay * ay + az * az  # inf when the components are huge: implausible
+        g2 = gx * gx + gy * gy + gz * gz
+        ok = (g2 <= GYRO_MAX2) & (a2 <= ACCEL_MAX2) & (a2 != 0.0) & ((sec != 0) | (nsec != 0))
+        if not ok.all():
+            fin_g = np.isfinite(gx) & np.isfinite(gy) & np.isfinite(gz)
+            fin_a = np.isfinite(ax) & np.isfinite(ay) & np.isfinite(az)
+            fails = [(sec == 0) & (nsec == 0), ~fin_g, ~fin_a, a2 == 0.0, g2 > GYRO_MAX2,
+                     a2 > ACCEL_MAX2]
+            for k in range(len(fails), 0, -1):  # the first check failed wins
+                code[fails[k - 1]] = k
+    return code, g2
+
+
+class _Chunk:
+    """The events ``start``..``stop`` of a chunk as the stages read them (range coordinates:
+    event ``start + i`` is ``i``), IMU and magnetometer rows in the body convention paired
+    with the world frame, the magnetometer calibrated."""
+
+    def __init__(self, pipe: ImuPipeline, ev: Events, start: int, stop: int) -> None:
+        kind_a, log_a, row_a = ev.arrays()
+        self.ev, self.start = ev, start
+        self.n = stop - start
+        kind = self.kind = kind_a[start:stop]
+        self.log_ns = log_a[start:stop]
+        row = row_a[start:stop]
+        flip = pipe.rules.flip
+        codes: dict[Any, int] = {}
+        # IMU rows
+        self.imu_at = np.flatnonzero(kind == IMU)  # range index of each IMU event
+        self.imu_list = self.imu_at.tolist()
+        rows = row[self.imu_at]
+        if rows.shape[0]:
+            blk = ev.imu
+            sec_all, nsec_all, plain_all = blk.arrays()
+            v = blk.values[rows]
+            #: both input covariances' bits per row (one changing ends a run)
+            self.imu_cov_bits = np.concatenate(
+                (v[:, columns.ANGULAR_VELOCITY_COVARIANCE],
+                 v[:, columns.LINEAR_ACCELERATION_COVARIANCE]), axis=1).view("<u8")
+            self.imu_values = v
+            g = v[:, columns.ANGULAR_VELOCITY]
+            a = v[:, columns.LINEAR_ACCELERATION]
+            if flip:  # body_frame FLU <-> FRD: a half turn about x
+                g[:, 1:] = -g[:, 1:]
+                a[:, 1:] = -a[:, 1:]
+            self.gyro, self.accel = g, a
+            self.sec, self.nsec = sec_all[rows], nsec_all[rows]
+            self.t_ns = self.sec * 1_000_000_000 + self.nsec
+            self.imu_plain = plain_all[rows]
+            self.imu_frame = [blk.frame[r] for r in rows.tolist()]
+            self.imu_fcode = np.array([codes.setdefault(f, len(codes)) for f in self.imu_frame],
+                                      dtype=np.int64)
+            self.reason, self.g2 = imu_reasons(g, a, self.sec, self.nsec)
+        # magnetometer rows: calibrated, then turned (as the field the filter takes)
+        self.mag_at = np.flatnonzero(kind == MAG)
+        self.mag_list = self.mag_at.tolist()
+        mrows = row[self.mag_at]
+        self.mag_valid = self.mag_plain = np.zeros(0, dtype=bool)
+        if mrows.shape[0]:
+            blk = ev.mag
+            sec_all, nsec_all, plain_all = blk.arrays()
+            m = blk.values[mrows, columns.MAGNETIC_FIELD]
+            if not pipe.mag_correction.identity:
+                m = pipe.mag_correction.apply_rows(m)
+            if flip:
+                m[:, 1:] = -m[:, 1:]
+            self.mag = m
+            self.mag_t_ns = sec_all[mrows] * 1_000_000_000 + nsec_all[mrows]
+            with np.errstate(over="ignore", invalid="ignore"):
+                self.mag_n2 = m[:, 0] * m[:, 0] + m[:, 1] * m[:, 1] + m[:, 2] * m[:, 2]
+                self.mag_valid = ((self.mag_t_ns != 0) & np.isfinite(self.mag_n2)
+                                  & (self.mag_n2 != 0.0))
+            self.mag_plain = plain_all[mrows]
+            self.mag_frame = [blk.frame[r] for r in mrows.tolist()]
+            self.mag_fcode = np.array([codes.setdefault(f, len(codes)) for f in self.mag_frame],
+                                      dtype=np.int64)
+        self.codes = codes
+
+    def code(self, frame: Any) -> int:
+        """The frame id's code in this chunk (-1: none of its rows has it)."""
+        return self.codes.get(frame, -1) if frame is not None else -1
+
+
+def process(pipe: ImuPipeline, ev: Events, start: int = 0, stop: int | None = None
+            ) -> list[Rows]:
+    """Events ``start``..``stop`` of ``ev`` through ``pipe`` (see the module docstring): the
+    outputs of the processed IMU messages, a :class:`Rows` per run. Never raises on data: an
+    unexpected exception drops the messages it hit (counted ``internal_error``, its traceback
+    kept for :meth:`ImuPipeline.take_internal_error`)."""
+    stop = len(ev) if stop is None else stop
+    c = _Chunk(pipe, ev, start, stop)
+    tally = pipe.tally
+    if c.imu_at.shape[0]:
+        tally.received_imu += int(np.count_nonzero(c.imu_plain))
+    if c.mag_at.shape[0]:
+        tally.received_mag += int(np.count_nonzero(c.mag_plain))
+    out: list[Rows] = []
+    p = 0
+    while p < c.n:
+        try:
+            e = _ordinary_end(pipe, c, p)
+        except Exception:  # noqa: BLE001 - a bug: the event alone, where it is counted
+            e = p
+        if e > p:
+            rows = _guarded(pipe, c, p, e, _run)
+            p = e
+        else:
+            rows = _guarded(pipe, c, p, p + 1, _exceptional)
+            p += 1
+        if rows is not None:
+            out.extend(rows)
+    return out
+
+
+def _guarded(pipe: ImuPipeline, c: _Chunk, p: int, e: int, stage: Any) -> list[Rows] | None:
+    """``stage(pipe, c, p, e)``; an unexpected exception (a bug) drops the IMU messages of
+    events p..e-1, each counted as ``internal_error``
+    (:meth:`ImuPipeline.note_internal_error`)."""
+    try:
+        return stage(pipe, c, p, e)
+    except Exception:  # noqa: BLE001 - the pipeline never raises on data
+        for _ in range(bisect_left(c.imu_list, e) - bisect_left(c.imu_list, p)):
+            pipe.note_internal_error()
+        return None
+
+
+def _first_false(mask: np.ndarray) -> int:
+    """Index of the first False in ``mask`` (its length if none)."""
+    if mask.shape[0] == 0:
+        return 0
+    k = int(np.argmin(mask))
+    return k if not mask[k] else int(mask.shape[0])
+
+
+def _ordinary_end(pipe: ImuPipeline, c: _Chunk, p: int) -> int:
+    """The end of the run of ordinary events from range index ``p`` (p itself when event p is
+    not ordinary; see the module docstring). Nothing of ``pipe`` changes."""
+    kind = c.kind
+    if kind[p] == VELOCITY:
+        return p
+    rules = pipe.rules
+    f = pipe.filter
+    end = c.n
+    # velocity messages end a run (they go to the aiding between two IMU samples)
+    vel = np.flatnonzero(kind[p:] == VELOCITY)
+    if vel.shape[0]:
+        end = p + int(vel[0])
+    ia = bisect_left(c.imu_list, p)
+    ib = bisect_left(c.imu_list, end)
+    if ib > ia:
+        last = pipe.clock.last_ns
+        if (last is None or not f.initialized
+                or pipe.accel_check_n < checks.ACCEL_CHECK_SAMPLES):
+            ok = np.zeros(ib - ia, dtype=bool)  # the next IMU message starts or checks
+        else:
+            t = c.t_ns[ia:ib]
+            d = np.empty(ib - ia, dtype=np.int64)
+            d[0] = int(t[0]) - last
+            np.subtract(t[1:], t[:-1], out=d[1:])
+            ok = (c.imu_plain[ia:ib] & (c.reason[ia:ib] == 0) & (d > 0)
+                  & (c.imu_fcode[ia:ib] == c.code(pipe.imu_frame)))
+            if rules.reset_gap_on:
+                ok &= d <= rules.reset_gap_ns
+            if "gyro_units" not in pipe.input_warning_tags:
+                ok &= c.g2[ia:ib] <= _GYRO_WARN2
+            # the covariances of the message before (the first one's: the pipeline's)
+            bits = c.imu_cov_bits[ia:ib]
+            same = np.ones(ib - ia, dtype=bool)
+            if ib - ia > 1:
+                same[1:] = (bits[1:] == bits[:-1]).all(axis=1)
+            ref = pipe.covariance_bits()
+            same[0] = ref is not None and bool((bits[0] == ref).all())
+            ok &= same
+            if (rules.use_mag and not f.step_state.heading_initialized
+                    and (pipe.mag_input.pending is not None or c.mag_list)):
+                ok &= ~_takes_mag(pipe, c, p, ia, ib)  # the heading may start: alone
+        k = _first_false(ok)
+        if k < ib - ia:
+            end = min(end, int(c.imu_at[ia + k]))
+    ma = bisect_left(c.mag_list, p)
+    mb = bisect_left(c.mag_list, end)
+    if mb > ma and rules.use_mag:
+        mi = pipe.mag_input
+        ok = c.mag_plain[ma:mb] & (~c.mag_valid[ma:mb] | (
+            (c.mag_fcode[ma:mb] == c.code(mi.frame)) & (mi.check_n >= checks.MAG_CHECK_SAMPLES)))
+        k = _first_false(ok)
+        if k < mb - ma:
+            end = min(end, int(c.mag_at[ma + k]))
+    elif mb > ma:
+        k = _first_false(c.mag_plain[ma:mb])
+        if k < mb - ma:
+            end = min(end, int(c.mag_at[ma + k]))
+    return end
+
+
+def _takes_mag(pipe: ImuPipeline, c: _Chunk, p: int, ia: int, ib: int) -> np.ndarray:
+    """Per IMU event ia..ib-1 (from range index p): a magnetometer sample is waiting for it."""
+    valid = np.zeros(c.n + 1, dtype=np.int64)
+    ma = bisect_left(c.mag_list, p)
+    at = c.mag_at[ma:]
+    valid[at[c.mag_valid[ma:]] + 1] = 1
+    cum = np.cumsum(valid)  # cum[x]: valid magnetometer events before range index x
+    imu = c.imu_at[ia:ib]
+    before = np.empty(ib - ia, dtype=np.int64)
+    before[0] = cum[p]
+    before[1:] = cum[imu[:-1] + 1]
+    takes = cum[imu] > before
+    takes[0] |= pipe.mag_input.pending is not None
+    return takes
+
+
+def _exceptional(pipe: ImuPipeline, c: _Chunk, p: int, _e: int) -> list[Rows] | None:
+    """Event ``p`` alone: what only it needs, then (when it goes on) the stages as a run of
+    one."""
+    kind = int(c.kind[p])
+    if kind == VELOCITY:
+        pipe.on_velocity(c.ev.message(c.start + p))
+        return None
+    if kind == IMU:
+        j = bisect_left(c.imu_list, p)
+        if not c.imu_plain[j]:  # not decoded in bulk: the message object, on its own
+            return _message(pipe, c, p, imu=True)
+        return _imu_alone(pipe, c, p, j)
+    if kind == MAG:
+        j = bisect_left(c.mag_list, p)
+        if not c.mag_plain[j]:
+            return _message(pipe, c, p, imu=False)
+        if pipe.rules.use_mag and c.mag_valid[j]:
+            _mag_checks(pipe, c, j)
+        return _run(pipe, c, p, p + 1)
+    return None
+
+
+def _message(pipe: ImuPipeline, c: _Chunk, p: int, imu: bool) -> list[Rows] | None:
+    """Event ``p`` as a message object (not decoded in bulk) through
+    :meth:`ImuPipeline.process_message`."""
+    rows = pipe.process_message(c.ev.message(c.start + p), imu=imu, log_ns=int(c.log_ns[p]))
+    return rows or None
+
+
+def _imu_alone(pipe: ImuPipeline, c: _Chunk, p: int, j: int) -> list[Rows] | None:
+    """An IMU message that is not ordinary: the covariances it brings, the value and stamp
+    checks (rejections, resets), the frame id and unit checks, then a run of one."""
+    v = c.imu_values[j]
+    pipe.angular_velocity_covariance.get(v[columns.ANGULAR_VELOCITY_COVARIANCE])
+    pipe.linear_acceleration_covariance.get(v[columns.LINEAR_ACCELERATION_COVARIANCE])
+    code = int(c.reason[j])
+    if code:
+        pipe.reject(_REASONS[code])
+        return None
+    t_ns = int(c.t_ns[j])
+    last = pipe.clock.last_ns
+    rules = pipe.rules
+    if last is not None:
+        d_ns = t_ns - last
+        if d_ns <= 0:
+            if d_ns == 0:
+                pipe.reject(checks.DUPLICATE_STAMP)
+                return None
+            if -d_ns < rules.jump_back_ns:
+                pipe.reject(checks.OUT_OF_ORDER)
+                return None
+            if not pipe.pipeline_params.reset_on_time_jump_back:
+                pipe.reject(checks.TIME_BACKWARDS)
+                return None
+            pipe.reset(checks.RESET_TIME_JUMP_BACK)
+        elif rules.reset_gap_on and d_ns > rules.reset_gap_ns:
+            pipe.reset(checks.RESET_LONG_GAP)
+    # what the input says about its conventions, once each
+    frame = c.imu_frame[j]
+    if frame != pipe.imu_frame:
+        pipe.imu_frame = frame
+        pipe.warn(checks.frame_id_warning(str(frame), "IMU"))
+    if pipe.accel_check_n < checks.ACCEL_CHECK_SAMPLES:
+        # |mean a|, not mean |a|: vibration adds to every |a| (13 m/s^2 on a quadrotor)
+        # but averages out of the vector, which is gravity (plus a mean acceleration)
+        ax, ay, az = c.accel[j].tolist()
+        pipe.accel_check_n += 1
+        pipe.acc_sum[0] += ax
+        pipe.acc_sum[1] += ay
+        pipe.acc_sum[2] += az
+        if pipe.accel_check_n == checks.ACCEL_CHECK_SAMPLES:
+            n = pipe.accel_check_n
+            sx, sy, sz = pipe.acc_sum
+            mean_norm = math.sqrt(sx**2 + sy**2 + sz**2) / n
+            pipe.warn(checks.accel_units_warning(mean_norm, pipe.filter_params.gravity_m_s2))
+    g2 = float(c.g2[j])
+    if g2 > _GYRO_WARN2:
+        pipe.warn(checks.gyro_units_warning(math.sqrt(g2)))
+    return _run(pipe, c, p, p + 1)
+
+
+def _mag_checks(pipe: ImuPipeline, c: _Chunk, j: int) -> None:
+    """A valid magnetometer sample's frame id and unit checks (warn-once)."""
+    mi = pipe.mag_input
+    frame = c.mag_frame[j]
+    if frame != mi.frame:
+        mi.frame = frame
+        pipe.warn(checks.frame_id_warning(str(frame), "magnetometer"))
+        if pipe.imu_frame is not None and frame != pipe.imu_frame:
+            pipe.warn(checks.mag_frame_warning(str(frame), pipe.imu_frame))
+    if mi.check_n < checks.MAG_CHECK_SAMPLES:
+        mi.check_n += 1
+        mi.check_norm_sum += math.sqrt(float(c.mag_n2[j]))
+        if mi.check_n == checks.MAG_CHECK_SAMPLES:
+            pipe.warn(checks.mag_units_warning(mi.check_norm_sum / mi.check_n))
+
+
+def _run(pipe: ImuPipeline, c: _Chunk, p: int, e: int) -> list[Rows] | None:
+    """Events p..e-1 (ordinary, or one already checked by :func:`_exceptional`) through the
+    stages: magnetometer samples, time base, filter, counters, covariance, outputs."""
+    t0 = perf_counter()
+    ia, ib = bisect_left(c.imu_list, p), bisect_left(c.imu_list, e)
+    ma, mb = bisect_left(c.mag_list, p), bisect_left(c.mag_list, e)
+    mag, mag_t = _mag_stage(pipe, c, p, ia, ib, ma, mb)
+    n = ib - ia
+    if n == 0:
+        return None
+    dt = _time_stage(pipe, c.t_ns[ia:ib])
+    gyro = np.ascontiguousarray(c.gyro[ia:ib])
+    accel = np.ascontiguousarray(c.accel[ia:ib])
+    q, extra, used, rejected, first = _filter_stage(pipe, c.t_ns[ia:ib], gyro, accel, mag, dt)
+    return [_output_stage(pipe, c, ia, ib, dt, gyro, accel, q, extra, used, rejected, first,
+                          mag_t, t0)]
+
+
+def _mag_stage(pipe: ImuPipeline, c: _Chunk, p: int, ia: int, ib: int, ma: int, mb: int
+               ) -> tuple[np.ndarray | None, np.ndarray]:
+    """Magnetometer events ma..mb-1 (counted; the valid ones wait for the next IMU message,
+    a sample replaced before one came is dropped) and the sample each IMU message ia..ib-1
+    takes: (n, 3) rows (NaN: none; None: none at all) and their stamps [ns] (0: none)."""
+    tally, mi, rules = pipe.tally, pipe.mag_input, pipe.rules
+    n = ib - ia
+    mag_t = np.zeros(n, dtype=np.int64)
+    pending = mi.pending
+    if mb > ma:
+        if not rules.use_mag:
+            tally.mag_disabled += mb - ma
+            valid_at = c.mag_at[:0]
+        else:
+            valid = c.mag_valid[ma:mb]
+            tally.mag_invalid += int(mb - ma - np.count_nonzero(valid))
+            valid_at = c.mag_at[ma:mb][valid]  # range indices of the valid samples
+            vj = np.flatnonzero(valid) + ma  # their rows
+    else:
+        valid_at = c.mag_at[:0]
+    if valid_at.shape[0] == 0:
+        if n == 0 or pending is None:
+            return None, mag_t
+        # the waiting sample goes to the first IMU message
+        mi.pending = None
+        if not rules.use_mag:
+            tally.mag_disabled += 1
+            return None, mag_t
+        if abs(int(c.t_ns[ia]) - pending[0]) > rules.mag_timeout_ns:
+            tally.mag_stale += 1
+            return None, mag_t
+        mag = np.full((n, 3), np.nan)
+        mag[0] = pending[1:4]
+        mag_t[0] = pending[0]
+        return mag, mag_t
+    # each valid sample waits for the next IMU message; one followed by another first is
+    # dropped (as is the waiting one when a sample comes before any IMU message)
+    imu = c.imu_at[ia:ib]
+    # for each valid sample: the index of the first IMU message after it (n: none)
+    nxt = np.searchsorted(imu, valid_at)
+    dropped = int(np.count_nonzero(nxt[:-1] == nxt[1:]))
+    if pending is not None and (n == 0 or int(valid_at[0]) < int(imu[0])):
+        dropped += 1
+        pending = None
+    tally.mag_dropped += dropped
+    # the sample each IMU message takes: the last valid one before it, after the one before
+    last_of = np.flatnonzero(np.append(nxt[1:] != nxt[:-1], True))  # last sample per IMU
+    takers = nxt[last_of]
+    took = takers < n
+    mag = np.full((n, 3), np.nan)
+    has = np.zeros(n, dtype=bool)
+    rows_taken = vj[last_of[took]]
+    has[takers[took]] = True
+    mag[takers[took]] = c.mag[rows_taken]
+    mag_t[takers[took]] = c.mag_t_ns[rows_taken]
+    if pending is not None and n and not has[0]:  # the waiting one goes to the first
+        has[0] = True
+        mag[0] = pending[1:4]
+        mag_t[0] = pending[0]
+    # the sample still waiting after the run
+    if not took[-1]:
+        r = int(vj[last_of[-1]])
+        m = c.mag[r].tolist()
+        mi.pending = (int(c.mag_t_ns[r]), m[0], m[1], m[2])
+    elif n:
+        mi.pending = None
+    if n == 0:
+        return None, mag_t
+    # stale: stamped too far from the IMU message it would go with
+    fresh = np.abs(c.t_ns[ia:ib] - mag_t) <= rules.mag_timeout_ns
+    tally.mag_stale += int(np.count_nonzero(has & ~fresh))
+    has &= fresh
+    if not has.any():
+        return None, np.zeros(n, dtype=np.int64)
+    mag[~has] = np.nan
+    mag_t[~has] = 0
+    return mag, mag_t
+
+
+def _time_stage(pipe: ImuPipeline, t_ns: np.ndarray) -> np.ndarray:
+    """The time base over the run's stamps [ns] (all accepted): the filter's interval per row
+    [s] (0 for a first sample; the mean interval across a gap, counted), the diagnostics
+    period's interval statistics."""
+    clock, w, rules = pipe.clock, pipe.window, pipe.rules
+    n = t_ns.shape[0]
+    last = clock.last_ns
+    clock.last_ns = int(t_ns[-1])
+    if last is None:  # a first sample (always alone): no interval
+        return np.zeros(1)
+    d_ns = np.empty(n, dtype=np.int64)
+    d_ns[0] = int(t_ns[0]) - last
+    np.subtract(t_ns[1:], t_ns[:-1], out=d_ns[1:])
+    dt = d_ns * 1e-9
+    lo, hi = float(dt.min()), float(dt.max())
+    if w.n_dt == 0 or lo < w.dt_min:
+        w.dt_min = lo
+    if hi > w.dt_max:
+        w.dt_max = hi
+    w.n_dt += n
+    # the running sum in message order (add.accumulate is sequential: the same bits)
+    w.dt_sum = float(np.add.accumulate(np.concatenate(([w.dt_sum], dt)))[-1])
+    dt_mean = clock.dt_mean
+    if int(d_ns.max()) > rules.max_dt_ns:  # gaps: not integrated, the mean interval instead
+        fallback = min(pipe.pipeline_params.max_dt_s, 0.01)
+        dts = []
+        for d, x in zip(d_ns.tolist(), dt.tolist(), strict=True):
+            if d > rules.max_dt_ns:
+                pipe.tally.gaps += 1
+                x = dt_mean if dt_mean > 0.0 else fallback
+            elif dt_mean > 0.0:
+                dt_mean += 0.05 * (x - dt_mean)
+            else:
+                dt_mean = x
+            dts.append(x)
+        dt = np.asarray(dts, dtype=np.float64)
+    elif not (dt_mean > 0.0 and bool(np.all(dt == dt_mean))):  # unchanged by equal intervals
+        for x in dt.tolist():
+            if dt_mean > 0.0:
+                dt_mean += 0.05 * (x - dt_mean)
+            else:
+                dt_mean = x
+    clock.dt_mean = dt_mean
+    return dt
+
+
+def _filter_stage(pipe: ImuPipeline, t_ns: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
+                  mag: np.ndarray | None, dt: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+    """The filter over the rows (a first sample initialises it; velocity aiding, when there is
+    one, gives each row its input): q (n, 4) in the core's world, the state after each row
+    (``extra``), per row whether the magnetometer sample was used or rejected (counted), and
+    1 when row 0 initialised the filter (else 0)."""
+    f = pipe.filter
+    n = gyro.shape[0]
+    q = np.empty((n, 4))
+    extra = np.empty((n, EXTRA_COLUMNS))
+    tally = pipe.tally
+    k0 = 0
+    has = np.zeros(n, dtype=bool) if mag is None else ~np.isnan(mag[:, 0])
+    used = np.zeros(n, dtype=bool)
+    rejected = np.zeros(n, dtype=bool)
+    if not f.initialized:  # the first sample initialises the attitude (always alone)
+        m0 = tuple(mag[0].tolist()) if has[0] else None  # type: ignore[index]
+        q[0] = f.update(tuple(gyro[0].tolist()), tuple(accel[0].tolist()), 0.0, m0)
+        extra[0] = state_extras(f.step_state)
+        if has[0]:
+            if f.step_state.heading_initialized:
+                used[0] = True
+            else:  # horizontal component too small to give a heading
+                tally.mag_rejected += 1
+        k0 = 1
+    if k0 < n:
+        aiding = pipe.velocity_aiding
+        if aiding is None:
+            f.run_rows(gyro, accel, mag, dt, k0, q, extra)
+        else:
+            g_rows, a_rows, dts = gyro.tolist(), accel.tolist(), dt.tolist()
+            m_rows = mag.tolist() if mag is not None else None
+            for k in range(k0, n):
+                mk = tuple(m_rows[k]) if m_rows is not None and has[k] else None
+                q[k], _accel = aiding.update_filter(f, int(t_ns[k]) * 1e-9, tuple(g_rows[k]),
+                                                    tuple(a_rows[k]), dts[k], mk)
+                extra[k] = state_extras(f.step_state)
+        status = extra[k0:, Extra.MAG_STATUS]
+        h = has[k0:]
+        used[k0:] = h & (status == MAG_USED)
+        rejected[k0:] = h & (status == MAG_REJECTED)
+        tally.mag_rejected += int(np.count_nonzero(rejected[k0:]))
+        tally.mag_disabled += int(np.count_nonzero(h & (status == MAG_DISABLED)))
+    tally.mag_used += int(np.count_nonzero(used))
+    return q, extra, used, rejected, k0
+
+
+def _output_stage(pipe: ImuPipeline, c: _Chunk, ia: int, ib: int, dt: np.ndarray,
+                  gyro: np.ndarray, accel: np.ndarray, q: np.ndarray, extra: np.ndarray,
+                  used: np.ndarray, rejected: np.ndarray, first: int, mag_t: np.ndarray,
+                  t0: float) -> Rows:
+    """Counters, the diagnostics period's error and time statistics, the orientation
+    covariance, the published frame and roll/pitch/yaw of the run's rows (``first``: row 0
+    initialised the filter and has no error to count)."""
+    f = pipe.filter
+    n = ib - ia
+    t_ns = c.t_ns[ia:ib]
+    ex, ey, ez = extra[:, Extra.ERROR].T
+    en = np.sqrt(ex * ex + ey * ey + ez * ez)
+    clipped = extra[:, Extra.CLIPPED]
+    # the diagnostics period's error statistics (not of a first sample: it has no error)
+    w = pipe.window
+    err = en[first:]
+    w.err_sum = float(np.add.accumulate(np.concatenate(([w.err_sum], err)))[-1])
+    finite = err[~np.isnan(err)]
+    if finite.size and float(finite.max()) > w.err_max:
+        w.err_max = float(finite.max())
+    w.n_err += n - first
+    w.n_clipped += int(np.count_nonzero(clipped[first:] != 0.0))
+    # the age of the last magnetometer sample used, per row [s]
+    last_mag = pipe.mag_input.last_used_ns
+    ages: np.ndarray | None
+    if used.any():
+        last_at = np.maximum.accumulate(np.where(used, np.arange(n), -1))
+        last_t = mag_t[np.maximum(last_at, 0)]
+        known = last_at >= 0
+        if last_mag is not None:
+            last_t = np.where(known, last_t, last_mag)
+            known[:] = True
+        ages = np.where(known, (t_ns - last_t) * 1e-9, 0.0)  # 0.0: "never"
+        last_mag = int(mag_t[int(last_at[-1])])
+    elif last_mag is not None:
+        ages = (t_ns - last_mag) * 1e-9
+    else:
+        ages = None
+    pipe.mag_input.last_used_ns = last_mag
+    heading = bool(f.step_state.heading_initialized)  # constant over a run
+    tilts, yaws = pipe.covariance_model.rows(
+        dt, clipped, extra[:, Extra.BIAS_SIGMA], extra[:, Extra.PHASE], en, extra[:, Extra.LX],
+        extra[:, Extra.LY], extra[:, Extra.NOISE_A2], heading, extra[:, Extra.YAW_ERROR],
+        used.astype(np.float64), ages, extra[:, Extra.LOOP_K1], rejected.astype(np.float64),
+        f.backend)
+    cov = np.zeros((n, 9))
+    cov[:, 0] = tilts
+    cov[:, 4] = tilts
+    cov[:, 8] = yaws
+    pipe.tally.processed += n
+    if not pipe.output_frame.identity:  # core world -> published (nwu, true north)
+        q = pipe.output_frame.apply_array(q)
+    rpy = _rpy(pipe, q, f.backend)
+    pipe.last_rpy = tuple(rpy[-1].tolist())
+    frame = pipe.output_frame_id(str(c.imu_frame[ia]))
+    av_cov = pipe.angular_velocity_covariance.value
+    la_cov = pipe.linear_acceleration_covariance.value
+    gfree = None
+    if pipe.pipeline_params.publish_linear_acceleration:
+        fp = pipe.filter_params
+        gfree = [gravity_free((qr[1], qr[2], qr[3], qr[0]), tuple(a), tuple(cr), la_cov,
+                              fp.gravity_m_s2, fp.world_frame)
+                 for qr, a, cr in zip(q.tolist(), accel.tolist(), cov.tolist(), strict=True)]
+    if w.n == 0:
+        w.first_ns = int(t_ns[0])
+    w.n += n
+    w.last_ns = int(t_ns[-1])
+    elapsed = perf_counter() - t0  # the run's processing time, shared by its messages
+    w.proc_sum += elapsed
+    if elapsed / n > w.proc_max:
+        w.proc_max = elapsed / n
+    return Rows(c.sec[ia:ib], c.nsec[ia:ib], c.log_ns[c.imu_at[ia:ib]], frame, q, rpy, cov,
+                gyro, accel, av_cov, la_cov, extra, en, gfree, pipe.take_warnings())
+
+
+def _rpy(p: ImuPipeline, q: np.ndarray, backend: str = "python") -> np.ndarray:
+    """(n, 3) roll, pitch, yaw [rad] (aerospace ZYX) of each row of ``q`` (w, x, y, z): backend
+    'compiled': ``_kernel.rpy_rows``, else ``math.atan2``/``math.asin`` per row (the same libm
+    calls); then the unwrap, sequential by nature, when it is on."""
+    out = np.empty((q.shape[0], 3))
+    if backend == "compiled" and compiled_kernel is not None:
+        compiled_kernel.rpy_rows(np.ascontiguousarray(q), out)
+    else:
+        qw, qx, qy, qz = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+        out[:, 0] = list(map(math.atan2, (2.0 * (qw * qx + qy * qz)).tolist(),
+                             (1.0 - 2.0 * (qx * qx + qy * qy)).tolist()))
+        sp = 2.0 * (qw * qy - qz * qx)
+        sp = np.where(sp > 1.0, 1.0, np.where(sp < -1.0, -1.0, sp))
+        out[:, 1] = list(map(math.asin, sp.tolist()))
+        out[:, 2] = list(map(math.atan2, (2.0 * (qw * qz + qx * qy)).tolist(),
+                             (1.0 - 2.0 * (qy * qy + qz * qz)).tolist()))
+    if p.pipeline_params.rpy_unwrap:
+        prev = p.clock.unwrap_prev
+        rows = out.tolist()
+        for k, (roll, pitch, yaw) in enumerate(rows):
+            if prev is not None:
+                roll += TWO_PI * round((prev[0] - roll) / TWO_PI)
+                yaw += TWO_PI * round((prev[2] - yaw) / TWO_PI)
+            prev = (roll, pitch, yaw)
+            rows[k] = [roll, pitch, yaw]
+        p.clock.unwrap_prev = prev
+        out = np.asarray(rows, dtype=np.float64).reshape(-1, 3)
+    return out
