@@ -731,7 +731,8 @@ def test_valid_parameter_changes_apply_at_the_next_sample_without_reset(changes,
     dt = next_dt_ns * 1e-9 if not model.gaps else None
     if dt is not None:
         # the published frame: the core's, turned by declination and yaw offset (frames.py)
-        w, x, y, z = pipe.output_frame.apply(ref.update(gyro, accel, dt, None))
+        w, x, y, z = pipe.output_frame.apply_array(
+            np.array([ref.update(gyro, accel, dt, None)]))[0].tolist()
         assert out.orientation_xyzw == (x, y, z, w)
     # the covariance model (docs/ros_interface.md, core/covariance.py) with the new floors and
     # gains: tilt = floor + the error norm squared while settling + half the mean square of the

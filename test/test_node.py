@@ -168,7 +168,7 @@ def test_invalid_parameter_at_start_exits_with_one_line_error():
 
 def test_an_unexpected_exception_is_logged_once_with_its_traceback_and_counted(harness,
                                                                                monkeypatch):
-    """A bug in the filter (here: an update that raises) drops the message, counts
+    """A bug in the filter (here: a step over the rows that raises) drops the message, counts
     ``internal_error`` and logs the traceback once, not once per message; the node goes on."""
     assert harness.wait_connected()
     assert harness.publish_one(harness.imu())  # initialised
@@ -186,14 +186,14 @@ def test_an_unexpected_exception_is_logged_once_with_its_traceback_and_counted(h
     f = harness.pipe._filter  # noqa: SLF001
 
     def broken(*_a, **_k):
-        raise ZeroDivisionError("a bug in update")
+        raise ZeroDivisionError("a bug in the step")
 
-    monkeypatch.setattr(f, "update", broken)
+    monkeypatch.setattr(f, "run_rows", broken)
     for _ in range(3):
         assert harness.publish_one(harness.imu())
     assert harness.pipe.counters["rejected"].get("internal_error") == 3
     assert len(errors) == 1
-    assert "Traceback" in errors[0] and "ZeroDivisionError: a bug in update" in errors[0]
+    assert "Traceback" in errors[0] and "ZeroDivisionError: a bug in the step" in errors[0]
     monkeypatch.undo()
     published = len(harness.received["imu"])
     assert harness.publish_one(harness.imu())

@@ -2,7 +2,7 @@
 
 The filter does not propagate a covariance; this model turns the state it reports after each
 step into variances [rad²] about the world x, y, z axes (diagonal of ``orientation_covariance``,
-row-major 3×3). One model for the node, the bag replay (per message and in bulk) and
+row-major 3×3). One model for the node and the bag replay (the pipeline) and
 :func:`cf_estimator.core.batch.estimate` (``tilt_sigma_rad``, ``heading_sigma_rad``).
 Documented in docs/ros_interface.md ("Covariance").
 
@@ -83,8 +83,9 @@ when nothing moves —; yaw on BROAD's undisturbed trials, 9-D; docs/decisions/0
 ``M``'s gain k1 (the loop's running gain), its window CORRECTION_WINDOW_S, its memory and
 ``l̄``'s, ``1/k1``, and ``V`` follow from the loop. Each variance is
 capped at π² (an angle error is at most π), or at its floor (yaw: also the unreferenced
-variance) if larger. Plain floats: it runs per message; :meth:`OrientationCovariance.rows` runs
-it over arrays, in the compiled kernel when asked (``c/cf_core.c`` ``cf_covariance_rows``: the same
+variance) if larger. :meth:`OrientationCovariance.step` is one row in plain floats
+(``estimate``); :meth:`OrientationCovariance.rows` runs it over the pipeline's arrays, in the
+compiled kernel when asked (``c/cf_core.c`` ``cf_covariance_rows``: the same
 operations in the same order as :meth:`OrientationCovariance.steps`, the reference).
 """
 
@@ -229,7 +230,7 @@ class OrientationCovariance:
               mag_age_s: Sequence[float | None], loop_k1: Sequence[float],
               mag_rejected: Sequence[bool]) -> tuple[list[float], list[float]]:
         """:meth:`step` over rows, the same operations in the same order, as
-        (tilt, yaw) variances per row [rad²] (the bulk pipeline: one call per run instead of one
+        (tilt, yaw) variances per row [rad²] (the pipeline: one call per run instead of one
         per row). ``bias_sigma_rad_s`` NaN: no estimate yet (the prior is used)."""
         clip_s, ms, yaw_err, cx, cy = self._clip_s, self._ms, self._yaw_err, self._cx, self._cy
         sx, sy = self._sx, self._sy

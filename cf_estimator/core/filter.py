@@ -340,7 +340,7 @@ class ComplementaryFilter:
     @property
     def step_state(self) -> Any:
         """The step state (:class:`cf_estimator.core.state.StepState`, or the compiled twin's
-        struct with the same fields): for reading — the bulk path, diagnostics, tests."""
+        struct with the same fields): for reading — the pipeline, diagnostics, tests."""
         return self._state
 
     @property

@@ -6,9 +6,9 @@ pipeline's parameter schema refuse the same values with the same words.
 
 ``h`` = ``mag_hard_iron_t`` [T], ``S`` = ``mag_soft_iron`` (3x3 row-major, dimensionless), both
 in the magnetometer message's own axes (the sensor frame, before ``body_frame`` turns it), as
-``cf-estimator calibrate-mag`` fits them. The node and the replay (``on_mag``, message by
-message), the replay's bulk path (:meth:`MagCorrection.apply_rows`) and ``estimate``
-(:func:`correct_mag`) use the same arithmetic, so they agree bit for bit.
+``cf-estimator calibrate-mag`` fits them. The pipeline (node and replay:
+:meth:`MagCorrection.apply_rows`) and ``estimate`` (:func:`correct_mag`) use the same
+arithmetic, so they agree bit for bit.
 """
 
 from __future__ import annotations
@@ -59,16 +59,8 @@ class MagCorrection:
         self.s = tuple(float(v) for v in soft_iron)
         self.identity = self.h == (0.0, 0.0, 0.0) and self.s == IDENTITY9
 
-    def apply(self, x: float, y: float, z: float) -> tuple[float, float, float]:
-        """One raw sample [T] → corrected [T]."""
-        h, s = self.h, self.s
-        dx, dy, dz = x - h[0], y - h[1], z - h[2]
-        return (s[0] * dx + s[1] * dy + s[2] * dz,
-                s[3] * dx + s[4] * dy + s[5] * dz,
-                s[6] * dx + s[7] * dy + s[8] * dz)
-
     def apply_rows(self, rows: Any) -> Any:
-        """(N, 3) NumPy raw samples → corrected (a new array; :meth:`apply`'s arithmetic)."""
+        """(N, 3) NumPy raw samples [T] → corrected [T] (a new array)."""
         import numpy as np
 
         h, s = self.h, self.s

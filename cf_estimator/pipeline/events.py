@@ -91,13 +91,16 @@ def _frame_id(msg: Any) -> str:
     return frame
 
 
-def _covariance(values: np.ndarray, columns_: slice, cov: Any) -> None:
-    """Write a 9-element covariance (array.array, NumPy or a sequence) into ``values``."""
-    c = np.asarray(cov, dtype=np.float64).ravel() if hasattr(cov, "tobytes") else \
-        np.array([float(x) for x in cov], dtype=np.float64)
-    if c.shape[0] != 9:
-        raise ValueError(f"covariance must have 9 elements, got {c.shape[0]}")
-    values[0, columns_] = c
+def _covariance(cov: Any) -> list[float]:
+    """A 9-element covariance (array.array, NumPy or a sequence) as floats."""
+    c = cov.tolist() if hasattr(cov, "tolist") else [float(x) for x in cov]
+    if len(c) != 9:
+        raise ValueError(f"covariance must have 9 elements, got {len(c)}")
+    return c
+
+
+#: the orientation columns of an input row (unused by the pipeline: it computes its own)
+_NO_ORIENTATION = [0.0] * (columns.ANGULAR_VELOCITY.start)
 
 
 def imu_message_events(msg: Any, log_ns: int = 0) -> Events:
@@ -106,15 +109,11 @@ def imu_message_events(msg: Any, log_ns: int = 0) -> Events:
     number, a covariance not of 9)."""
     sec, nsec = _stamp(msg)
     frame = _frame_id(msg)
-    values = np.zeros((1, columns.IMU_DOUBLES))
     av, la = msg.angular_velocity, msg.linear_acceleration
-    v = values[0]
-    g0, a0 = columns.ANGULAR_VELOCITY.start, columns.LINEAR_ACCELERATION.start
-    v[g0], v[g0 + 1], v[g0 + 2] = float(av.x), float(av.y), float(av.z)
-    v[a0], v[a0 + 1], v[a0 + 2] = float(la.x), float(la.y), float(la.z)
-    _covariance(values, columns.ANGULAR_VELOCITY_COVARIANCE, msg.angular_velocity_covariance)
-    _covariance(values, columns.LINEAR_ACCELERATION_COVARIANCE,
-                msg.linear_acceleration_covariance)
+    values = np.array([_NO_ORIENTATION + [float(av.x), float(av.y), float(av.z)]
+                       + _covariance(msg.angular_velocity_covariance)
+                       + [float(la.x), float(la.y), float(la.z)]
+                       + _covariance(msg.linear_acceleration_covariance)], dtype=np.float64)
     return Events((IMU,), (log_ns,), (0,), MessageRows(values, sec, nsec, [frame]), None,
                   _no_message, _one(IMU, log_ns))
 

@@ -91,13 +91,9 @@ class OutputFrame:
         self.q = _mul(c, rz)  #: (w, x, y, z) applied on the left
         self.identity = world_frame != "nwu" and theta == 0.0
 
-    def apply(self, q_wxyz: tuple[float, float, float, float]
-              ) -> tuple[float, float, float, float]:
-        """q_out (w, x, y, z) of the core's q (w, x, y, z)."""
-        return q_wxyz if self.identity else _mul(self.q, q_wxyz)
-
     def apply_array(self, q_wxyz: np.ndarray) -> np.ndarray:
-        """Row-wise :meth:`apply` of an (N, 4) array (NaN rows stay NaN)."""
+        """q_out (w, x, y, z) of the core's q (w, x, y, z), row by row of an (N, 4) array (NaN
+        rows stay NaN)."""
         if self.identity:
             return q_wxyz
         from cf_estimator.core import quaternion as quat

@@ -261,11 +261,6 @@ class ImuPipeline:
         self._filter = new_filter
 
     @property
-    def has_pending_warnings(self) -> bool:
-        """True while warn-once messages wait for the next output."""
-        return bool(self._pending_warnings)
-
-    @property
     def has_velocity_aiding(self) -> bool:
         """True once a velocity message has created the aiding (it then runs per message)."""
         return self._aiding is not None

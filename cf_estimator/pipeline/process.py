@@ -128,17 +128,15 @@ def imu_reasons(gyro: np.ndarray, accel: np.ndarray, sec: np.ndarray, nsec: np.n
     A row passes them all exactly when its stamp is not zero and 0 < |a|² ≤ ACCEL_MAX2,
     |g|² ≤ GYRO_MAX2 (a NaN or Inf component makes its norm fail the comparison; an overflow is
     implausible): that is tested first, the reasons sorted out only for the rows failing it."""
-    gx, gy, gz = gyro[:, 0], gyro[:, 1], gyro[:, 2]
-    ax, ay, az = accel[:, 0], accel[:, 1], accel[:, 2]
     code = np.zeros(gyro.shape[0], dtype=np.int8)
     with np.errstate(over="ignore", invalid="ignore"):
-        a2 = ax * ax + ay * ay + az * az  # inf when the components are huge: implausible
-        g2 = gx * gx + gy * gy + gz * gz
-        ok = (g2 <= GYRO_MAX2) & (a2 <= ACCEL_MAX2) & (a2 != 0.0) & ((sec != 0) | (nsec != 0))
+        a2 = np.add.reduce(accel * accel, axis=1)  # (x² + y²) + z²; inf when huge
+        g2 = np.add.reduce(gyro * gyro, axis=1)
+        ok = (g2 <= GYRO_MAX2) & (a2 <= ACCEL_MAX2) & (a2 != 0.0) & ((sec | nsec) != 0)
         if not ok.all():
-            fin_g = np.isfinite(gx) & np.isfinite(gy) & np.isfinite(gz)
-            fin_a = np.isfinite(ax) & np.isfinite(ay) & np.isfinite(az)
-            fails = [(sec == 0) & (nsec == 0), ~fin_g, ~fin_a, a2 == 0.0, g2 > GYRO_MAX2,
+            fin_g = np.isfinite(gyro).all(axis=1)
+            fin_a = np.isfinite(accel).all(axis=1)
+            fails = [(sec | nsec) == 0, ~fin_g, ~fin_a, a2 == 0.0, g2 > GYRO_MAX2,
                      a2 > ACCEL_MAX2]
             for k in range(len(fails), 0, -1):  # the first check failed wins
                 code[fails[k - 1]] = k
@@ -154,19 +152,29 @@ class _Chunk:
         kind_a, log_a, row_a = ev.arrays()
         self.ev, self.start = ev, start
         self.n = stop - start
-        kind = self.kind = kind_a[start:stop]
+        self.kind = kind_a[start:stop]
         self.log_ns = log_a[start:stop]
         row = row_a[start:stop]
         flip = pipe.rules.flip
         codes: dict[Any, int] = {}
+        kinds = self.kind.tolist()
+        #: range indices of the IMU, magnetometer and velocity events
+        self.imu_list = [i for i, k in enumerate(kinds) if k == IMU]
+        self.mag_list = [i for i, k in enumerate(kinds) if k == MAG]
+        self.vel_list = [i for i, k in enumerate(kinds) if k == VELOCITY]
         # IMU rows
-        self.imu_at = np.flatnonzero(kind == IMU)  # range index of each IMU event
-        self.imu_list = self.imu_at.tolist()
+        self.imu_at = np.array(self.imu_list, dtype=np.intp)
         rows = row[self.imu_at]
-        if rows.shape[0]:
+        if self.imu_list:
             blk = ev.imu
             sec_all, nsec_all, plain_all = blk.arrays()
-            v = blk.values[rows]
+            if blk.n == 1:  # a block of one message (the node's): its row itself
+                v = blk.values.copy() if flip else blk.values
+                self.sec, self.nsec, self.imu_plain = sec_all, nsec_all, plain_all
+            else:
+                v = blk.values[rows]
+                self.sec, self.nsec = sec_all[rows], nsec_all[rows]
+                self.imu_plain = plain_all[rows]
             #: both input covariances' bits per row (one changing ends a run)
             self.imu_cov_bits = np.concatenate(
                 (v[:, columns.ANGULAR_VELOCITY_COVARIANCE],
@@ -178,19 +186,30 @@ class _Chunk:
                 g[:, 1:] = -g[:, 1:]
                 a[:, 1:] = -a[:, 1:]
             self.gyro, self.accel = g, a
-            self.sec, self.nsec = sec_all[rows], nsec_all[rows]
             self.t_ns = self.sec * 1_000_000_000 + self.nsec
-            self.imu_plain = plain_all[rows]
             self.imu_frame = [blk.frame[r] for r in rows.tolist()]
-            self.imu_fcode = np.array([codes.setdefault(f, len(codes)) for f in self.imu_frame],
-                                      dtype=np.int64)
             self.reason, self.g2 = imu_reasons(g, a, self.sec, self.nsec)
+            self.quiet_gyro = self.g2 <= _GYRO_WARN2  #: no gyro unit warning to raise
+            #: a row that would be ordinary after the row before it was: decoded, valid,
+            #: stamped after it without a gap that resets, its frame id and covariances
+            m = len(self.imu_list)
+            self.d_ns = np.zeros(m, dtype=np.int64)  #: the stamp interval from the row before
+            chain = self.imu_plain & (self.reason == 0)
+            if m > 1:
+                np.subtract(self.t_ns[1:], self.t_ns[:-1], out=self.d_ns[1:])
+                fcode = np.array([codes.setdefault(f, len(codes)) for f in self.imu_frame],
+                                 dtype=np.int64)
+                bits = self.imu_cov_bits
+                chain[1:] &= ((fcode[1:] == fcode[:-1]) & (self.d_ns[1:] > 0)
+                              & (bits[1:] == bits[:-1]).all(axis=1))
+                if pipe.rules.reset_gap_on:
+                    chain[1:] &= self.d_ns[1:] <= pipe.rules.reset_gap_ns
+            self.chain = chain
         # magnetometer rows: calibrated, then turned (as the field the filter takes)
-        self.mag_at = np.flatnonzero(kind == MAG)
-        self.mag_list = self.mag_at.tolist()
-        mrows = row[self.mag_at]
+        self.mag_at = np.array(self.mag_list, dtype=np.intp)
         self.mag_valid = self.mag_plain = np.zeros(0, dtype=bool)
-        if mrows.shape[0]:
+        if self.mag_list:
+            mrows = row[self.mag_at]
             blk = ev.mag
             sec_all, nsec_all, plain_all = blk.arrays()
             m = blk.values[mrows, columns.MAGNETIC_FIELD]
@@ -268,62 +287,57 @@ def _first_false(mask: np.ndarray) -> int:
 
 def _ordinary_end(pipe: ImuPipeline, c: _Chunk, p: int) -> int:
     """The end of the run of ordinary events from range index ``p`` (p itself when event p is
-    not ordinary; see the module docstring). Nothing of ``pipe`` changes."""
-    kind = c.kind
-    if kind[p] == VELOCITY:
+    not ordinary; see the module docstring). Nothing of ``pipe`` changes.
+
+    The first IMU message of the run is checked against the pipeline's state (its last stamp,
+    frame id and covariances, the unit checks done, an initialised filter); each one after it
+    against the message before (:attr:`_Chunk.chain`): that one was ordinary too."""
+    if c.kind[p] == VELOCITY:
         return p
     rules = pipe.rules
     f = pipe.filter
     end = c.n
     # velocity messages end a run (they go to the aiding between two IMU samples)
-    vel = np.flatnonzero(kind[p:] == VELOCITY)
-    if vel.shape[0]:
-        end = p + int(vel[0])
+    v = bisect_left(c.vel_list, p)
+    if v < len(c.vel_list):
+        end = c.vel_list[v]
     ia = bisect_left(c.imu_list, p)
     ib = bisect_left(c.imu_list, end)
     if ib > ia:
         last = pipe.clock.last_ns
-        if (last is None or not f.initialized
-                or pipe.accel_check_n < checks.ACCEL_CHECK_SAMPLES):
-            ok = np.zeros(ib - ia, dtype=bool)  # the next IMU message starts or checks
-        else:
-            t = c.t_ns[ia:ib]
-            d = np.empty(ib - ia, dtype=np.int64)
-            d[0] = int(t[0]) - last
-            np.subtract(t[1:], t[:-1], out=d[1:])
-            ok = (c.imu_plain[ia:ib] & (c.reason[ia:ib] == 0) & (d > 0)
-                  & (c.imu_fcode[ia:ib] == c.code(pipe.imu_frame)))
-            if rules.reset_gap_on:
-                ok &= d <= rules.reset_gap_ns
-            if "gyro_units" not in pipe.input_warning_tags:
-                ok &= c.g2[ia:ib] <= _GYRO_WARN2
-            # the covariances of the message before (the first one's: the pipeline's)
-            bits = c.imu_cov_bits[ia:ib]
-            same = np.ones(ib - ia, dtype=bool)
-            if ib - ia > 1:
-                same[1:] = (bits[1:] == bits[:-1]).all(axis=1)
-            ref = pipe.covariance_bits()
-            same[0] = ref is not None and bool((bits[0] == ref).all())
-            ok &= same
-            if (rules.use_mag and not f.step_state.heading_initialized
-                    and (pipe.mag_input.pending is not None or c.mag_list)):
-                ok &= ~_takes_mag(pipe, c, p, ia, ib)  # the heading may start: alone
-        k = _first_false(ok)
-        if k < ib - ia:
-            end = min(end, int(c.imu_at[ia + k]))
+        ref = pipe.covariance_bits()
+        d0 = int(c.t_ns[ia]) - last if last is not None else 0
+        warned = "gyro_units" in pipe.input_warning_tags
+        heading_may_start = (rules.use_mag and not f.step_state.heading_initialized
+                             and (pipe.mag_input.pending is not None or bool(c.mag_list)))
+        takes = _takes_mag(pipe, c, p, ia, ib) if heading_may_start else None
+        if not (f.initialized and pipe.accel_check_n >= checks.ACCEL_CHECK_SAMPLES
+                and d0 > 0 and (not rules.reset_gap_on or d0 <= rules.reset_gap_ns)
+                and c.imu_plain[ia] and c.reason[ia] == 0 and ref is not None
+                and c.imu_frame[ia] == pipe.imu_frame and (c.imu_cov_bits[ia] == ref).all()
+                and (warned or c.quiet_gyro[ia]) and (takes is None or not takes[0])):
+            end = c.imu_list[ia]  # the next IMU message starts, checks or breaks the chain
+        elif ib - ia > 1:
+            ok = c.chain[ia + 1:ib]
+            if not warned:
+                ok = ok & c.quiet_gyro[ia + 1:ib]
+            if takes is not None:  # the heading may start: alone
+                ok = ok & ~takes[1:]
+            k = _first_false(ok)
+            if k < ib - ia - 1:
+                end = c.imu_list[ia + 1 + k]
     ma = bisect_left(c.mag_list, p)
     mb = bisect_left(c.mag_list, end)
-    if mb > ma and rules.use_mag:
-        mi = pipe.mag_input
-        ok = c.mag_plain[ma:mb] & (~c.mag_valid[ma:mb] | (
-            (c.mag_fcode[ma:mb] == c.code(mi.frame)) & (mi.check_n >= checks.MAG_CHECK_SAMPLES)))
+    if mb > ma:
+        ok = c.mag_plain[ma:mb]
+        if rules.use_mag:
+            mi = pipe.mag_input
+            ok = ok & (~c.mag_valid[ma:mb] | (
+                (c.mag_fcode[ma:mb] == c.code(mi.frame))
+                & (mi.check_n >= checks.MAG_CHECK_SAMPLES)))
         k = _first_false(ok)
         if k < mb - ma:
-            end = min(end, int(c.mag_at[ma + k]))
-    elif mb > ma:
-        k = _first_false(c.mag_plain[ma:mb])
-        if k < mb - ma:
-            end = min(end, int(c.mag_at[ma + k]))
+            end = min(end, c.mag_list[ma + k])
     return end
 
 
@@ -450,7 +464,7 @@ def _run(pipe: ImuPipeline, c: _Chunk, p: int, e: int) -> list[Rows] | None:
     n = ib - ia
     if n == 0:
         return None
-    dt = _time_stage(pipe, c.t_ns[ia:ib])
+    dt = _time_stage(pipe, c.t_ns[ia:ib], c.d_ns[ia:ib])
     gyro = np.ascontiguousarray(c.gyro[ia:ib])
     accel = np.ascontiguousarray(c.accel[ia:ib])
     q, extra, used, rejected, first = _filter_stage(pipe, c.t_ns[ia:ib], gyro, accel, mag, dt)
@@ -537,33 +551,37 @@ def _mag_stage(pipe: ImuPipeline, c: _Chunk, p: int, ia: int, ib: int, ma: int, 
     return mag, mag_t
 
 
-def _time_stage(pipe: ImuPipeline, t_ns: np.ndarray) -> np.ndarray:
-    """The time base over the run's stamps [ns] (all accepted): the filter's interval per row
-    [s] (0 for a first sample; the mean interval across a gap, counted), the diagnostics
-    period's interval statistics."""
+def _time_stage(pipe: ImuPipeline, t_ns: np.ndarray, d_ns: np.ndarray) -> np.ndarray:
+    """The time base over the run's stamps [ns] (all accepted; ``d_ns`` their intervals from
+    the row before, the first one's unused): the filter's interval per row [s] (0 for a first
+    sample; the mean interval across a gap, counted), the diagnostics period's interval
+    statistics."""
     clock, w, rules = pipe.clock, pipe.window, pipe.rules
     n = t_ns.shape[0]
     last = clock.last_ns
     clock.last_ns = int(t_ns[-1])
     if last is None:  # a first sample (always alone): no interval
         return np.zeros(1)
-    d_ns = np.empty(n, dtype=np.int64)
+    d_ns = d_ns.copy()
     d_ns[0] = int(t_ns[0]) - last
-    np.subtract(t_ns[1:], t_ns[:-1], out=d_ns[1:])
     dt = d_ns * 1e-9
-    lo, hi = float(dt.min()), float(dt.max())
+    dts = dt.tolist()
+    lo, hi = min(dts), max(dts)
     if w.n_dt == 0 or lo < w.dt_min:
         w.dt_min = lo
     if hi > w.dt_max:
         w.dt_max = hi
     w.n_dt += n
-    # the running sum in message order (add.accumulate is sequential: the same bits)
-    w.dt_sum = float(np.add.accumulate(np.concatenate(([w.dt_sum], dt)))[-1])
+    dt_sum = w.dt_sum
+    for x in dts:  # the running sum in message order
+        dt_sum += x
+    w.dt_sum = dt_sum
     dt_mean = clock.dt_mean
-    if int(d_ns.max()) > rules.max_dt_ns:  # gaps: not integrated, the mean interval instead
+    d_list = d_ns.tolist()
+    if max(d_list) > rules.max_dt_ns:  # gaps: not integrated, the mean interval instead
         fallback = min(pipe.pipeline_params.max_dt_s, 0.01)
-        dts = []
-        for d, x in zip(d_ns.tolist(), dt.tolist(), strict=True):
+        out = []
+        for d, x in zip(d_list, dts, strict=True):
             if d > rules.max_dt_ns:
                 pipe.tally.gaps += 1
                 x = dt_mean if dt_mean > 0.0 else fallback
@@ -571,10 +589,12 @@ def _time_stage(pipe: ImuPipeline, t_ns: np.ndarray) -> np.ndarray:
                 dt_mean += 0.05 * (x - dt_mean)
             else:
                 dt_mean = x
-            dts.append(x)
-        dt = np.asarray(dts, dtype=np.float64)
-    elif not (dt_mean > 0.0 and bool(np.all(dt == dt_mean))):  # unchanged by equal intervals
-        for x in dt.tolist():
+            out.append(x)
+        dt = np.asarray(out, dtype=np.float64)
+    else:
+        for x in dts:
+            if x == dt_mean:  # the mean interval itself: unchanged
+                continue
             if dt_mean > 0.0:
                 dt_mean += 0.05 * (x - dt_mean)
             else:
@@ -585,27 +605,28 @@ def _time_stage(pipe: ImuPipeline, t_ns: np.ndarray) -> np.ndarray:
 
 def _filter_stage(pipe: ImuPipeline, t_ns: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
                   mag: np.ndarray | None, dt: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None, int]:
     """The filter over the rows (a first sample initialises it; velocity aiding, when there is
     one, gives each row its input): q (n, 4) in the core's world, the state after each row
-    (``extra``), per row whether the magnetometer sample was used or rejected (counted), and
-    1 when row 0 initialised the filter (else 0)."""
+    (``extra``), per row whether the magnetometer sample was used or rejected (counted; None
+    when no row had one), and 1 when row 0 initialised the filter (else 0)."""
     f = pipe.filter
     n = gyro.shape[0]
     q = np.empty((n, 4))
     extra = np.empty((n, EXTRA_COLUMNS))
     tally = pipe.tally
     k0 = 0
-    has = np.zeros(n, dtype=bool) if mag is None else ~np.isnan(mag[:, 0])
-    used = np.zeros(n, dtype=bool)
-    rejected = np.zeros(n, dtype=bool)
+    # per row: a magnetometer sample given, used, rejected (None: none at all)
+    has = None if mag is None else ~np.isnan(mag[:, 0])
+    used = None if has is None else np.zeros(n, dtype=bool)
+    rejected = None if has is None else np.zeros(n, dtype=bool)
     if not f.initialized:  # the first sample initialises the attitude (always alone)
-        m0 = tuple(mag[0].tolist()) if has[0] else None  # type: ignore[index]
+        m0 = tuple(mag[0].tolist()) if has is not None and has[0] else None  # type: ignore[index]
         q[0] = f.update(tuple(gyro[0].tolist()), tuple(accel[0].tolist()), 0.0, m0)
         extra[0] = state_extras(f.step_state)
-        if has[0]:
+        if m0 is not None:
             if f.step_state.heading_initialized:
-                used[0] = True
+                used[0] = True  # type: ignore[index]
             else:  # horizontal component too small to give a heading
                 tally.mag_rejected += 1
         k0 = 1
@@ -617,23 +638,26 @@ def _filter_stage(pipe: ImuPipeline, t_ns: np.ndarray, gyro: np.ndarray, accel: 
             g_rows, a_rows, dts = gyro.tolist(), accel.tolist(), dt.tolist()
             m_rows = mag.tolist() if mag is not None else None
             for k in range(k0, n):
-                mk = tuple(m_rows[k]) if m_rows is not None and has[k] else None
+                mk = tuple(m_rows[k]) if m_rows is not None and has[k] else None  # type: ignore[index]
                 q[k], _accel = aiding.update_filter(f, int(t_ns[k]) * 1e-9, tuple(g_rows[k]),
                                                     tuple(a_rows[k]), dts[k], mk)
                 extra[k] = state_extras(f.step_state)
-        status = extra[k0:, Extra.MAG_STATUS]
-        h = has[k0:]
-        used[k0:] = h & (status == MAG_USED)
-        rejected[k0:] = h & (status == MAG_REJECTED)
-        tally.mag_rejected += int(np.count_nonzero(rejected[k0:]))
-        tally.mag_disabled += int(np.count_nonzero(h & (status == MAG_DISABLED)))
-    tally.mag_used += int(np.count_nonzero(used))
+        if has is not None:
+            status = extra[k0:, Extra.MAG_STATUS]
+            h = has[k0:]
+            used[k0:] = h & (status == MAG_USED)  # type: ignore[index]
+            rejected[k0:] = h & (status == MAG_REJECTED)  # type: ignore[index]
+            tally.mag_rejected += int(np.count_nonzero(rejected[k0:]))  # type: ignore[index]
+            tally.mag_disabled += int(np.count_nonzero(h & (status == MAG_DISABLED)))
+    if used is not None:
+        tally.mag_used += int(np.count_nonzero(used))
     return q, extra, used, rejected, k0
 
 
 def _output_stage(pipe: ImuPipeline, c: _Chunk, ia: int, ib: int, dt: np.ndarray,
                   gyro: np.ndarray, accel: np.ndarray, q: np.ndarray, extra: np.ndarray,
-                  used: np.ndarray, rejected: np.ndarray, first: int, mag_t: np.ndarray,
+                  used: np.ndarray | None, rejected: np.ndarray | None, first: int,
+                  mag_t: np.ndarray,
                   t0: float) -> Rows:
     """Counters, the diagnostics period's error and time statistics, the orientation
     covariance, the published frame and roll/pitch/yaw of the run's rows (``first``: row 0
@@ -641,22 +665,23 @@ def _output_stage(pipe: ImuPipeline, c: _Chunk, ia: int, ib: int, dt: np.ndarray
     f = pipe.filter
     n = ib - ia
     t_ns = c.t_ns[ia:ib]
-    ex, ey, ez = extra[:, Extra.ERROR].T
-    en = np.sqrt(ex * ex + ey * ey + ez * ez)
+    e = extra[:, Extra.ERROR]
+    en = np.sqrt(np.add.reduce(e * e, axis=1))  # √((ex² + ey²) + ez²), as the step has it
     clipped = extra[:, Extra.CLIPPED]
     # the diagnostics period's error statistics (not of a first sample: it has no error)
     w = pipe.window
-    err = en[first:]
-    w.err_sum = float(np.add.accumulate(np.concatenate(([w.err_sum], err)))[-1])
-    finite = err[~np.isnan(err)]
-    if finite.size and float(finite.max()) > w.err_max:
-        w.err_max = float(finite.max())
+    err_sum, err_max = w.err_sum, w.err_max
+    for x in en[first:].tolist():  # the running sum in message order
+        err_sum += x
+        if x > err_max:  # NaN: never
+            err_max = x
+    w.err_sum, w.err_max = err_sum, err_max
     w.n_err += n - first
-    w.n_clipped += int(np.count_nonzero(clipped[first:] != 0.0))
+    w.n_clipped += int(np.count_nonzero(clipped[first:]))
     # the age of the last magnetometer sample used, per row [s]
     last_mag = pipe.mag_input.last_used_ns
     ages: np.ndarray | None
-    if used.any():
+    if used is not None and used.any():
         last_at = np.maximum.accumulate(np.where(used, np.arange(n), -1))
         last_t = mag_t[np.maximum(last_at, 0)]
         known = last_at >= 0
@@ -671,11 +696,14 @@ def _output_stage(pipe: ImuPipeline, c: _Chunk, ia: int, ib: int, dt: np.ndarray
         ages = None
     pipe.mag_input.last_used_ns = last_mag
     heading = bool(f.step_state.heading_initialized)  # constant over a run
+    if used is None:
+        used_f = rejected_f = np.zeros(n)
+    else:
+        used_f, rejected_f = used.astype(np.float64), rejected.astype(np.float64)  # type: ignore[union-attr]
     tilts, yaws = pipe.covariance_model.rows(
         dt, clipped, extra[:, Extra.BIAS_SIGMA], extra[:, Extra.PHASE], en, extra[:, Extra.LX],
         extra[:, Extra.LY], extra[:, Extra.NOISE_A2], heading, extra[:, Extra.YAW_ERROR],
-        used.astype(np.float64), ages, extra[:, Extra.LOOP_K1], rejected.astype(np.float64),
-        f.backend)
+        used_f, ages, extra[:, Extra.LOOP_K1], rejected_f, f.backend)
     cov = np.zeros((n, 9))
     cov[:, 0] = tilts
     cov[:, 4] = tilts
