@@ -46,7 +46,7 @@ from cf_estimator.core.offline import ROW_AIDED, ROW_MOVING
 from cf_estimator.core.params import FilterParams
 from cf_estimator.core.step import BIAS_CONVERGED_SIGMA_RAD_S
 from cf_estimator.pipeline import ImuPipeline, PipelineParams, checks, frames, px4
-from cf_estimator.pipeline.events import IMU, MAG, OTHER, VELOCITY, Events
+from cf_estimator.pipeline.events import IMU, MAG, OTHER, VELOCITY, Events, message_events
 from cf_estimator.pipeline.process import Rows
 from cf_estimator.schema import as_dict
 
@@ -76,8 +76,8 @@ class ReplayOptions:
     offline: bool = False  #: write the offline (acausal) estimate (_offline_orientations)
     #: decode IMU/magnetometer messages in bulk with NumPy (same values; False: one by one)
     bulk_decode: bool = True
-    #: with bulk_decode, chunks of messages through the pipeline at once (same outputs, bit
-    #: for bit; False: message by message)
+    #: with bulk_decode, the decoded rows straight to the pipeline (False: as message objects
+    #: first, then to the pipeline; the same outputs, bit for bit)
     bulk_pipeline: bool = True
     #: called with the number of messages read since the last call (a fleet's progress bar)
     on_messages: Callable[[int], None] | None = None
@@ -432,13 +432,6 @@ class _Run:
             self._internal_error()
             i = stop
 
-    def imu(self, log_ns: int, msg: Any) -> None:
-        """One IMU message object logged at ``log_ns`` [ns] (the replay's message-by-message
-        reading)."""
-        for rows in self.pipe.process_message(msg, log_ns=log_ns):
-            self.write(rows)
-        self._internal_error()
-
     def _internal_error(self) -> None:
         bug = self.pipe.take_internal_error()
         if bug is not None:  # counted as internal_error in the summary; said once here
@@ -694,37 +687,52 @@ def _read_in_bulk(bag: Any, topics: _Topics, runs: Sequence[_Run], reading: _Rea
         progress.add(len(chunk))
 
 
+#: Messages read as objects handed to the pipelines at once (without copied inputs).
+_MESSAGE_CHUNK = 1024
+
+
 def _read_messages(bag: Any, topics: _Topics, runs: Sequence[_Run], copy: bool,
                    decode_bulk: bool, reading: _Reading, progress: _Progress) -> None:
-    """Message by message, in log-time order, to every run's pipeline (and, with ``copy``,
-    each input message into the output bags)."""
+    """Message objects in log-time order to every run's pipeline, a chunk at a time (with
+    ``copy``, each input message into the output bags first, one message a chunk: the copies
+    and the outputs are written in log-time order)."""
+    table = {t: k for t, k in ((topics.velocity, VELOCITY), (topics.mag, MAG),
+                               (topics.imu, IMU)) if t}
+    items: list[tuple[int, int, Any]] = []
+
+    def flush() -> None:
+        if items:
+            ev = message_events(items)
+            for r in runs:
+                r.events(ev)
+            items.clear()
+
     for m in bag.messages(topics.names, bulk=decode_bulk):
         log_ns = m.log_time_ns
         reading.logged(log_ns, log_ns)
-        for r in runs:
-            r.tick(log_ns)
         if copy:
+            for r in runs:
+                r.tick(log_ns)
             jazzy = bag.to_jazzy(m.msg, m.msgtype)
             for r in runs:
                 if r.bag is not None:
                     r.bag.write(m.topic, m.msgtype, log_ns, jazzy)
-        if m.topic == topics.imu:
+        kind = table.get(m.topic, OTHER)
+        items.append((kind, log_ns, m.msg))
+        if kind == IMU:
             reading.n_imu += 1
-            for r in runs:
-                r.imu(log_ns, m.msg)
-        elif m.topic == topics.mag:
+        elif kind == MAG:
             reading.n_mag += 1
-            for r in runs:
-                r.pipe.on_mag(m.msg)
-        elif m.topic == topics.velocity:
+        elif kind == VELOCITY:
             reading.n_vel += 1
-            for r in runs:
-                r.pipe.on_velocity(m.msg)
         if m.topic == topics.reference:
             if m.topic != topics.imu:
                 reading.n_ref += 1
             _add_reference(topics.reference_type, m.msg, reading.ref_t, reading.ref_q)
+        if copy or len(items) >= _MESSAGE_CHUNK:
+            flush()
         progress.tick()
+    flush()
 
 
 def replay_variants(

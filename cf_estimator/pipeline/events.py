@@ -29,11 +29,11 @@ class MessageRows:
     __slots__ = ("frame", "n", "values", "_arrays")
 
     def __init__(self, values: np.ndarray, sec: np.ndarray, nsec: np.ndarray,
-                 frame: list[Any]) -> None:
+                 frame: list[Any], plain: np.ndarray | None = None) -> None:
         self.values = values
         self.n = int(values.shape[0])
         self.frame = frame
-        self._arrays = (sec, nsec, np.ones(self.n, dtype=bool))
+        self._arrays = (sec, nsec, np.ones(self.n, dtype=bool) if plain is None else plain)
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``sec``, ``nanosec`` (int64) and ``plain`` (bool) per row."""
@@ -79,11 +79,6 @@ def _no_message(i: int) -> Any:
     raise IndexError(i)
 
 
-def _stamp(msg: Any) -> tuple[np.ndarray, np.ndarray]:
-    st = msg.header.stamp
-    return np.array([int(st.sec)], dtype=np.int64), np.array([int(st.nanosec)], dtype=np.int64)
-
-
 def _frame_id(msg: Any) -> str:
     frame = msg.header.frame_id
     if not isinstance(frame, str):
@@ -103,29 +98,74 @@ def _covariance(cov: Any) -> list[float]:
 _NO_ORIENTATION = [0.0] * (columns.ANGULAR_VELOCITY.start)
 
 
-def imu_message_events(msg: Any, log_ns: int = 0) -> Events:
-    """The one-event chunk of a sensor_msgs/Imu-like message logged at ``log_ns`` [ns].
-    AttributeError, TypeError or ValueError when it is malformed (a field missing, not a
-    number, a covariance not of 9)."""
-    sec, nsec = _stamp(msg)
+def _imu_row(msg: Any) -> tuple[list[float], int, int, str]:
+    """A sensor_msgs/Imu-like message's row (columns.IMU_DOUBLES values), header stamp (sec,
+    nanosec) and frame id; AttributeError, TypeError or ValueError when it is malformed (a
+    field missing, not a number, a covariance not of 9)."""
+    st = msg.header.stamp
+    sec, nsec = int(st.sec), int(st.nanosec)
     frame = _frame_id(msg)
     av, la = msg.angular_velocity, msg.linear_acceleration
-    values = np.array([_NO_ORIENTATION + [float(av.x), float(av.y), float(av.z)]
-                       + _covariance(msg.angular_velocity_covariance)
-                       + [float(la.x), float(la.y), float(la.z)]
-                       + _covariance(msg.linear_acceleration_covariance)], dtype=np.float64)
-    return Events((IMU,), (log_ns,), (0,), MessageRows(values, sec, nsec, [frame]), None,
-                  _no_message, _one(IMU, log_ns))
+    return (_NO_ORIENTATION + [float(av.x), float(av.y), float(av.z)]
+            + _covariance(msg.angular_velocity_covariance)
+            + [float(la.x), float(la.y), float(la.z)]
+            + _covariance(msg.linear_acceleration_covariance), sec, nsec, frame)
+
+
+def _mag_row(msg: Any) -> tuple[list[float], int, int, str]:
+    """A sensor_msgs/MagneticField-like message's row (columns.MAG_DOUBLES values), stamp and
+    frame id (AttributeError, TypeError or ValueError when it is malformed)."""
+    st = msg.header.stamp
+    sec, nsec = int(st.sec), int(st.nanosec)
+    frame = _frame_id(msg)
+    m = msg.magnetic_field
+    return [float(m.x), float(m.y), float(m.z)] + [0.0] * 9, sec, nsec, frame
+
+
+def _rows(made: list[tuple[list[float], int, int, str] | None], width: int) -> MessageRows:
+    """Rows made by :func:`_imu_row`/:func:`_mag_row` (None: malformed, not plain)."""
+    zero = [0.0] * width
+    values = np.array([r[0] if r else zero for r in made], dtype=np.float64).reshape(-1, width)
+    sec = np.array([r[1] if r else 0 for r in made], dtype=np.int64)
+    nsec = np.array([r[2] if r else 0 for r in made], dtype=np.int64)
+    plain = np.array([r is not None for r in made], dtype=bool)
+    return MessageRows(values, sec, nsec, [r[3] if r else "" for r in made], plain)
+
+
+def imu_message_events(msg: Any, log_ns: int = 0) -> Events:
+    """The one-event chunk of a sensor_msgs/Imu-like message logged at ``log_ns`` [ns].
+    AttributeError, TypeError or ValueError when it is malformed."""
+    row, sec, nsec, frame = _imu_row(msg)
+    return Events((IMU,), (log_ns,), (0,),
+                  MessageRows(np.array([row], dtype=np.float64), np.array([sec]),
+                              np.array([nsec]), [frame]), None, _no_message, _one(IMU, log_ns))
 
 
 def mag_message_events(msg: Any, log_ns: int = 0) -> Events:
     """The one-event chunk of a sensor_msgs/MagneticField-like message (AttributeError,
     TypeError or ValueError when it is malformed)."""
-    sec, nsec = _stamp(msg)
-    frame = _frame_id(msg)
-    m = msg.magnetic_field
-    values = np.zeros((1, columns.MAG_DOUBLES))
-    m0 = columns.MAGNETIC_FIELD.start
-    values[0, m0], values[0, m0 + 1], values[0, m0 + 2] = float(m.x), float(m.y), float(m.z)
-    return Events((MAG,), (log_ns,), (0,), None, MessageRows(values, sec, nsec, [frame]),
-                  _no_message, _one(MAG, log_ns))
+    row, sec, nsec, frame = _mag_row(msg)
+    return Events((MAG,), (log_ns,), (0,), None,
+                  MessageRows(np.array([row], dtype=np.float64), np.array([sec]),
+                              np.array([nsec]), [frame]), _no_message, _one(MAG, log_ns))
+
+
+def message_events(items: Sequence[tuple[int, int, Any]]) -> Events:
+    """Message objects ``(kind, log_ns, msg)`` in log order as one chunk: the IMU and
+    magnetometer messages as rows (a malformed one is left to :attr:`Events.message`, where
+    the pipeline counts it), the others as objects."""
+    made: dict[int, list[tuple[list[float], int, int, str] | None]] = {IMU: [], MAG: []}
+    row = []
+    for kind, _log_ns, msg in items:
+        rows = made.get(kind)
+        if rows is None:
+            row.append(0)
+            continue
+        row.append(len(rows))
+        try:
+            rows.append(_imu_row(msg) if kind == IMU else _mag_row(msg))
+        except Exception:  # noqa: BLE001 - malformed: the pipeline counts it from the object
+            rows.append(None)
+    return Events([k for k, _t, _m in items], [t for _k, t, _m in items], row,
+                  _rows(made[IMU], columns.IMU_DOUBLES), _rows(made[MAG], columns.MAG_DOUBLES),
+                  lambda i: items[i][2])
