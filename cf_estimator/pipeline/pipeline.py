@@ -41,8 +41,6 @@ from collections.abc import Mapping
 from time import perf_counter
 from typing import Any
 
-import numpy as np
-
 from cf_estimator.core.filter import ComplementaryFilter
 from cf_estimator.core.magcal import MagCorrection
 from cf_estimator.core.params import FilterParams
@@ -109,8 +107,6 @@ class ImuPipeline:
         self.imu_frame: str | None = None  #: the IMU messages' frame id (None: none yet)
         self.accel_check_n = 0  #: accelerometer samples in the unit check so far
         self.acc_sum = [0.0, 0.0, 0.0]  #: their sum [m/s²]
-        self._cov_key: bytes = b""
-        self._cov_bits: np.ndarray | None = None
         #: the diagnostics window (since the last report)
         self.window = WindowStats()
         self._previous_counters: dict[str, Any] = {}
@@ -341,16 +337,11 @@ class ImuPipeline:
             return warnings
         return []
 
-    def covariance_bits(self) -> np.ndarray | None:
-        """The bits of the input covariances in force (angular velocity, then linear
-        acceleration: 18 uint64), None before the first IMU message."""
+    def covariance_bytes(self) -> bytes | None:
+        """The input covariances in force (angular velocity, then linear acceleration) as
+        bytes, None before the first IMU message."""
         a, b = self.angular_velocity_covariance.raw, self.linear_acceleration_covariance.raw
-        if a is None or b is None or len(a) != 72 or len(b) != 72:
-            return None
-        key = a + b
-        if key != self._cov_key:
-            self._cov_key, self._cov_bits = key, np.frombuffer(key, dtype="<u8")
-        return self._cov_bits
+        return None if a is None or b is None else a + b
 
     def warn(self, tag_text: tuple[str, str] | None) -> None:
         """Raise a warn-once ``(tag, text)`` (None: nothing to say): the first time its tag is

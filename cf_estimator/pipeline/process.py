@@ -119,28 +119,35 @@ class Rows:
             None if self.gravity_free is None else self.gravity_free[k])
 
 
-def imu_reasons(gyro: np.ndarray, accel: np.ndarray, sec: np.ndarray, nsec: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """Per IMU row: the value checks' verdict (0: valid, k: rejected for ``_REASONS[k]``, the
-    first check failed in the order zero stamp, non-finite gyro, non-finite accelerometer, zero
-    accelerometer, implausible gyro, implausible accelerometer) and |gyro|² [(rad/s)²].
-
-    A row passes them all exactly when its stamp is not zero and 0 < |a|² ≤ ACCEL_MAX2,
-    |g|² ≤ GYRO_MAX2 (a NaN or Inf component makes its norm fail the comparison; an overflow is
-    implausible): that is tested first, the reasons sorted out only for the rows failing it."""
-    code = np.zeros(gyro.shape[0], dtype=np.int8)
+def imu_valid(gyro: np.ndarray, accel: np.ndarray, sec: np.ndarray, nsec: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """Per IMU row: it passes every value check of :func:`imu_reasons` (its stamp is not zero,
+    0 < |a|² ≤ ACCEL_MAX2 and |g|² ≤ GYRO_MAX2: a NaN or Inf component makes its norm fail the
+    comparison, an overflow is implausible), and |gyro|² [(rad/s)²]."""
     with np.errstate(over="ignore", invalid="ignore"):
         a2 = np.add.reduce(accel * accel, axis=1)  # (x² + y²) + z²; inf when huge
         g2 = np.add.reduce(gyro * gyro, axis=1)
         ok = (g2 <= GYRO_MAX2) & (a2 <= ACCEL_MAX2) & (a2 != 0.0) & ((sec | nsec) != 0)
-        if not ok.all():
-            fin_g = np.isfinite(gyro).all(axis=1)
-            fin_a = np.isfinite(accel).all(axis=1)
-            fails = [(sec | nsec) == 0, ~fin_g, ~fin_a, a2 == 0.0, g2 > GYRO_MAX2,
-                     a2 > ACCEL_MAX2]
-            for k in range(len(fails), 0, -1):  # the first check failed wins
-                code[fails[k - 1]] = k
-    return code, g2
+    return ok, g2
+
+
+def imu_reasons(gyro: np.ndarray, accel: np.ndarray, sec: np.ndarray, nsec: np.ndarray
+                ) -> np.ndarray:
+    """Per IMU row: the value checks' verdict, 0 (valid) or k (rejected for ``_REASONS[k]``):
+    the first check failed in the order zero stamp, non-finite gyro, non-finite accelerometer,
+    zero accelerometer, implausible gyro, implausible accelerometer."""
+    code = np.zeros(gyro.shape[0], dtype=np.int8)
+    with np.errstate(over="ignore", invalid="ignore"):
+        a2 = np.add.reduce(accel * accel, axis=1)
+        g2 = np.add.reduce(gyro * gyro, axis=1)
+        fails = [(sec | nsec) == 0, ~np.isfinite(gyro).all(axis=1),
+                 ~np.isfinite(accel).all(axis=1), a2 == 0.0, g2 > GYRO_MAX2, a2 > ACCEL_MAX2]
+    for k in range(len(fails), 0, -1):  # the first check failed wins
+        code[fails[k - 1]] = k
+    return code
+
+
+_NONE = np.zeros(0, dtype=bool)
 
 
 class _Chunk:
@@ -164,21 +171,19 @@ class _Chunk:
         self.vel_list = [i for i, k in enumerate(kinds) if k == VELOCITY]
         # IMU rows
         self.imu_at = np.array(self.imu_list, dtype=np.intp)
-        rows = row[self.imu_at]
         if self.imu_list:
             blk = ev.imu
             sec_all, nsec_all, plain_all = blk.arrays()
             if blk.n == 1:  # a block of one message (the node's): its row itself
                 v = blk.values.copy() if flip else blk.values
                 self.sec, self.nsec, self.imu_plain = sec_all, nsec_all, plain_all
+                self.imu_frame = list(blk.frame)
             else:
+                rows = row[self.imu_at]
                 v = blk.values[rows]
                 self.sec, self.nsec = sec_all[rows], nsec_all[rows]
                 self.imu_plain = plain_all[rows]
-            #: both input covariances' bits per row (one changing ends a run)
-            self.imu_cov_bits = np.concatenate(
-                (v[:, columns.ANGULAR_VELOCITY_COVARIANCE],
-                 v[:, columns.LINEAR_ACCELERATION_COVARIANCE]), axis=1).view("<u8")
+                self.imu_frame = [blk.frame[r] for r in rows.tolist()]
             self.imu_values = v
             g = v[:, columns.ANGULAR_VELOCITY]
             a = v[:, columns.LINEAR_ACCELERATION]
@@ -187,27 +192,40 @@ class _Chunk:
                 a[:, 1:] = -a[:, 1:]
             self.gyro, self.accel = g, a
             self.t_ns = self.sec * 1_000_000_000 + self.nsec
-            self.imu_frame = [blk.frame[r] for r in rows.tolist()]
-            self.reason, self.g2 = imu_reasons(g, a, self.sec, self.nsec)
-            self.quiet_gyro = self.g2 <= _GYRO_WARN2  #: no gyro unit warning to raise
+            self.valid, self.g2 = imu_valid(g, a, self.sec, self.nsec)
             #: a row that would be ordinary after the row before it was: decoded, valid,
-            #: stamped after it without a gap that resets, its frame id and covariances
+            #: stamped after it without a gap that resets, its frame id and covariances, no
+            #: gyro unit warning to raise (row 0: checked against the pipeline's state)
             m = len(self.imu_list)
             self.d_ns = np.zeros(m, dtype=np.int64)  #: the stamp interval from the row before
-            chain = self.imu_plain & (self.reason == 0)
             if m > 1:
                 np.subtract(self.t_ns[1:], self.t_ns[:-1], out=self.d_ns[1:])
                 fcode = np.array([codes.setdefault(f, len(codes)) for f in self.imu_frame],
                                  dtype=np.int64)
-                bits = self.imu_cov_bits
+                bits = np.concatenate((v[:, columns.ANGULAR_VELOCITY_COVARIANCE],
+                                       v[:, columns.LINEAR_ACCELERATION_COVARIANCE]),
+                                      axis=1).view("<u8")
+                chain = self.imu_plain & self.valid
                 chain[1:] &= ((fcode[1:] == fcode[:-1]) & (self.d_ns[1:] > 0)
                               & (bits[1:] == bits[:-1]).all(axis=1))
                 if pipe.rules.reset_gap_on:
                     chain[1:] &= self.d_ns[1:] <= pipe.rules.reset_gap_ns
-            self.chain = chain
-        # magnetometer rows: calibrated, then turned (as the field the filter takes)
+                self.chain = chain
+                self.quiet_gyro = self.g2 <= _GYRO_WARN2
+        self._mag_rows(pipe, ev, row, codes, flip)
+        self.codes = codes
+
+    def covariance_bytes(self, j: int) -> bytes:
+        """IMU row ``j``'s input covariances (angular velocity, then linear acceleration) as
+        bytes."""
+        v = self.imu_values[j]
+        return (v[columns.ANGULAR_VELOCITY_COVARIANCE].tobytes()
+                + v[columns.LINEAR_ACCELERATION_COVARIANCE].tobytes())
+
+    def _mag_rows(self, pipe: ImuPipeline, ev: Events, row: np.ndarray, codes: dict[Any, int],
+                  flip: bool) -> None:
+        """The magnetometer rows: calibrated, then turned (as the field the filter takes)."""
         self.mag_at = np.array(self.mag_list, dtype=np.intp)
-        self.mag_valid = self.mag_plain = np.zeros(0, dtype=bool)
         if self.mag_list:
             mrows = row[self.mag_at]
             blk = ev.mag
@@ -227,7 +245,8 @@ class _Chunk:
             self.mag_frame = [blk.frame[r] for r in mrows.tolist()]
             self.mag_fcode = np.array([codes.setdefault(f, len(codes)) for f in self.mag_frame],
                                       dtype=np.int64)
-        self.codes = codes
+        else:
+            self.mag_valid = self.mag_plain = _NONE
 
     def code(self, frame: Any) -> int:
         """The frame id's code in this chunk (-1: none of its rows has it)."""
@@ -305,7 +324,6 @@ def _ordinary_end(pipe: ImuPipeline, c: _Chunk, p: int) -> int:
     ib = bisect_left(c.imu_list, end)
     if ib > ia:
         last = pipe.clock.last_ns
-        ref = pipe.covariance_bits()
         d0 = int(c.t_ns[ia]) - last if last is not None else 0
         warned = "gyro_units" in pipe.input_warning_tags
         heading_may_start = (rules.use_mag and not f.step_state.heading_initialized
@@ -313,9 +331,9 @@ def _ordinary_end(pipe: ImuPipeline, c: _Chunk, p: int) -> int:
         takes = _takes_mag(pipe, c, p, ia, ib) if heading_may_start else None
         if not (f.initialized and pipe.accel_check_n >= checks.ACCEL_CHECK_SAMPLES
                 and d0 > 0 and (not rules.reset_gap_on or d0 <= rules.reset_gap_ns)
-                and c.imu_plain[ia] and c.reason[ia] == 0 and ref is not None
-                and c.imu_frame[ia] == pipe.imu_frame and (c.imu_cov_bits[ia] == ref).all()
-                and (warned or c.quiet_gyro[ia]) and (takes is None or not takes[0])):
+                and c.imu_plain[ia] and c.valid[ia] and c.imu_frame[ia] == pipe.imu_frame
+                and c.covariance_bytes(ia) == pipe.covariance_bytes()
+                and (warned or c.g2[ia] <= _GYRO_WARN2) and (takes is None or not takes[0])):
             end = c.imu_list[ia]  # the next IMU message starts, checks or breaks the chain
         elif ib - ia > 1:
             ok = c.chain[ia + 1:ib]
@@ -392,7 +410,8 @@ def _imu_alone(pipe: ImuPipeline, c: _Chunk, p: int, j: int) -> list[Rows] | Non
     v = c.imu_values[j]
     pipe.angular_velocity_covariance.get(v[columns.ANGULAR_VELOCITY_COVARIANCE])
     pipe.linear_acceleration_covariance.get(v[columns.LINEAR_ACCELERATION_COVARIANCE])
-    code = int(c.reason[j])
+    code = 0 if c.valid[j] else int(imu_reasons(c.gyro[j:j + 1], c.accel[j:j + 1],
+                                                 c.sec[j:j + 1], c.nsec[j:j + 1])[0])
     if code:
         pipe.reject(_REASONS[code])
         return None
