@@ -216,9 +216,9 @@ _BIAS_SAMPLE_PERIOD_S = 0.02
 
 
 class _Col:
-    """One per-output series of a replay: values appended one at a time (the per-message
-    path; None in a ``width``-wide series: no value, NaN) or a run's block at once (the bulk
-    path: an array, no Python object per row)."""
+    """One per-output series of a replay: a run's values at once (:meth:`add`: an array, no
+    Python object per row), or given whole (``values``; None in a ``width``-wide series: no
+    value, NaN)."""
 
     __slots__ = ("_blocks", "_cur", "_width", "_dtype")
 
@@ -227,9 +227,6 @@ class _Col:
         self._blocks: list[np.ndarray] = []
         self._cur: list[Any] = values if values is not None else []
         self._width, self._dtype = width, dtype
-
-    def append(self, value: Any) -> None:
-        self._cur.append(value)
 
     def add(self, block: np.ndarray) -> None:
         """Values of several outputs at once (rows of ``block``)."""
@@ -254,7 +251,7 @@ class _Col:
         return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
     def values(self) -> list[Any]:
-        """The values as appended (the offline replay's, which never adds blocks)."""
+        """The values, row by row (tuples in a ``width``-wide series)."""
         if not self._blocks:
             return list(self._cur)
         return [tuple(r) if isinstance(r, list) else r for r in self.array().tolist()]
