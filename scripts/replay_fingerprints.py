@@ -49,7 +49,7 @@ VARIANTS: dict[str, tuple[dict[str, Any], dict[str, Any]]] = {
 ALL_VARIANTS_ON = ("hostile", "ardrone_imu", "sample_log_small", "dronekit_log171")
 
 
-def _digest(path: Path, summary: dict[str, Any], series: Any) -> dict[str, Any]:
+def _digest(path: Path, summary: dict[str, Any], series: Any, work: Path) -> dict[str, Any]:
     from rosbags.highlevel import AnyReader
 
     from cf_estimator.bag.replay import OUT_DIAGNOSTICS_TOPIC
@@ -69,7 +69,8 @@ def _digest(path: Path, summary: dict[str, Any], series: Any) -> dict[str, Any]:
                 else:
                     h.update(bytes(raw))
             topics[conn.topic] = h.hexdigest()
-    text = re.sub(r"'(messages_per_s|wall_s|wall_time_s|output)': [^,}]+", "", repr(summary))
+    text = re.sub(r"'(messages_per_s|wall_s|wall_time_s|output)': [^,}]+", "",
+                  repr(summary).replace(str(work), "<work>"))  # the run's own folder
     return {"topics": topics,
             "summary": hashlib.sha256(text.encode()).hexdigest(),
             "series": {k: hashlib.sha256(np.asarray(v).tobytes()).hexdigest()
@@ -110,13 +111,13 @@ def fingerprints(work: Path) -> dict[str, Any]:
     out: dict[str, Any] = {}
 
     def run(key: str, path: Path, variants: list[tuple[str, dict, dict]], **opts: Any) -> None:
-        vs = [ReplayVariant(name, FilterParams(**fp), PipelineParams(**pp), work / f"{key}_{name}")
-              for name, fp, pp in variants]
+        vs = [ReplayVariant(name, FilterParams(**fp), PipelineParams(**pp),
+                            work / f"{key}_{name}".replace("/", "_")) for name, fp, pp in variants]
         for v in vs:
             shutil.rmtree(v.output_path, ignore_errors=True)
         results = replay_variants(path, vs, ReplayOptions(progress=False, overwrite=True, **opts))
         for v, r in zip(vs, results, strict=True):
-            out[f"{key}/{v.name}"] = _digest(Path(v.output_path), r.summary, r.series)
+            out[f"{key}/{v.name}"] = _digest(Path(v.output_path), r.summary, r.series, work)
             print(f"{key}/{v.name}", flush=True)
 
     for name, path in inputs.items():
