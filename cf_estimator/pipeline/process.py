@@ -150,6 +150,25 @@ def imu_reasons(gyro: np.ndarray, accel: np.ndarray, sec: np.ndarray, nsec: np.n
 _NONE = np.zeros(0, dtype=bool)
 
 
+def _where(kind: np.ndarray, k: int) -> np.ndarray:
+    """Indices of the events of kind ``k`` (a chunk of one: without NumPy's call overhead)."""
+    if kind.shape[0] == 1:
+        return _AT0 if int(kind[0]) == k else _AT_NONE
+    return np.flatnonzero(kind == k)
+
+
+_AT0 = np.zeros(1, dtype=np.intp)
+_AT_NONE = np.zeros(0, dtype=np.intp)
+
+
+def _frame_codes(frames: list[Any], codes: dict[Any, int]) -> np.ndarray:
+    """Per row: a code of its frame id, the same for equal ones (``codes``: frame id → code,
+    filled here)."""
+    if frames.count(frames[0]) == len(frames):  # one frame id throughout (the usual case)
+        return np.full(len(frames), codes.setdefault(frames[0], len(codes)), dtype=np.int64)
+    return np.array([codes.setdefault(f, len(codes)) for f in frames], dtype=np.int64)
+
+
 class _Chunk:
     """The events ``start``..``stop`` of a chunk as the stages read them (range coordinates:
     event ``start + i`` is ``i``), IMU and magnetometer rows in the body convention paired
@@ -164,13 +183,11 @@ class _Chunk:
         row = row_a[start:stop]
         flip = pipe.rules.flip
         codes: dict[Any, int] = {}
-        kinds = self.kind.tolist()
-        #: range indices of the IMU, magnetometer and velocity events
-        self.imu_list = [i for i, k in enumerate(kinds) if k == IMU]
-        self.mag_list = [i for i, k in enumerate(kinds) if k == MAG]
-        self.vel_list = [i for i, k in enumerate(kinds) if k == VELOCITY]
+        #: range indices of the IMU, magnetometer and velocity events (as lists and arrays)
+        self.imu_at, self.mag_at, vel_at = (_where(self.kind, k) for k in (IMU, MAG, VELOCITY))
+        self.imu_list, self.mag_list = self.imu_at.tolist(), self.mag_at.tolist()
+        self.vel_list = vel_at.tolist()
         # IMU rows
-        self.imu_at = np.array(self.imu_list, dtype=np.intp)
         if self.imu_list:
             blk = ev.imu
             sec_all, nsec_all, plain_all = blk.arrays()
@@ -200,8 +217,7 @@ class _Chunk:
             self.d_ns = np.zeros(m, dtype=np.int64)  #: the stamp interval from the row before
             if m > 1:
                 np.subtract(self.t_ns[1:], self.t_ns[:-1], out=self.d_ns[1:])
-                fcode = np.array([codes.setdefault(f, len(codes)) for f in self.imu_frame],
-                                 dtype=np.int64)
+                fcode = _frame_codes(self.imu_frame, {})
                 bits = np.concatenate((v[:, columns.ANGULAR_VELOCITY_COVARIANCE],
                                        v[:, columns.LINEAR_ACCELERATION_COVARIANCE]),
                                       axis=1).view("<u8")
@@ -225,7 +241,6 @@ class _Chunk:
     def _mag_rows(self, pipe: ImuPipeline, ev: Events, row: np.ndarray, codes: dict[Any, int],
                   flip: bool) -> None:
         """The magnetometer rows: calibrated, then turned (as the field the filter takes)."""
-        self.mag_at = np.array(self.mag_list, dtype=np.intp)
         if self.mag_list:
             mrows = row[self.mag_at]
             blk = ev.mag
@@ -243,8 +258,7 @@ class _Chunk:
                                   & (self.mag_n2 != 0.0))
             self.mag_plain = plain_all[mrows]
             self.mag_frame = [blk.frame[r] for r in mrows.tolist()]
-            self.mag_fcode = np.array([codes.setdefault(f, len(codes)) for f in self.mag_frame],
-                                      dtype=np.int64)
+            self.mag_fcode = _frame_codes(self.mag_frame, codes)
         else:
             self.mag_valid = self.mag_plain = _NONE
 
