@@ -4,7 +4,8 @@ A replay hands the pipeline a chunk of thousands of decoded messages; the live n
 message at a time. Both arrive as :class:`Events`: ``kind`` per event (:data:`IMU`, :data:`MAG`,
 :data:`VELOCITY`, :data:`OTHER`), its log time, and its row in a block of decoded messages (the
 column layout of :mod:`cf_estimator.pipeline.columns`). :func:`imu_message_events` and
-:func:`mag_message_events` make the one-event chunk of a message object (rclpy's or rosbags').
+:func:`mag_message_events` make the one-event chunk of a message object (rclpy's or rosbags'),
+:func:`message_events` one chunk of many message objects.
 """
 
 from __future__ import annotations
