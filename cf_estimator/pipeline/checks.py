@@ -50,11 +50,6 @@ MAG_CHECK_SAMPLES = 20
 MAG_PLAUSIBLE_T = (10e-6, 100e-6)
 
 
-def finite3(x: float, y: float, z: float) -> bool:
-    """True when all three components are finite (one isfinite on the sum: Inf-Inf is NaN)."""
-    return math.isfinite(x + y + z)
-
-
 def frame_id_warning(frame_id: str, what: str) -> tuple[str, str] | None:
     """``(tag, message)`` when a frame id is empty or starts with '/', else None."""
     if not frame_id:

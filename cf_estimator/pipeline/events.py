@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from cf_estimator.pipeline import columns
+from cf_estimator.pipeline.messages import covariance9, stamp_of, vector3
 
 IMU, MAG, OTHER, VELOCITY = 0, 1, 2, 3  #: event kinds; OTHER (e.g. a reference) passes through
 
@@ -87,45 +88,36 @@ def _frame_id(msg: Any) -> str:
     return frame
 
 
-def _covariance(cov: Any) -> list[float]:
-    """A 9-element covariance (array.array, NumPy or a sequence) as floats."""
-    c = cov.tolist() if hasattr(cov, "tolist") else [float(x) for x in cov]
-    if len(c) != 9:
-        raise ValueError(f"covariance must have 9 elements, got {len(c)}")
-    return c
-
-
 #: the orientation columns of an input row (unused by the pipeline: it computes its own)
-_NO_ORIENTATION = [0.0] * (columns.ANGULAR_VELOCITY.start)
+_NO_ORIENTATION = (0.0,) * columns.ANGULAR_VELOCITY.start
 
 
-def _imu_row(msg: Any) -> tuple[list[float], int, int, str]:
+def _imu_row(msg: Any) -> tuple[tuple[float, ...], int, int, str]:
     """A sensor_msgs/Imu-like message's row (columns.IMU_DOUBLES values), header stamp (sec,
     nanosec) and frame id; AttributeError, TypeError or ValueError when it is malformed (a
     field missing, not a number, a covariance not of 9)."""
-    st = msg.header.stamp
-    sec, nsec = int(st.sec), int(st.nanosec)
+    sec, nsec = stamp_of(msg)
     frame = _frame_id(msg)
-    av, la = msg.angular_velocity, msg.linear_acceleration
-    return (_NO_ORIENTATION + [float(av.x), float(av.y), float(av.z)]
-            + _covariance(msg.angular_velocity_covariance)
-            + [float(la.x), float(la.y), float(la.z)]
-            + _covariance(msg.linear_acceleration_covariance), sec, nsec, frame)
+    return (_NO_ORIENTATION + vector3(msg.angular_velocity)
+            + covariance9(msg.angular_velocity_covariance) + vector3(msg.linear_acceleration)
+            + covariance9(msg.linear_acceleration_covariance), sec, nsec, frame)
 
 
-def _mag_row(msg: Any) -> tuple[list[float], int, int, str]:
+def _mag_row(msg: Any) -> tuple[tuple[float, ...], int, int, str]:
     """A sensor_msgs/MagneticField-like message's row (columns.MAG_DOUBLES values), stamp and
     frame id (AttributeError, TypeError or ValueError when it is malformed)."""
-    st = msg.header.stamp
-    sec, nsec = int(st.sec), int(st.nanosec)
+    sec, nsec = stamp_of(msg)
     frame = _frame_id(msg)
-    m = msg.magnetic_field
-    return [float(m.x), float(m.y), float(m.z)] + [0.0] * 9, sec, nsec, frame
+    return vector3(msg.magnetic_field) + _NO_MAG_COVARIANCE, sec, nsec, frame
 
 
-def _rows(made: list[tuple[list[float], int, int, str] | None], width: int) -> MessageRows:
+_NO_MAG_COVARIANCE = (0.0,) * (columns.MAG_DOUBLES - columns.MAGNETIC_FIELD.stop)
+
+
+def _rows(made: list[tuple[tuple[float, ...], int, int, str] | None], width: int
+          ) -> MessageRows:
     """Rows made by :func:`_imu_row`/:func:`_mag_row` (None: malformed, not plain)."""
-    zero = [0.0] * width
+    zero = (0.0,) * width
     values = np.array([r[0] if r else zero for r in made], dtype=np.float64).reshape(-1, width)
     sec = np.array([r[1] if r else 0 for r in made], dtype=np.int64)
     nsec = np.array([r[2] if r else 0 for r in made], dtype=np.int64)
@@ -155,7 +147,7 @@ def message_events(items: Sequence[tuple[int, int, Any]]) -> Events:
     """Message objects ``(kind, log_ns, msg)`` in log order as one chunk: the IMU and
     magnetometer messages as rows (a malformed one is left to :attr:`Events.message`, where
     the pipeline counts it), the others as objects."""
-    made: dict[int, list[tuple[list[float], int, int, str] | None]] = {IMU: [], MAG: []}
+    made: dict[int, list[tuple[tuple[float, ...], int, int, str] | None]] = {IMU: [], MAG: []}
     row = []
     for kind, _log_ns, msg in items:
         rows = made.get(kind)

@@ -15,9 +15,6 @@ from typing import Any
 Vec3 = tuple[float, float, float]
 Cov9 = tuple[float, float, float, float, float, float, float, float, float]
 
-#: sensor_msgs convention: a covariance whose element 0 is -1 means "not provided".
-UNKNOWN_COVARIANCE: Cov9 = (-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-
 
 def stamp_of(msg: Any) -> tuple[int, int]:
     """``(sec, nanosec)`` of ``msg.header.stamp``."""
@@ -29,11 +26,6 @@ def stamp_ns(msg: Any) -> int:
     """``msg.header.stamp`` in integer nanoseconds (exact; dt is computed from these)."""
     st = msg.header.stamp
     return int(st.sec) * 1_000_000_000 + int(st.nanosec)
-
-
-def frame_id_of(msg: Any) -> str:
-    """``msg.header.frame_id`` as a string."""
-    return str(msg.header.frame_id)
 
 
 def vector3(v: Any) -> Vec3:
@@ -53,19 +45,3 @@ def covariance9(c: Any) -> Cov9:
     if len(out) != 9:
         raise ValueError(f"covariance must have 9 elements, got {len(out)}")
     return out  # type: ignore[return-value]
-
-
-def imu_gyro_rad_s(msg: Any) -> Vec3:
-    """``angular_velocity`` [rad/s] of a sensor_msgs/Imu-like message."""
-    return vector3(msg.angular_velocity)
-
-
-def imu_accel_m_s2(msg: Any) -> Vec3:
-    """``linear_acceleration`` [m/s^2] of a sensor_msgs/Imu-like message."""
-    return vector3(msg.linear_acceleration)
-
-
-def mag_field(msg: Any) -> Vec3:
-    """``magnetic_field`` of a sensor_msgs/MagneticField-like message (Tesla by convention;
-    components may be NaN, meaning "not reported")."""
-    return vector3(msg.magnetic_field)

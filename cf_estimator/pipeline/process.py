@@ -120,28 +120,26 @@ class Rows:
 
 
 def imu_valid(gyro: np.ndarray, accel: np.ndarray, sec: np.ndarray, nsec: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray]:
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per IMU row: it passes every value check of :func:`imu_reasons` (its stamp is not zero,
     0 < |a|² ≤ ACCEL_MAX2 and |g|² ≤ GYRO_MAX2: a NaN or Inf component makes its norm fail the
-    comparison, an overflow is implausible), and |gyro|² [(rad/s)²]."""
+    comparison, an overflow is implausible), |accel|² [(m/s²)²] and |gyro|² [(rad/s)²]."""
     with np.errstate(over="ignore", invalid="ignore"):
         a2 = np.add.reduce(accel * accel, axis=1)  # (x² + y²) + z²; inf when huge
         g2 = np.add.reduce(gyro * gyro, axis=1)
         ok = (g2 <= GYRO_MAX2) & (a2 <= ACCEL_MAX2) & (a2 != 0.0) & ((sec | nsec) != 0)
-    return ok, g2
+    return ok, a2, g2
 
 
-def imu_reasons(gyro: np.ndarray, accel: np.ndarray, sec: np.ndarray, nsec: np.ndarray
-                ) -> np.ndarray:
-    """Per IMU row: the value checks' verdict, 0 (valid) or k (rejected for ``_REASONS[k]``):
-    the first check failed in the order zero stamp, non-finite gyro, non-finite accelerometer,
-    zero accelerometer, implausible gyro, implausible accelerometer."""
+def imu_reasons(gyro: np.ndarray, accel: np.ndarray, a2: np.ndarray, g2: np.ndarray,
+                sec: np.ndarray, nsec: np.ndarray) -> np.ndarray:
+    """Per IMU row (its squared norms from :func:`imu_valid`): the value checks' verdict, 0
+    (valid) or k (rejected for ``_REASONS[k]``): the first check failed in the order zero
+    stamp, non-finite gyro, non-finite accelerometer, zero accelerometer, implausible gyro,
+    implausible accelerometer."""
     code = np.zeros(gyro.shape[0], dtype=np.int8)
-    with np.errstate(over="ignore", invalid="ignore"):
-        a2 = np.add.reduce(accel * accel, axis=1)
-        g2 = np.add.reduce(gyro * gyro, axis=1)
-        fails = [(sec | nsec) == 0, ~np.isfinite(gyro).all(axis=1),
-                 ~np.isfinite(accel).all(axis=1), a2 == 0.0, g2 > GYRO_MAX2, a2 > ACCEL_MAX2]
+    fails = [(sec | nsec) == 0, ~np.isfinite(gyro).all(axis=1), ~np.isfinite(accel).all(axis=1),
+             a2 == 0.0, g2 > GYRO_MAX2, a2 > ACCEL_MAX2]
     for k in range(len(fails), 0, -1):  # the first check failed wins
         code[fails[k - 1]] = k
     return code
@@ -161,9 +159,10 @@ _AT0 = np.zeros(1, dtype=np.intp)
 _AT_NONE = np.zeros(0, dtype=np.intp)
 
 
-def _frame_codes(frames: list[Any], codes: dict[Any, int]) -> np.ndarray:
+def _frame_codes(frames: list[Any], codes: dict[Any, int] | None = None) -> np.ndarray:
     """Per row: a code of its frame id, the same for equal ones (``codes``: frame id → code,
     filled here)."""
+    codes = {} if codes is None else codes
     if frames.count(frames[0]) == len(frames):  # one frame id throughout (the usual case)
         return np.full(len(frames), codes.setdefault(frames[0], len(codes)), dtype=np.int64)
     return np.array([codes.setdefault(f, len(codes)) for f in frames], dtype=np.int64)
@@ -182,7 +181,6 @@ class _Chunk:
         self.log_ns = log_a[start:stop]
         row = row_a[start:stop]
         flip = pipe.rules.flip
-        codes: dict[Any, int] = {}
         #: range indices of the IMU, magnetometer and velocity events (as lists and arrays)
         self.imu_at, self.mag_at, vel_at = (_where(self.kind, k) for k in (IMU, MAG, VELOCITY))
         self.imu_list, self.mag_list = self.imu_at.tolist(), self.mag_at.tolist()
@@ -209,7 +207,7 @@ class _Chunk:
                 a[:, 1:] = -a[:, 1:]
             self.gyro, self.accel = g, a
             self.t_ns = self.sec * 1_000_000_000 + self.nsec
-            self.valid, self.g2 = imu_valid(g, a, self.sec, self.nsec)
+            self.valid, self.a2, self.g2 = imu_valid(g, a, self.sec, self.nsec)
             #: a row that would be ordinary after the row before it was: decoded, valid,
             #: stamped after it without a gap that resets, its frame id and covariances, no
             #: gyro unit warning to raise (row 0: checked against the pipeline's state)
@@ -217,7 +215,7 @@ class _Chunk:
             self.d_ns = np.zeros(m, dtype=np.int64)  #: the stamp interval from the row before
             if m > 1:
                 np.subtract(self.t_ns[1:], self.t_ns[:-1], out=self.d_ns[1:])
-                fcode = _frame_codes(self.imu_frame, {})
+                fcode = _frame_codes(self.imu_frame)
                 bits = np.concatenate((v[:, columns.ANGULAR_VELOCITY_COVARIANCE],
                                        v[:, columns.LINEAR_ACCELERATION_COVARIANCE]),
                                       axis=1).view("<u8")
@@ -228,8 +226,7 @@ class _Chunk:
                     chain[1:] &= self.d_ns[1:] <= pipe.rules.reset_gap_ns
                 self.chain = chain
                 self.quiet_gyro = self.g2 <= _GYRO_WARN2
-        self._mag_rows(pipe, ev, row, codes, flip)
-        self.codes = codes
+        self._mag_rows(pipe, ev, row, flip)
 
     def covariance_bytes(self, j: int) -> bytes:
         """IMU row ``j``'s input covariances (angular velocity, then linear acceleration) as
@@ -238,9 +235,9 @@ class _Chunk:
         return (v[columns.ANGULAR_VELOCITY_COVARIANCE].tobytes()
                 + v[columns.LINEAR_ACCELERATION_COVARIANCE].tobytes())
 
-    def _mag_rows(self, pipe: ImuPipeline, ev: Events, row: np.ndarray, codes: dict[Any, int],
-                  flip: bool) -> None:
+    def _mag_rows(self, pipe: ImuPipeline, ev: Events, row: np.ndarray, flip: bool) -> None:
         """The magnetometer rows: calibrated, then turned (as the field the filter takes)."""
+        self.mag_codes: dict[Any, int] = {}  #: frame id -> its code in mag_fcode
         if self.mag_list:
             mrows = row[self.mag_at]
             blk = ev.mag
@@ -258,13 +255,13 @@ class _Chunk:
                                   & (self.mag_n2 != 0.0))
             self.mag_plain = plain_all[mrows]
             self.mag_frame = [blk.frame[r] for r in mrows.tolist()]
-            self.mag_fcode = _frame_codes(self.mag_frame, codes)
+            self.mag_fcode = _frame_codes(self.mag_frame, self.mag_codes)
         else:
             self.mag_valid = self.mag_plain = _NONE
 
-    def code(self, frame: Any) -> int:
-        """The frame id's code in this chunk (-1: none of its rows has it)."""
-        return self.codes.get(frame, -1) if frame is not None else -1
+    def mag_frame_code(self, frame: Any) -> int:
+        """A magnetometer frame id's code in this chunk (-1: none of its rows has it)."""
+        return self.mag_codes.get(frame, -1) if frame is not None else -1
 
 
 def process(pipe: ImuPipeline, ev: Events, start: int = 0, stop: int | None = None
@@ -365,7 +362,7 @@ def _ordinary_end(pipe: ImuPipeline, c: _Chunk, p: int) -> int:
         if rules.use_mag:
             mi = pipe.mag_input
             ok = ok & (~c.mag_valid[ma:mb] | (
-                (c.mag_fcode[ma:mb] == c.code(mi.frame))
+                (c.mag_fcode[ma:mb] == c.mag_frame_code(mi.frame))
                 & (mi.check_n >= checks.MAG_CHECK_SAMPLES)))
         k = _first_false(ok)
         if k < mb - ma:
@@ -424,8 +421,9 @@ def _imu_alone(pipe: ImuPipeline, c: _Chunk, p: int, j: int) -> list[Rows] | Non
     v = c.imu_values[j]
     pipe.angular_velocity_covariance.get(v[columns.ANGULAR_VELOCITY_COVARIANCE])
     pipe.linear_acceleration_covariance.get(v[columns.LINEAR_ACCELERATION_COVARIANCE])
-    code = 0 if c.valid[j] else int(imu_reasons(c.gyro[j:j + 1], c.accel[j:j + 1],
-                                                 c.sec[j:j + 1], c.nsec[j:j + 1])[0])
+    one = slice(j, j + 1)
+    code = 0 if c.valid[j] else int(imu_reasons(c.gyro[one], c.accel[one], c.a2[one],
+                                                 c.g2[one], c.sec[one], c.nsec[one])[0])
     if code:
         pipe.reject(_REASONS[code])
         return None
