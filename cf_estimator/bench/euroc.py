@@ -37,7 +37,9 @@ GT_FORMATS = ("asl", "tum")
 #: Longest ground-truth gap [s] bridged by interpolation (EuRoC's ground truth runs at 200 Hz).
 MAX_GAP_S = 0.1
 
-_SPLIT = re.compile(r"[,\s]+")
+def _tokens(line: str) -> list[str]:
+    """A text table line's fields: separated by commas and/or whitespace."""
+    return line.replace(",", " ").split()
 
 
 class EurocDataError(ValueError):
@@ -149,12 +151,12 @@ def read_table(path: str | os.PathLike, min_cols: int, time_in_s: bool, what: st
         text = line.strip()
         if not text or text.startswith("#"):
             continue
-        tokens = [t for t in _SPLIT.split(text) if t]
+        tokens = _tokens(text)
         try:
             if len(tokens) < min_cols:
                 raise ValueError
             stamp = _stamp_ns(tokens[0], time_in_s)
-            values = [float(t) for t in tokens[1:min_cols]]
+            values = list(map(float, tokens[1:min_cols]))
         except (ValueError, InvalidOperation):
             if header_allowed and not any(_is_number(t) for t in tokens[:1]):
                 header_allowed = False  # one header line without '#' (e.g. "timestamp,...")
@@ -220,7 +222,7 @@ def _detect_format(path: Path) -> str:
     if re.search(r"\bqx\b", text):
         return "tum"
     for line in head:
-        tokens = [t for t in _SPLIT.split(line.strip()) if t]
+        tokens = _tokens(line)
         if tokens and not line.lstrip().startswith("#") and _is_number(tokens[0]):
             # ASL stamps are nanoseconds (~1e18 for EuRoC); TUM stamps are seconds
             return "asl" if float(tokens[0]) > 1e12 else "tum"

@@ -21,6 +21,10 @@ from cf_estimator.pipeline.messages import covariance9, stamp_of, vector3
 IMU, MAG, OTHER, VELOCITY = 0, 1, 2, 3  #: event kinds; OTHER (e.g. a reference) passes through
 
 
+_PLAIN_ONE = np.ones(1, dtype=bool)
+_PLAIN_ONE.flags.writeable = False
+
+
 class MessageRows:
     """Decoded messages of one type (row k = message k): ``values`` (n, 37 | 12) float64 in the
     layout of :mod:`cf_estimator.pipeline.columns`, header ``frame`` per row, and through
@@ -35,7 +39,9 @@ class MessageRows:
         self.values = values
         self.n = int(values.shape[0])
         self.frame = frame
-        self._arrays = (sec, nsec, np.ones(self.n, dtype=bool) if plain is None else plain)
+        if plain is None:  # every row holds its message
+            plain = _PLAIN_ONE if self.n == 1 else np.ones(self.n, dtype=bool)
+        self._arrays = (sec, nsec, plain)
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``sec``, ``nanosec`` (int64) and ``plain`` (bool) per row."""

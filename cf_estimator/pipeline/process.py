@@ -239,22 +239,27 @@ class _Chunk:
         """The magnetometer rows: calibrated, then turned (as the field the filter takes)."""
         self.mag_codes: dict[Any, int] = {}  #: frame id -> its code in mag_fcode
         if self.mag_list:
-            mrows = row[self.mag_at]
             blk = ev.mag
             sec_all, nsec_all, plain_all = blk.arrays()
-            m = blk.values[mrows, columns.MAGNETIC_FIELD]
+            if blk.n == 1:  # a block of one message (the node's): its row itself
+                m = blk.values[:, columns.MAGNETIC_FIELD].copy()
+                sec, nsec, self.mag_plain = sec_all, nsec_all, plain_all
+                self.mag_frame = list(blk.frame)
+            else:
+                mrows = row[self.mag_at]
+                m = blk.values[mrows, columns.MAGNETIC_FIELD]
+                sec, nsec, self.mag_plain = sec_all[mrows], nsec_all[mrows], plain_all[mrows]
+                self.mag_frame = [blk.frame[r] for r in mrows.tolist()]
             if not pipe.mag_correction.identity:
                 m = pipe.mag_correction.apply_rows(m)
             if flip:
                 m[:, 1:] = -m[:, 1:]
             self.mag = m
-            self.mag_t_ns = sec_all[mrows] * 1_000_000_000 + nsec_all[mrows]
+            self.mag_t_ns = sec * 1_000_000_000 + nsec
             with np.errstate(over="ignore", invalid="ignore"):
-                self.mag_n2 = m[:, 0] * m[:, 0] + m[:, 1] * m[:, 1] + m[:, 2] * m[:, 2]
+                self.mag_n2 = np.add.reduce(m * m, axis=1)  # (x² + y²) + z²
                 self.mag_valid = ((self.mag_t_ns != 0) & np.isfinite(self.mag_n2)
                                   & (self.mag_n2 != 0.0))
-            self.mag_plain = plain_all[mrows]
-            self.mag_frame = [blk.frame[r] for r in mrows.tolist()]
             self.mag_fcode = _frame_codes(self.mag_frame, self.mag_codes)
         else:
             self.mag_valid = self.mag_plain = _NONE
@@ -309,10 +314,9 @@ def _guarded(pipe: ImuPipeline, c: _Chunk, p: int, e: int, stage: Any) -> list[R
 
 def _first_false(mask: np.ndarray) -> int:
     """Index of the first False in ``mask`` (its length if none)."""
-    if mask.shape[0] == 0:
-        return 0
-    k = int(np.argmin(mask))
-    return k if not mask[k] else int(mask.shape[0])
+    if mask.all():  # the usual case, and an empty mask
+        return int(mask.shape[0])
+    return int(np.argmin(mask))
 
 
 def _ordinary_end(pipe: ImuPipeline, c: _Chunk, p: int) -> int:
@@ -523,8 +527,15 @@ def _mag_stage(pipe: ImuPipeline, c: _Chunk, p: int, ia: int, ib: int, ma: int, 
             vj = np.flatnonzero(valid) + ma  # their rows
     else:
         valid_at = c.mag_at[:0]
+    if n == 0:  # no IMU message in the run: the last valid sample waits, the others drop
+        if valid_at.shape[0]:
+            tally.mag_dropped += int(valid_at.shape[0]) - 1 + (pending is not None)
+            r = int(vj[-1])
+            m = c.mag[r].tolist()
+            mi.pending = (int(c.mag_t_ns[r]), m[0], m[1], m[2])
+        return None, mag_t
     if valid_at.shape[0] == 0:
-        if n == 0 or pending is None:
+        if pending is None:
             return None, mag_t
         # the waiting sample goes to the first IMU message
         mi.pending = None
@@ -544,7 +555,7 @@ def _mag_stage(pipe: ImuPipeline, c: _Chunk, p: int, ia: int, ib: int, ma: int, 
     # for each valid sample: the index of the first IMU message after it (n: none)
     nxt = np.searchsorted(imu, valid_at)
     dropped = int(np.count_nonzero(nxt[:-1] == nxt[1:]))
-    if pending is not None and (n == 0 or int(valid_at[0]) < int(imu[0])):
+    if pending is not None and int(valid_at[0]) < int(imu[0]):
         dropped += 1
         pending = None
     tally.mag_dropped += dropped
@@ -567,10 +578,8 @@ def _mag_stage(pipe: ImuPipeline, c: _Chunk, p: int, ia: int, ib: int, ma: int, 
         r = int(vj[last_of[-1]])
         m = c.mag[r].tolist()
         mi.pending = (int(c.mag_t_ns[r]), m[0], m[1], m[2])
-    elif n:
+    else:
         mi.pending = None
-    if n == 0:
-        return None, mag_t
     # stale: stamped too far from the IMU message it would go with
     fresh = np.abs(c.t_ns[ia:ib] - mag_t) <= rules.mag_timeout_ns
     tally.mag_stale += int(np.count_nonzero(has & ~fresh))
