@@ -164,13 +164,26 @@ class CrossResult:
         return {"columns": list(cols), "notes": list(self.notes), "rows": rows}
 
 
-def _euroc_rows(root: Path, params: FilterParams, peers: Sequence[str], jobs: int,
+class _Flights:
+    """Each EuRoC-layout folder's flights, loaded once per table (its plain and aided rows
+    read the same recordings)."""
+
+    def __init__(self) -> None:
+        self._loaded: dict[Path, list[Any]] = {}
+
+    def __call__(self, folder: Path) -> list[Any]:
+        from cf_estimator.bench import euroc
+
+        if folder not in self._loaded:
+            self._loaded[folder] = euroc.load_flights(folder)
+        return self._loaded[folder]
+
+
+def _euroc_rows(flights: list[Any], params: FilterParams, peers: Sequence[str], jobs: int,
                 family: str, label: str, midair: bool,
                 columns: Sequence[str] = COLUMNS) -> list[Row]:
-    from cf_estimator.bench import euroc
     from cf_estimator.bench import euroc_eval as ev
 
-    flights = euroc.load_flights(root)
     res = ev.run_euroc(flights, params, peers, ev.SETTLE_S, jobs=jobs)
     start = ", ground start" if midair else ""
 
@@ -372,9 +385,9 @@ def _multirotor_rows(params: FilterParams, peers: Sequence[str], jobs: int,
     return rows
 
 
-def _aided_rows(root: Path, params: FilterParams, jobs: int) -> tuple[list[Row], list[str]]:
+def _aided_rows(root: Path, params: FilterParams, jobs: int, loaded: _Flights
+                ) -> tuple[list[Row], list[str]]:
     """The velocity-aided rows (module docstring) and notes for missing data directories."""
-    from cf_estimator.bench import euroc
     from cf_estimator.bench import euroc_eval as ev
     from cf_estimator.bench.scenarios import run_scenarios
 
@@ -387,7 +400,7 @@ def _aided_rows(root: Path, params: FilterParams, jobs: int) -> tuple[list[Row],
         if not folder.is_dir():
             notes.append(f"aided: {folder} not found, its rows left out")
             continue
-        flights = euroc.load_flights(folder)
+        flights = loaded(folder)
         vin = _euroc_gnss() if family == "euroc" else ev.VelocityInput()
         res = ev.run_euroc(flights, base, (), ev.SETTLE_S, jobs=jobs, velocity=vin)
         start = ", ground start" if family == "euroc" else ""
@@ -520,6 +533,7 @@ def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = 
         peers = peers + more
     cols = result.columns
     runs_on_arrays = [p for p in peers if p != "onboard"]
+    loaded = _Flights()
     for family in families:
         if progress:
             progress(family)
@@ -533,7 +547,7 @@ def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = 
             result.rows += _multirotor_rows(params, runs_on_arrays, jobs, cols)
             continue
         if family == "aided":
-            rows, notes = _aided_rows(root, params, jobs)
+            rows, notes = _aided_rows(root, params, jobs, loaded)
             result.rows += rows
             result.notes += notes
             continue
@@ -542,12 +556,12 @@ def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = 
             result.notes.append(f"{family}: {folder} not found, left out")
             continue
         if family == "euroc":
-            result.rows += _euroc_rows(folder, params, runs_on_arrays, jobs, "euroc",
+            result.rows += _euroc_rows(loaded(folder), params, runs_on_arrays, jobs, "euroc",
                                        "EuRoC MH", midair=True, columns=cols)
             result.rows += _consistency_rows(folder, family, "EuRoC MH", params, jobs, floors)
         elif family in ("phantom4", "phantom4_horizontal"):
             label = "phantom4" if family == "phantom4" else "phantom4 horizontal"
-            result.rows += _euroc_rows(folder, params, peers, jobs, family, label,
+            result.rows += _euroc_rows(loaded(folder), params, peers, jobs, family, label,
                                        midair=False, columns=cols)
             result.rows += _consistency_rows(folder, family, label, params, jobs, floors)
         elif family == "broad":
