@@ -37,6 +37,7 @@ GT_FORMATS = ("asl", "tum")
 #: Longest ground-truth gap [s] bridged by interpolation (EuRoC's ground truth runs at 200 Hz).
 MAX_GAP_S = 0.1
 
+
 def _tokens(line: str) -> list[str]:
     """A text table line's fields: separated by commas and/or whitespace."""
     return line.replace(",", " ").split()
