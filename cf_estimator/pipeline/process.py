@@ -168,6 +168,19 @@ def _frame_codes(frames: list[Any], codes: dict[Any, int] | None = None) -> np.n
     return np.array([codes.setdefault(f, len(codes)) for f in frames], dtype=np.int64)
 
 
+def _block_rows(blk: Any, row: np.ndarray, at: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[Any]]:
+    """The rows of a block of decoded messages that the chunk's events ``at`` refer to
+    (``row``: each event's row in the block): values, header sec and nanosec, plain and the
+    frame ids. A block of one message (the node's) is its own row: its arrays, not copies."""
+    sec, nsec, plain = blk.arrays()
+    if blk.n == 1:
+        return blk.values, sec, nsec, plain, list(blk.frame)
+    rows = row[at]
+    return (blk.values[rows], sec[rows], nsec[rows], plain[rows],
+            [blk.frame[r] for r in rows.tolist()])
+
+
 class _Chunk:
     """The events ``start``..``stop`` of a chunk as the stages read them (range coordinates:
     event ``start + i`` is ``i``), IMU and magnetometer rows in the body convention paired
@@ -187,18 +200,10 @@ class _Chunk:
         self.vel_list = vel_at.tolist()
         # IMU rows
         if self.imu_list:
-            blk = ev.imu
-            sec_all, nsec_all, plain_all = blk.arrays()
-            if blk.n == 1:  # a block of one message (the node's): its row itself
-                v = blk.values.copy() if flip else blk.values
-                self.sec, self.nsec, self.imu_plain = sec_all, nsec_all, plain_all
-                self.imu_frame = list(blk.frame)
-            else:
-                rows = row[self.imu_at]
-                v = blk.values[rows]
-                self.sec, self.nsec = sec_all[rows], nsec_all[rows]
-                self.imu_plain = plain_all[rows]
-                self.imu_frame = [blk.frame[r] for r in rows.tolist()]
+            v, self.sec, self.nsec, self.imu_plain, self.imu_frame = _block_rows(
+                ev.imu, row, self.imu_at)
+            if flip and v is ev.imu.values:  # turned in place below: not the block's own row
+                v = v.copy()
             self.imu_values = v
             g = v[:, columns.ANGULAR_VELOCITY]
             a = v[:, columns.LINEAR_ACCELERATION]
@@ -239,17 +244,8 @@ class _Chunk:
         """The magnetometer rows: calibrated, then turned (as the field the filter takes)."""
         self.mag_codes: dict[Any, int] = {}  #: frame id -> its code in mag_fcode
         if self.mag_list:
-            blk = ev.mag
-            sec_all, nsec_all, plain_all = blk.arrays()
-            if blk.n == 1:  # a block of one message (the node's): its row itself
-                m = blk.values[:, columns.MAGNETIC_FIELD].copy()
-                sec, nsec, self.mag_plain = sec_all, nsec_all, plain_all
-                self.mag_frame = list(blk.frame)
-            else:
-                mrows = row[self.mag_at]
-                m = blk.values[mrows, columns.MAGNETIC_FIELD]
-                sec, nsec, self.mag_plain = sec_all[mrows], nsec_all[mrows], plain_all[mrows]
-                self.mag_frame = [blk.frame[r] for r in mrows.tolist()]
+            v, sec, nsec, self.mag_plain, self.mag_frame = _block_rows(ev.mag, row, self.mag_at)
+            m = v[:, columns.MAGNETIC_FIELD].copy()  # its own: calibrated and turned below
             if not pipe.mag_correction.identity:
                 m = pipe.mag_correction.apply_rows(m)
             if flip:
