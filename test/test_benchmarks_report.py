@@ -123,6 +123,29 @@ def test_where_we_are_weaker_lists_every_row_a_peer_wins_as_printed():
     assert "No peer scores below ours" in report.render(clean)
 
 
+def test_where_we_are_weaker_lists_a_reported_sigma_beyond_the_consistency_bounds():
+    doc = copy.deepcopy(FAKE)
+    rows = doc["cross"]["rows"]
+    rows += [_row("multirotor", "figure-8s: tilt, per axis: beyond 2σ (consistent 13.5 %)", "%",
+                  cf_estimator=48.4),
+             _row("multirotor", "figure-8s: tilt mean(e²/σ²) (consistent 1)", "1",
+                  cf_estimator=2.19),
+             _row("multirotor", "zig-zags: tilt, per axis: beyond 2σ (consistent 13.5 %)", "%",
+                  cf_estimator=24.9),
+             _row("multirotor", "zig-zags: tilt mean(e²/σ²) (consistent 1)", "1",
+                  cf_estimator=1.99),
+             _row("multirotor", "circles: tilt beyond 2σ (consistent 1.8 %)", "%",
+                  cf_estimator=30.0)]
+    text = report.render(doc)
+    line = next(x for x in text.splitlines() if "Our reported σ too small" in x)
+    assert "on 2 row(s)" in line and "figure-8s: tilt, per axis" in line and "(48.40)" in line
+    assert "figure-8s: tilt mean(e²/σ²) (consistent 1) (2.19)" in line
+    assert "zig-zags" not in line  # within both bounds
+    # the share beyond 2σ of the whole σ (not per axis) is not held to the per-axis bound
+    assert "circles" not in line
+    assert "Our reported σ too small" not in report.render(FAKE)
+
+
 def test_render_only_rewrites_the_report_from_the_results(tmp_path, capsys):
     results, out = tmp_path / "r.json", tmp_path / "B.md"
     results.write_text(report.dumps(FAKE), encoding="utf-8")

@@ -323,9 +323,10 @@ def _compass_rows(params: FilterParams, peers: Sequence[str], jobs: int,
 
 
 def _multirotor_case(args: tuple[str, float | None, dict[str, float], int, FilterParams,
-                                  tuple[str, ...]]) -> dict[str, tuple[float, ...]]:
+                                  tuple[str, ...], Floors]) -> dict[str, tuple]:
     """{column: (RMS, peak) [deg] after 10 s}; ours and VQF online also the learned-bias error
-    at the end [deg/s] as a third element."""
+    at the end [deg/s] as a third element; ``_consistency``: ours online's tilt error [rad] and
+    its reported variance [rad²] after 10 s (the consistency rows)."""
     import numpy as np
 
     from cf_estimator.bench import peers as peer_mod
@@ -334,7 +335,7 @@ def _multirotor_case(args: tuple[str, float | None, dict[str, float], int, Filte
     from cf_estimator.metrics import tilt_error_rad
     from cf_estimator.scenarios import make_scenario
 
-    name, rate, kwargs, seed, params, peers = args
+    name, rate, kwargs, seed, params, peers, floors = args
     sc = make_scenario(name, rate_hz=rate, seed=seed, **kwargs)
     g, a, t = sc.imu.gyro_rad_s, sc.imu.accel_m_s2, sc.imu.t_s
     p6 = dataclasses.replace(params, use_mag=False)
@@ -358,14 +359,21 @@ def _multirotor_case(args: tuple[str, float | None, dict[str, float], int, Filte
     for col, b in bias.items():
         b_err = b - sc.gyro_bias_true_rad_s[-1]
         out[col] += (float(np.degrees(np.linalg.norm(b_err))),)
+    cov = floors.covariance(runs["cf_estimator"])
+    truth = sc.truth.q_world_from_body
+    out["_consistency"] = (tilt_error_rad(qs["cf_estimator"], truth)[after],
+                           (cov[:, 0] + cov[:, 4])[after])
     return out
 
 
-def _multirotor_rows(params: FilterParams, peers: Sequence[str], jobs: int,
+def _multirotor_rows(params: FilterParams, peers: Sequence[str], jobs: int, floors: Floors,
                      columns: Sequence[str] = COLUMNS) -> list[Row]:
+    import numpy as np
+
+    from cf_estimator.bench.consistency import CONSISTENT_BEYOND, consistency
     from cf_estimator.bench.parallel import run_tasks
 
-    work = [(name, rate, kwargs, seed, params, tuple(peers))
+    work = [(name, rate, kwargs, seed, params, tuple(peers), floors)
             for _, name, rate, kwargs in MULTIROTOR_CASES for seed in MULTIROTOR_SEEDS]
     found = run_tasks(_multirotor_case, work, jobs)
     rows = []
@@ -382,6 +390,18 @@ def _multirotor_rows(params: FilterParams, peers: Sequence[str], jobs: int,
                             {c: {f"seed {s}": r[c][i] for s, r in zip(MULTIROTOR_SEEDS, runs,
                                                                       strict=True)}
                              for c in OURS if c in cols}))
+    for k, (label, *_) in enumerate(MULTIROTOR_CASES):  # the reported tilt σ, ours online
+        parts = [r["_consistency"] for r in found[k * n:(k + 1) * n]]
+        c = consistency(np.concatenate([p[0] for p in parts]),
+                        np.concatenate([p[1] for p in parts]))
+        head = f"simulated {label}: tilt"
+        rows.append(Row("multirotor", f"{head} beyond 2σ (consistent {CONSISTENT_BEYOND['tilt']})",
+                        "%", {"cf_estimator": c["beyond_2sigma_pct"]}))
+        rows.append(Row("multirotor", f"{head}, per axis: beyond 2σ (consistent "
+                        f"{CONSISTENT_BEYOND['tilt per axis']})", "%",
+                        {"cf_estimator": c["beyond_2sigma_axis_pct"]}))
+        rows.append(Row("multirotor", f"{head} mean(e²/σ²) (consistent 1)", "1",
+                        {"cf_estimator": c["mean_ratio"]}))
     return rows
 
 
@@ -544,7 +564,7 @@ def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = 
             result.rows += _compass_rows(params, runs_on_arrays, jobs, floors, cols)
             continue
         if family == "multirotor":
-            result.rows += _multirotor_rows(params, runs_on_arrays, jobs, cols)
+            result.rows += _multirotor_rows(params, runs_on_arrays, jobs, floors, cols)
             continue
         if family == "aided":
             rows, notes = _aided_rows(root, params, jobs, loaded)

@@ -262,7 +262,30 @@ def _weaker_lines(cross: dict) -> list[str]:
             who = "ours offline" if peer in OFFLINE_PEERS else "ours"
             lines.append(f"- **{COLUMN_NAMES[peer]} ahead of {who}** on "
                          f"{len(by_peer[peer])} row(s): " + "; ".join(by_peer[peer]) + ".")
-    return lines or ["- No peer scores below ours on any row of these tables."]
+    return (lines or ["- No peer scores below ours on any row of these tables."]) + _overconfident(
+        cross)
+
+
+#: The reported tilt σ is too small where more than this share [%] of the errors lie beyond
+#: twice one axis's σ, or mean(e²/σ²) exceeds MEAN_RATIO_BOUND (issue 50's bounds; a consistent
+#: 2-D Gaussian: 13.5 % and 1).
+AXIS_BEYOND_BOUND_PCT = 25.0
+MEAN_RATIO_BOUND = 2.0
+
+
+def _overconfident(cross: dict) -> list[str]:
+    """The consistency rows beyond the bounds above, as one line (none: no line)."""
+    found = [f"{r['label']} ({r['values']['cf_estimator']:.2f})" for r in cross.get("rows", [])
+             if "cf_estimator" in r.get("values", {})
+             and (("per axis: beyond 2σ" in r["label"]
+                   and r["values"]["cf_estimator"] > AXIS_BEYOND_BOUND_PCT)
+                  or ("mean(e²/σ²)" in r["label"]
+                      and r["values"]["cf_estimator"] > MEAN_RATIO_BOUND))]
+    if not found:
+        return []
+    return [f"- **Our reported σ too small** (beyond {AXIS_BEYOND_BOUND_PCT:g} % per axis or "
+            f"mean(e²/σ²) above {MEAN_RATIO_BOUND:g}) on {len(found)} row(s): "
+            + "; ".join(found) + "."]
 
 
 def render(results: dict) -> str:
@@ -364,7 +387,7 @@ def render(results: dict) -> str:
         "ours and VQF's own estimate only."])
     table(_rows(cross, ["scenarios"]))
     table([r for r in _rows(cross, ["compass"]) if not _consistency(r)])
-    table(_rows(cross, ["multirotor"]))
+    table([r for r in _rows(cross, ["multirotor"]) if not _consistency(r)])
 
     section("Velocity-aided (ours only: the peers take no velocity)", [
         "phantom4 families with their RTK velocity (10 Hz); EuRoC with its ground truth's "
