@@ -18,7 +18,7 @@ Families (the score of one recording; lower is better):
   AUTOPILOT_SETTLE_S after the first IMU sample to the end worth scoring (before a crash)
   [deg];
 - ``multirotor``: the simulated in-air multirotor cases (zig-zags with the Phantom DOTs' bias,
-  and with a de-biased gyro; figure-8s and tight figure-8s on a de-biased gyro), inclination
+  and with a de-biased gyro; figure-8s, tight and slow figure-8s on a de-biased gyro), inclination
   RMS after 10 s [deg], one recording per case and seed;
 - ``handheld``: a simulated handheld sensor (:func:`handheld_case`): a rotation of up to
   250 °/s about a random axis every 8 s, a slow wobble, world-frame hand accelerations of
@@ -58,6 +58,7 @@ MULTIROTOR_CASES: tuple[tuple[str, str, float | None, dict[str, Any]], ...] = (
     ("zigzag_debiased", "zigzag", None, {"gyro_bias_rad_s": (0.0, 0.0, 0.0)}),
     ("figure8", "circles", 200.0, {}),
     ("figure8_tight", "circles", 200.0, {"speed_m_s": 1.0, "turn_rate_rad_s": 1.5}),
+    ("figure8_slow", "circles", 200.0, {"speed_m_s": 1.0, "turn_rate_rad_s": 0.4}),
 )
 MULTIROTOR_SEEDS = (0, 1, 2)
 THESIS_CASES = ("impacts", "vibration", "acceleration")
