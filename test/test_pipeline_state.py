@@ -27,9 +27,6 @@ def test_the_rules_read_and_write_no_private_attribute_of_the_pipeline():
         and node.value.id in ("p", "pipe") and node.attr.startswith("_")
     ]
     assert private == []
-    imported = [alias.name for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)
-                and node.module == "cf_estimator.pipeline.pipeline" for alias in node.names]
-    assert imported and not [n for n in imported if n.startswith("_")]
 
 
 def test_a_new_pipeline_has_one_state_object_per_concern_at_its_start():
@@ -69,3 +66,22 @@ def test_the_filter_can_be_replaced_only_before_the_first_message():
     with pytest.raises(RuntimeError, match="already processed"):
         pipe.replace_filter(ComplementaryFilter(pipe.filter.params))
     assert pipe.filter is other
+
+
+def test_the_rules_use_only_what_their_pipeline_protocol_names_and_the_pipeline_has_it():
+    """process.py types the pipeline it runs for as ``process.Pipeline`` (no import of
+    pipeline.py: no import circle); every member the rules use on ``pipe``/``p`` is one the
+    protocol names, and an ImuPipeline has each of them."""
+    from cf_estimator.pipeline import process
+
+    named = {n for n in vars(process.Pipeline) if not n.startswith("_")}
+    named |= set(process.Pipeline.__annotations__)
+    tree = ast.parse(PROCESS.read_text(encoding="utf-8"))
+    used = {node.attr for node in ast.walk(tree)
+            if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+            and node.value.id in ("p", "pipe")}
+    assert used and used <= named, sorted(used - named)
+    pipe = ImuPipeline()
+    assert [n for n in sorted(named) if not hasattr(pipe, n)] == []
+    imports = [node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)]
+    assert "cf_estimator.pipeline.pipeline" not in imports

@@ -54,10 +54,15 @@ from cf_estimator.pipeline.diagnostics import (
     velocity_values,
 )
 from cf_estimator.pipeline.events import Events, imu_message_events, mag_message_events
-from cf_estimator.pipeline.messages import covariance9
 from cf_estimator.pipeline.params import PipelineParams
 from cf_estimator.pipeline.process import PipelineOutput, Rows, process
-from cf_estimator.pipeline.state import ImuTime, InputRules, MagInput, MessageCounts
+from cf_estimator.pipeline.state import (
+    ImuTime,
+    InputCovariance,
+    InputRules,
+    MagInput,
+    MessageCounts,
+)
 from cf_estimator.pipeline.velocity_input import velocity_from_message
 from cf_estimator.schema import ParameterError, as_dict, specs_of, split_by_owner
 
@@ -114,8 +119,8 @@ class ImuPipeline:
         self.last_rpy: Vec3 | None = None  #: roll, pitch, yaw [rad] of the last output
         self._aiding: VelocityAiding | None = None  # created by the first velocity message
         #: the input covariances (angular velocity, linear acceleration), cached by their bytes
-        self.angular_velocity_covariance = _CovarianceCache()
-        self.linear_acceleration_covariance = _CovarianceCache()
+        self.angular_velocity_covariance = InputCovariance()
+        self.linear_acceleration_covariance = InputCovariance()
         #: the orientation covariance model (cf_estimator.core.covariance)
         self.covariance_model = OrientationCovariance(
             self._pp.orientation_covariance_rad2, self._pp.yaw_covariance_rad2,
@@ -481,30 +486,3 @@ class ImuPipeline:
         self._previous_now_s = now_s
         self.window = WindowStats()
         return report
-
-
-class _CovarianceCache:
-    """Input covariances rarely change: reuse the last tuple when the bytes are equal."""
-
-    __slots__ = ("flip", "raw", "value")
-
-    def __init__(self) -> None:
-        self.raw: bytes | None = None
-        self.value: tuple[float, ...] = ()
-        self.flip = False  #: FLU <-> FRD: D C D with D = diag(1, -1, -1)
-
-    def _convert(self, cov: Any) -> tuple[float, ...]:
-        c = covariance9(cov)
-        if not self.flip or c[0] == -1.0:  # -1: "not provided", kept as is
-            return c
-        return (c[0], -c[1], -c[2], -c[3], c[4], c[5], -c[6], c[7], c[8])
-
-    def get(self, cov: Any) -> tuple[float, ...]:
-        tobytes = getattr(cov, "tobytes", None)  # array.array (rclpy) and NumPy (rosbags)
-        if tobytes is None:
-            return self._convert(cov)
-        raw = tobytes()
-        if raw != self.raw:
-            self.value = self._convert(cov)
-            self.raw = raw
-        return self.value

@@ -2,7 +2,8 @@
 
 :func:`process` takes events in log order (:class:`cf_estimator.pipeline.events.Events`: a
 replay's thousands, the live node's one) and applies every rule of
-:class:`cf_estimator.pipeline.pipeline.ImuPipeline` (its module docstring lists them). Most of a
+:class:`cf_estimator.pipeline.pipeline.ImuPipeline` (its module docstring lists them), through
+what :class:`Pipeline` names of it. Most of a
 recording is *ordinary* — valid values, increasing stamps without a gap that resets, the frame
 ids and covariances of the message before, a magnetometer past its unit check, an initialised
 filter — and a run of ordinary events goes through the stages at once (:func:`_run`): the time
@@ -17,9 +18,10 @@ from __future__ import annotations
 
 import math
 from bisect import bisect_left
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from time import perf_counter
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -31,7 +33,21 @@ from cf_estimator.pipeline.events import IMU, MAG, VELOCITY, Events
 from cf_estimator.pipeline.linear_acceleration import gravity_free
 
 if TYPE_CHECKING:
-    from cf_estimator.pipeline.pipeline import ImuPipeline
+    from cf_estimator.core.filter import ComplementaryFilter
+    from cf_estimator.core.magcal import MagCorrection
+    from cf_estimator.core.params import FilterParams
+    from cf_estimator.core.velocity import VelocityAiding
+    from cf_estimator.pipeline.covariance import OrientationCovariance
+    from cf_estimator.pipeline.diagnostics import WindowStats
+    from cf_estimator.pipeline.frames import OutputFrame
+    from cf_estimator.pipeline.params import PipelineParams
+    from cf_estimator.pipeline.state import (
+        ImuTime,
+        InputCovariance,
+        InputRules,
+        MagInput,
+        MessageCounts,
+    )
 
 Vec3 = tuple[float, float, float]
 TWO_PI = 2.0 * math.pi
@@ -43,6 +59,49 @@ _GYRO_WARN2 = checks.GYRO_IMPLAUSIBLE_RAD_S**2
 _REASONS = (None, checks.ZERO_STAMP, checks.NONFINITE_GYRO, checks.NONFINITE_ACCEL,
             checks.ZERO_ACCEL, checks.IMPLAUSIBLE_GYRO, checks.IMPLAUSIBLE_ACCEL)
 
+
+
+class Pipeline(Protocol):
+    """What the rules read and change of the pipeline they run for
+    (:class:`cf_estimator.pipeline.pipeline.ImuPipeline` is the one): its state objects, the
+    parameters and parts in force, and the few actions a rule triggers (a rejection, a reset,
+    a warning, a message handled alone)."""
+
+    rules: InputRules
+    tally: MessageCounts
+    clock: ImuTime
+    mag_input: MagInput
+    window: WindowStats
+    mag_correction: MagCorrection
+    covariance_model: OrientationCovariance
+    angular_velocity_covariance: InputCovariance
+    linear_acceleration_covariance: InputCovariance
+    imu_frame: str | None
+    accel_check_n: int
+    acc_sum: list[float]
+    last_rpy: Vec3 | None
+
+    @property
+    def filter(self) -> ComplementaryFilter: ...
+    @property
+    def filter_params(self) -> FilterParams: ...
+    @property
+    def pipeline_params(self) -> PipelineParams: ...
+    @property
+    def output_frame(self) -> OutputFrame: ...
+    @property
+    def velocity_aiding(self) -> VelocityAiding | None: ...
+    @property
+    def input_warning_tags(self) -> Mapping[str, str]: ...
+    def warn(self, tag_text: tuple[str, str] | None) -> None: ...
+    def reject(self, reason: str) -> None: ...
+    def reset(self, reason: str) -> None: ...
+    def take_warnings(self) -> list[str]: ...
+    def covariance_bytes(self) -> bytes | None: ...
+    def output_frame_id(self, input_frame_id: str) -> str: ...
+    def on_velocity(self, msg: Any) -> str | None: ...
+    def note_internal_error(self) -> None: ...
+    def process_message(self, msg: Any, imu: bool = True, log_ns: int = 0) -> list[Rows]: ...
 
 @dataclass(slots=True)
 class PipelineOutput:
@@ -186,7 +245,7 @@ class _Chunk:
     event ``start + i`` is ``i``), IMU and magnetometer rows in the body convention paired
     with the world frame, the magnetometer calibrated."""
 
-    def __init__(self, pipe: ImuPipeline, ev: Events, start: int, stop: int) -> None:
+    def __init__(self, pipe: Pipeline, ev: Events, start: int, stop: int) -> None:
         kind_a, log_a, row_a = ev.arrays()
         self.ev, self.start = ev, start
         self.n = stop - start
@@ -240,7 +299,7 @@ class _Chunk:
         return (v[columns.ANGULAR_VELOCITY_COVARIANCE].tobytes()
                 + v[columns.LINEAR_ACCELERATION_COVARIANCE].tobytes())
 
-    def _mag_rows(self, pipe: ImuPipeline, ev: Events, row: np.ndarray, flip: bool) -> None:
+    def _mag_rows(self, pipe: Pipeline, ev: Events, row: np.ndarray, flip: bool) -> None:
         """The magnetometer rows: calibrated, then turned (as the field the filter takes)."""
         self.mag_codes: dict[Any, int] = {}  #: frame id -> its code in mag_fcode
         if self.mag_list:
@@ -265,7 +324,7 @@ class _Chunk:
         return self.mag_codes.get(frame, -1) if frame is not None else -1
 
 
-def process(pipe: ImuPipeline, ev: Events, start: int = 0, stop: int | None = None
+def process(pipe: Pipeline, ev: Events, start: int = 0, stop: int | None = None
             ) -> list[Rows]:
     """Events ``start``..``stop`` of ``ev`` through ``pipe`` (see the module docstring): the
     outputs of the processed IMU messages, a :class:`Rows` per run. Never raises on data: an
@@ -296,7 +355,7 @@ def process(pipe: ImuPipeline, ev: Events, start: int = 0, stop: int | None = No
     return out
 
 
-def _guarded(pipe: ImuPipeline, c: _Chunk, p: int, e: int, stage: Any) -> list[Rows] | None:
+def _guarded(pipe: Pipeline, c: _Chunk, p: int, e: int, stage: Any) -> list[Rows] | None:
     """``stage(pipe, c, p, e)``; an unexpected exception (a bug) drops the IMU messages of
     events p..e-1, each counted as ``internal_error``
     (:meth:`ImuPipeline.note_internal_error`)."""
@@ -315,7 +374,7 @@ def _first_false(mask: np.ndarray) -> int:
     return int(np.argmin(mask))
 
 
-def _ordinary_end(pipe: ImuPipeline, c: _Chunk, p: int) -> int:
+def _ordinary_end(pipe: Pipeline, c: _Chunk, p: int) -> int:
     """The end of the run of ordinary events from range index ``p`` (p itself when event p is
     not ordinary; see the module docstring). Nothing of ``pipe`` changes.
 
@@ -370,7 +429,7 @@ def _ordinary_end(pipe: ImuPipeline, c: _Chunk, p: int) -> int:
     return end
 
 
-def _takes_mag(pipe: ImuPipeline, c: _Chunk, p: int, ia: int, ib: int) -> np.ndarray:
+def _takes_mag(pipe: Pipeline, c: _Chunk, p: int, ia: int, ib: int) -> np.ndarray:
     """Per IMU event ia..ib-1 (from range index p): a magnetometer sample is waiting for it."""
     valid = np.zeros(c.n + 1, dtype=np.int64)
     ma = bisect_left(c.mag_list, p)
@@ -386,7 +445,7 @@ def _takes_mag(pipe: ImuPipeline, c: _Chunk, p: int, ia: int, ib: int) -> np.nda
     return takes
 
 
-def _exceptional(pipe: ImuPipeline, c: _Chunk, p: int, _e: int) -> list[Rows] | None:
+def _exceptional(pipe: Pipeline, c: _Chunk, p: int, _e: int) -> list[Rows] | None:
     """Event ``p`` alone: what only it needs, then (when it goes on) the stages as a run of
     one."""
     kind = int(c.kind[p])
@@ -408,14 +467,14 @@ def _exceptional(pipe: ImuPipeline, c: _Chunk, p: int, _e: int) -> list[Rows] | 
     return None
 
 
-def _message(pipe: ImuPipeline, c: _Chunk, p: int, imu: bool) -> list[Rows] | None:
+def _message(pipe: Pipeline, c: _Chunk, p: int, imu: bool) -> list[Rows] | None:
     """Event ``p`` as a message object (not decoded in bulk) through
     :meth:`ImuPipeline.process_message`."""
     rows = pipe.process_message(c.ev.message(c.start + p), imu=imu, log_ns=int(c.log_ns[p]))
     return rows or None
 
 
-def _imu_alone(pipe: ImuPipeline, c: _Chunk, p: int, j: int) -> list[Rows] | None:
+def _imu_alone(pipe: Pipeline, c: _Chunk, p: int, j: int) -> list[Rows] | None:
     """An IMU message that is not ordinary: the covariances it brings, the value and stamp
     checks (rejections, resets), the frame id and unit checks, then a run of one."""
     v = c.imu_values[j]
@@ -469,7 +528,7 @@ def _imu_alone(pipe: ImuPipeline, c: _Chunk, p: int, j: int) -> list[Rows] | Non
     return _run(pipe, c, p, p + 1)
 
 
-def _mag_checks(pipe: ImuPipeline, c: _Chunk, j: int) -> None:
+def _mag_checks(pipe: Pipeline, c: _Chunk, j: int) -> None:
     """A valid magnetometer sample's frame id and unit checks (warn-once)."""
     mi = pipe.mag_input
     frame = c.mag_frame[j]
@@ -485,7 +544,7 @@ def _mag_checks(pipe: ImuPipeline, c: _Chunk, j: int) -> None:
             pipe.warn(checks.mag_units_warning(mi.check_norm_sum / mi.check_n))
 
 
-def _run(pipe: ImuPipeline, c: _Chunk, p: int, e: int) -> list[Rows] | None:
+def _run(pipe: Pipeline, c: _Chunk, p: int, e: int) -> list[Rows] | None:
     """Events p..e-1 (ordinary, or one already checked by :func:`_exceptional`) through the
     stages: magnetometer samples, time base, filter, counters, covariance, outputs."""
     t0 = perf_counter()
@@ -503,7 +562,7 @@ def _run(pipe: ImuPipeline, c: _Chunk, p: int, e: int) -> list[Rows] | None:
                           mag_t, t0)]
 
 
-def _mag_stage(pipe: ImuPipeline, c: _Chunk, p: int, ia: int, ib: int, ma: int, mb: int
+def _mag_stage(pipe: Pipeline, c: _Chunk, p: int, ia: int, ib: int, ma: int, mb: int
                ) -> tuple[np.ndarray | None, np.ndarray]:
     """Magnetometer events ma..mb-1 (counted; the valid ones wait for the next IMU message,
     a sample replaced before one came is dropped) and the sample each IMU message ia..ib-1
@@ -587,7 +646,7 @@ def _mag_stage(pipe: ImuPipeline, c: _Chunk, p: int, ia: int, ib: int, ma: int, 
     return mag, mag_t
 
 
-def _time_stage(pipe: ImuPipeline, t_ns: np.ndarray, d_ns: np.ndarray) -> np.ndarray:
+def _time_stage(pipe: Pipeline, t_ns: np.ndarray, d_ns: np.ndarray) -> np.ndarray:
     """The time base over the run's stamps [ns] (all accepted; ``d_ns`` their intervals from
     the row before, the first one's unused): the filter's interval per row [s] (0 for a first
     sample; the mean interval across a gap, counted), the diagnostics period's interval
@@ -639,7 +698,7 @@ def _time_stage(pipe: ImuPipeline, t_ns: np.ndarray, d_ns: np.ndarray) -> np.nda
     return dt
 
 
-def _filter_stage(pipe: ImuPipeline, t_ns: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
+def _filter_stage(pipe: Pipeline, t_ns: np.ndarray, gyro: np.ndarray, accel: np.ndarray,
                   mag: np.ndarray | None, dt: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None, int]:
     """The filter over the rows (a first sample initialises it; velocity aiding, when there is
@@ -690,7 +749,7 @@ def _filter_stage(pipe: ImuPipeline, t_ns: np.ndarray, gyro: np.ndarray, accel: 
     return q, extra, used, rejected, k0
 
 
-def _output_stage(pipe: ImuPipeline, c: _Chunk, ia: int, ib: int, dt: np.ndarray,
+def _output_stage(pipe: Pipeline, c: _Chunk, ia: int, ib: int, dt: np.ndarray,
                   gyro: np.ndarray, accel: np.ndarray, q: np.ndarray, extra: np.ndarray,
                   used: np.ndarray | None, rejected: np.ndarray | None, first: int,
                   mag_t: np.ndarray,
@@ -770,7 +829,7 @@ def _output_stage(pipe: ImuPipeline, c: _Chunk, ia: int, ib: int, dt: np.ndarray
                 gyro, accel, av_cov, la_cov, extra, en, gfree, pipe.take_warnings())
 
 
-def _rpy(p: ImuPipeline, q: np.ndarray, backend: str = "python") -> np.ndarray:
+def _rpy(p: Pipeline, q: np.ndarray, backend: str = "python") -> np.ndarray:
     """(n, 3) roll, pitch, yaw [rad] (aerospace ZYX) of each row of ``q`` (w, x, y, z): backend
     'compiled': ``_kernel.rpy_rows``, else ``math.atan2``/``math.asin`` per row (the same libm
     calls); then the unwrap, sequential by nature, when it is on."""

@@ -5,7 +5,8 @@
 - :class:`MessageCounts` — cumulative counts of what came in and what became of it;
 - :class:`ImuTime` — the IMU time base (cleared by every reset);
 - :class:`MagInput` — the magnetometer sample waiting for the next IMU step and its checks;
-- :class:`InputRules` — the time and magnetometer rules derived from the parameters in force.
+- :class:`InputRules` — the time and magnetometer rules derived from the parameters in force;
+- :class:`InputCovariance` — an input covariance as the outputs carry it (cached by its bytes).
 
 Plain mutable objects with slots: the hot path increments their attributes.
 """
@@ -13,6 +14,9 @@ Plain mutable objects with slots: the hot path increments their attributes.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
+
+from cf_estimator.pipeline.messages import covariance9
 
 Vec3 = tuple[float, float, float]
 
@@ -68,3 +72,32 @@ class InputRules:
     mag_timeout_ns: int = 0  #: mag_timeout_s
     use_mag: bool = True  #: FilterParams.use_mag
     flip: bool = False  #: input vectors turned FLU <-> FRD (body_frame against world_frame)
+
+
+class InputCovariance:
+    """One input covariance (an IMU message's angular velocity or linear acceleration one) as
+    the output carries it: row-major 9-tuple, turned FLU <-> FRD when ``flip``. Input
+    covariances rarely change: the last tuple is reused while the bytes are equal."""
+
+    __slots__ = ("flip", "raw", "value")
+
+    def __init__(self) -> None:
+        self.raw: bytes | None = None
+        self.value: tuple[float, ...] = ()
+        self.flip = False  #: FLU <-> FRD: D C D with D = diag(1, -1, -1)
+
+    def _convert(self, cov: Any) -> tuple[float, ...]:
+        c = covariance9(cov)
+        if not self.flip or c[0] == -1.0:  # -1: "not provided", kept as is
+            return c
+        return (c[0], -c[1], -c[2], -c[3], c[4], c[5], -c[6], c[7], c[8])
+
+    def get(self, cov: Any) -> tuple[float, ...]:
+        tobytes = getattr(cov, "tobytes", None)  # array.array (rclpy) and NumPy (rosbags)
+        if tobytes is None:
+            return self._convert(cov)
+        raw = tobytes()
+        if raw != self.raw:
+            self.value = self._convert(cov)
+            self.raw = raw
+        return self.value
