@@ -3,15 +3,15 @@
 :func:`process` takes events in log order (:class:`cf_estimator.pipeline.events.Events`: a
 replay's thousands, the live node's one) and applies every rule of
 :class:`cf_estimator.pipeline.pipeline.ImuPipeline` (its module docstring lists them), through
-what :class:`Pipeline` names of it. Most of a
-recording is *ordinary* — valid values, increasing stamps without a gap that resets, the frame
-ids and covariances of the message before, a magnetometer past its unit check, an initialised
-filter — and a run of ordinary events goes through the stages at once (:func:`_run`): the time
-base, magnetometer pairing, the filter over the rows, counters, covariance, frames, roll/pitch/
-yaw. An event that is not ordinary ends the run and is taken alone (:func:`_exceptional`): what
-only it needs (a rejection, a reset, a warning, a unit check, a velocity message) is done, then,
-when it goes on, it runs through the same stages as a run of one. Either way every stage exists
-once; a chunk gives the same outputs, counters and state, bit for bit, however it is cut.
+what the protocol :class:`Pipeline` names of it. Most of a recording is *ordinary* — valid
+values, increasing stamps without a gap that resets, the frame ids and covariances of the
+message before, a magnetometer past its unit check, an initialised filter — and a run of
+ordinary events goes through the stages at once (:func:`_run`): the time base, magnetometer
+pairing, the filter over the rows, counters, covariance, frames, roll/pitch/yaw. An event that
+is not ordinary ends the run and is taken alone (:func:`_exceptional`): what only it needs (a
+rejection, a reset, a warning, a unit check, a velocity message) is done, then, when it goes on,
+it runs through the same stages as a run of one. Either way every stage exists once; a chunk
+gives the same outputs, counters and state, bit for bit, however it is cut.
 """
 
 from __future__ import annotations
@@ -60,7 +60,6 @@ _REASONS = (None, checks.ZERO_STAMP, checks.NONFINITE_GYRO, checks.NONFINITE_ACC
             checks.ZERO_ACCEL, checks.IMPLAUSIBLE_GYRO, checks.IMPLAUSIBLE_ACCEL)
 
 
-
 class Pipeline(Protocol):
     """What the rules read and change of the pipeline they run for
     (:class:`cf_estimator.pipeline.pipeline.ImuPipeline` is the one): its state objects, the
@@ -102,6 +101,7 @@ class Pipeline(Protocol):
     def on_velocity(self, msg: Any) -> str | None: ...
     def note_internal_error(self) -> None: ...
     def process_message(self, msg: Any, imu: bool = True, log_ns: int = 0) -> list[Rows]: ...
+
 
 @dataclass(slots=True)
 class PipelineOutput:
