@@ -79,7 +79,7 @@ def test_the_committed_results_hold_every_family_and_no_wall_clock_figure():
     assert results["schema"] == report.SCHEMA
     families = {r["family"] for r in results["cross"]["rows"]}
     assert families == {"euroc", "phantom4", "phantom4_horizontal", "broad", "scenarios",
-                        "compass", "multirotor", "aided"}
+                        "compass", "multirotor", "handheld", "aided"}
     assert set(results["cross"]["columns"]) >= {"cf_estimator", "vqf", "fusion", "madgwick",
                                                 "complementary", "onboard"}
     assert {a["autopilot"] for a in results["autopilot"]} == {"PX4", "ArduPilot"}

@@ -44,6 +44,9 @@ looser bound would pretend); they stay open:
   the held-back nano-quadrotor) at most VQF online — 1.91° against 1.80° (1.29° with
   `bias_learning_k2: 0`: the in-flight learning takes the bank × the turn rate for a pitch-rate
   bias of about 0.5 °/s, and the hypotheses' evidence picks it);
+- issue 50: the simulated handheld sensor (250 °/s turns, a gyro with a 1–1.5 % scale error
+  and no bias; the held-back wand's and BROAD's fast rotations) below VQF online — 2.34°
+  against 1.54° (peak 8.43° against 3.66°; 1.40° with `bias_learning_k2: 0`);
 - issue 50: the same on every family, the simulated multirotor cases included (≤ 25 % per axis,
   mean(e²/σ²) ≤ 2): missed on the figure-8s (1 kHz and 100 Hz: 48.4 / 48.5 %, 2.19 / 2.22) and
   the slow figure-8s (68.0 %, 2.62), where the falsely learned pitch-rate bias above is taken
@@ -314,11 +317,12 @@ def test_target_simulated_multirotor_cases_at_most_vqf_online(table):
     figure-8s 3.59° against 5.01° since the loop gain follows the velocity swing, tight
     figure-8s 0.75° against 1.10° since the bias is learned through the unit's own R̄; their
     learned-bias target, < 0.05 °/s, is missed: module docstring). The slow figure-8s (issue
-    50's proxy of the held-back nano-quadrotor) miss it: module docstring."""
+    50's proxy of the held-back nano-quadrotor) and the handheld sensor miss it: module
+    docstring."""
     rows, _ = table
     labels = [label for label in rows
               if label.startswith("simulated") and label.endswith("inclination RMS after 10 s")
-              and not label.startswith("simulated slow")]
+              and not label.startswith(("simulated slow", "simulated handheld"))]
     assert len(labels) == 4
     for label in labels:
         assert _ours(rows, label) <= _ours(rows, label, "vqf"), label

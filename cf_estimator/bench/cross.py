@@ -73,9 +73,9 @@ COLUMNS = ("cf_estimator", "cf_estimator_offline", "vqf", "vqf_offline")
 #: Our columns (online, offline): the ones whose rows keep their per-recording values (Row.members).
 OURS = COLUMNS[:2]
 FAMILIES = ("euroc", "phantom4", "phantom4_horizontal", "broad", "scenarios", "compass",
-            "multirotor", "aided")
+            "multirotor", "handheld", "aided")
 #: Simulated families (no data directory needed).
-SIMULATED = ("scenarios", "compass", "multirotor")
+SIMULATED = ("scenarios", "compass", "multirotor", "handheld")
 #: The aided rows' recorded families (data directories) and the label of each.
 AIDED_FAMILIES = (("phantom4_horizontal", "phantom4 horizontal"), ("phantom4", "phantom4"),
                   ("euroc", "EuRoC MH"))
@@ -411,6 +411,59 @@ def _multirotor_rows(params: FilterParams, peers: Sequence[str], jobs: int, floo
     return rows
 
 
+def _handheld_case(args: tuple[int, FilterParams, tuple[str, ...]]
+                   ) -> dict[str, tuple[float, float]]:
+    """{column: (RMS, peak) [deg] after 10 s} of one simulated handheld recording
+    (:func:`cf_estimator.bench.ablation.handheld_case`), 6-D."""
+    import numpy as np
+
+    from cf_estimator.bench import peers as peer_mod
+    from cf_estimator.bench.ablation import handheld_case
+    from cf_estimator.bench.euroc_eval import SETTLE_S
+    from cf_estimator.core.batch import estimate
+    from cf_estimator.metrics import tilt_error_rad
+
+    seed, params, peers = args
+    t, g, a, truth = handheld_case(seed)
+    rate = float(1.0 / np.median(np.diff(t)))
+    p6 = dataclasses.replace(params, use_mag=False)
+    qs = {col: estimate(g, a, None, timestamps_s=t, params=p6, offline=off).quaternion
+          for col, off in (("cf_estimator", False), ("cf_estimator_offline", True))}
+    if "vqf" in peers:
+        qs["vqf"] = peer_mod.run_vqf(g, a, None, rate)["6d"]
+        qs["vqf_offline"] = peer_mod.run_vqf_offline(g, a, None, rate)["6d"]
+    runners = peer_mod.runners()
+    for p in _runnable(peers):
+        if p != "vqf":
+            qs[p] = runners[p](g, a, None, rate, ("6d",))["6d"]
+    after = t >= SETTLE_S
+    out = {}
+    for col, q in qs.items():
+        e = np.degrees(tilt_error_rad(q, truth))[after]
+        out[col] = (float(np.sqrt(np.mean(e * e))), float(np.max(e)))
+    return out
+
+
+def _handheld_rows(params: FilterParams, peers: Sequence[str], jobs: int,
+                   columns: Sequence[str] = COLUMNS) -> list[Row]:
+    from cf_estimator.bench.ablation import HANDHELD_SEEDS
+    from cf_estimator.bench.parallel import run_tasks
+
+    runs = run_tasks(_handheld_case, [(seed, params, tuple(peers)) for seed in HANDHELD_SEEDS],
+                     jobs)
+    rows = []
+    n = len(HANDHELD_SEEDS)
+    for i, what in enumerate(("inclination RMS after 10 s", "inclination peak after 10 s")):
+        cols = [c for c in columns if all(c in r for r in runs)]
+        rows.append(Row("handheld", f"simulated handheld, 250 °/s turns: {what}", "deg",
+                        {c: sum(r[c][i] for r in runs) / n for c in cols},
+                        {c: standard_error([r[c][i] for r in runs]) for c in cols},
+                        {c: {f"seed {s}": r[c][i] for s, r in zip(HANDHELD_SEEDS, runs,
+                                                                  strict=True)}
+                         for c in OURS if c in cols}))
+    return rows
+
+
 def _aided_rows(root: Path, params: FilterParams, jobs: int, loaded: _Flights
                 ) -> tuple[list[Row], list[str]]:
     """The velocity-aided rows (module docstring) and notes for missing data directories."""
@@ -571,6 +624,9 @@ def run_cross(data: str | Path, params: FilterParams, families: Sequence[str] = 
             continue
         if family == "multirotor":
             result.rows += _multirotor_rows(params, runs_on_arrays, jobs, floors, cols)
+            continue
+        if family == "handheld":
+            result.rows += _handheld_rows(params, runs_on_arrays, jobs, cols)
             continue
         if family == "aided":
             rows, notes = _aided_rows(root, params, jobs, loaded)
