@@ -466,7 +466,8 @@ def render(results: dict) -> str:
         "bias hypotheses, [0011](docs/decisions/0011-full-vector-variant-removed.md) the "
         "full-vector variant removed, [0012](docs/decisions/0012-in-flight-hard-iron-not-taken.md) "
         "in-flight hard iron not taken, [0013](docs/decisions/0013-fewer-parameters.md) fewer "
-        "parameters, [0014](docs/decisions/0014-per-sample-speed.md) per-sample speed. "
+        "parameters, [0014](docs/decisions/0014-per-sample-speed.md) per-sample speed, "
+        "[0015](docs/decisions/0015-one-pipeline.md) one pipeline over arrays. "
         "test/test_cross_table.py guards every row of ours on each change against this report's "
         "results, recording by recording (the per-recording values the JSON keeps: paired "
         "deltas, not the spread between recordings)."])
