@@ -328,6 +328,60 @@ def _compass_rows(params: FilterParams, peers: Sequence[str], jobs: int,
     return rows
 
 
+def _simulated_6d(g: Any, a: Any, t: Any, rate_hz: float, truth: Any, params: FilterParams,
+                  peers: Sequence[str]) -> tuple[dict[str, tuple[float, ...]], Any, Any, Any]:
+    """Ours online and offline and the peers, 6-D, on one simulated recording (gyro [rad/s],
+    accelerometer [m/s²], stamps [s], the truth q_world(ENU)_from_sensor): ({column: (RMS,
+    peak) [deg] after SETTLE_S}, our online result, VQF online's output or None, the mask of
+    the scored samples)."""
+    import numpy as np
+
+    from cf_estimator.bench import peers as peer_mod
+    from cf_estimator.bench.euroc_eval import SETTLE_S
+    from cf_estimator.core.batch import estimate
+    from cf_estimator.metrics import tilt_error_rad
+
+    p6 = dataclasses.replace(params, use_mag=False)
+    runs = {col: estimate(g, a, None, timestamps_s=t, params=p6, offline=off)
+            for col, off in (("cf_estimator", False), ("cf_estimator_offline", True))}
+    qs = {col: r.quaternion for col, r in runs.items()}
+    vqf = None
+    if "vqf" in peers:
+        vqf = peer_mod.run_vqf(g, a, None, rate_hz)
+        qs["vqf"] = vqf["6d"]
+        qs["vqf_offline"] = peer_mod.run_vqf_offline(g, a, None, rate_hz)["6d"]
+    runners = peer_mod.runners()
+    for p in _runnable(peers):
+        if p != "vqf":
+            qs[p] = runners[p](g, a, None, rate_hz, ("6d",))["6d"]
+    after = t >= SETTLE_S
+    out: dict[str, tuple[float, ...]] = {}
+    for col, q in qs.items():
+        e = np.degrees(tilt_error_rad(q, truth))[after]
+        out[col] = (float(np.sqrt(np.mean(e * e))), float(np.max(e)))
+    return out, runs["cf_estimator"], vqf, after
+
+
+def _seed_rows(family: str, label: str, whats: Sequence[tuple[str, str]], runs: Sequence[dict],
+               seeds: Sequence[int], columns: Sequence[str]) -> list[Row]:
+    """One row per (what, unit) of ``whats``: element i of each seed's tuple per column, mean
+    over the seeds, its standard error, and our columns' per-seed values (the paired guards)."""
+    rows = []
+    n = len(seeds)
+    for i, (what, unit) in enumerate(whats):
+        cols = [c for c in columns if all(len(r.get(c, ())) > i for r in runs)]
+        rows.append(Row(family, f"simulated {label}: {what}", unit,
+                        {c: sum(r[c][i] for r in runs) / n for c in cols},
+                        {c: standard_error([r[c][i] for r in runs]) for c in cols},
+                        {c: {f"seed {s}": r[c][i] for s, r in zip(seeds, runs, strict=True)}
+                         for c in OURS if c in cols}))
+    return rows
+
+
+#: The inclination rows of a simulated recording: (what, unit) of :func:`_simulated_6d`'s pair.
+INCLINATION_ROWS = (("inclination RMS after 10 s", "deg"), ("inclination peak after 10 s", "deg"))
+
+
 def _multirotor_case(args: tuple[str, float | None, dict[str, float], int, FilterParams,
                                   tuple[str, ...], Floors]) -> dict[str, tuple]:
     """{column: (RMS, peak) [deg] after 10 s}; ours and VQF online also the learned-bias error
@@ -335,41 +389,25 @@ def _multirotor_case(args: tuple[str, float | None, dict[str, float], int, Filte
     its reported variance [rad²] after 10 s (the consistency rows)."""
     import numpy as np
 
-    from cf_estimator.bench import peers as peer_mod
-    from cf_estimator.bench.euroc_eval import SETTLE_S
-    from cf_estimator.core.batch import estimate
     from cf_estimator.metrics import tilt_error_rad
     from cf_estimator.scenarios import make_scenario
 
     name, rate, kwargs, seed, params, peers, floors = args
     sc = make_scenario(name, rate_hz=rate, seed=seed, **kwargs)
-    g, a, t = sc.imu.gyro_rad_s, sc.imu.accel_m_s2, sc.imu.t_s
-    p6 = dataclasses.replace(params, use_mag=False)
-    runs = {col: estimate(g, a, None, timestamps_s=t, params=p6, offline=off)
-            for col, off in (("cf_estimator", False), ("cf_estimator_offline", True))}
-    qs = {col: r.quaternion for col, r in runs.items()}
-    bias = {"cf_estimator": runs["cf_estimator"].gyro_bias_rad_s[-1]}
-    if "vqf" in peers:
-        vqf = peer_mod.run_vqf(g, a, None, sc.rate_hz)
-        qs["vqf"], bias["vqf"] = vqf["6d"], vqf["bias"][-1]
-        qs["vqf_offline"] = peer_mod.run_vqf_offline(g, a, None, sc.rate_hz)["6d"]
-    runners = peer_mod.runners()
-    for p in _runnable(peers):
-        if p != "vqf":
-            qs[p] = runners[p](g, a, None, sc.rate_hz, ("6d",))["6d"]
-    after = t >= SETTLE_S
-    out: dict[str, tuple[float, ...]] = {}
-    for col, q in qs.items():
-        e = np.degrees(tilt_error_rad(q, sc.truth.q_world_from_body))[after]
-        out[col] = (float(np.sqrt(np.mean(e * e))), float(np.max(e)))
+    truth = sc.truth.q_world_from_body
+    out, ours, vqf, after = _simulated_6d(sc.imu.gyro_rad_s, sc.imu.accel_m_s2, sc.imu.t_s,
+                                          sc.rate_hz, truth, params, peers)
+    bias = {"cf_estimator": ours.gyro_bias_rad_s[-1]}
+    if vqf is not None:
+        bias["vqf"] = vqf["bias"][-1]
     for col, b in bias.items():
         b_err = b - sc.gyro_bias_true_rad_s[-1]
         out[col] += (float(np.degrees(np.linalg.norm(b_err))),)
-    cov = floors.covariance(runs["cf_estimator"])
-    truth = sc.truth.q_world_from_body
-    out["_consistency"] = (tilt_error_rad(qs["cf_estimator"], truth)[after],
-                           (cov[:, 0] + cov[:, 4])[after])
-    return out
+    cov = floors.covariance(ours)
+    result: dict[str, tuple] = dict(out)
+    result["_consistency"] = (tilt_error_rad(ours.quaternion, truth)[after],
+                              (cov[:, 0] + cov[:, 4])[after])
+    return result
 
 
 def _multirotor_rows(params: FilterParams, peers: Sequence[str], jobs: int, floors: Floors,
@@ -384,18 +422,10 @@ def _multirotor_rows(params: FilterParams, peers: Sequence[str], jobs: int, floo
     found = run_tasks(_multirotor_case, work, jobs)
     rows = []
     n = len(MULTIROTOR_SEEDS)
+    whats = (*INCLINATION_ROWS, ("learned-bias error at the end", "deg/s"))
     for k, (label, *_) in enumerate(MULTIROTOR_CASES):
-        runs = found[k * n:(k + 1) * n]
-        for i, (what, unit) in enumerate((("inclination RMS after 10 s", "deg"),
-                                          ("inclination peak after 10 s", "deg"),
-                                          ("learned-bias error at the end", "deg/s"))):
-            cols = [c for c in columns if all(len(r.get(c, ())) > i for r in runs)]
-            rows.append(Row("multirotor", f"simulated {label}: {what}", unit,
-                            {c: sum(r[c][i] for r in runs) / n for c in cols},
-                            {c: standard_error([r[c][i] for r in runs]) for c in cols},
-                            {c: {f"seed {s}": r[c][i] for s, r in zip(MULTIROTOR_SEEDS, runs,
-                                                                      strict=True)}
-                             for c in OURS if c in cols}))
+        rows += _seed_rows("multirotor", label, whats, found[k * n:(k + 1) * n],
+                           MULTIROTOR_SEEDS, columns)
     for k, (label, *_) in enumerate(MULTIROTOR_CASES):  # the reported tilt σ, ours online
         parts = [r["_consistency"] for r in found[k * n:(k + 1) * n]]
         c = consistency(np.concatenate([p[0] for p in parts]),
@@ -412,36 +442,16 @@ def _multirotor_rows(params: FilterParams, peers: Sequence[str], jobs: int, floo
 
 
 def _handheld_case(args: tuple[int, FilterParams, tuple[str, ...]]
-                   ) -> dict[str, tuple[float, float]]:
+                   ) -> dict[str, tuple[float, ...]]:
     """{column: (RMS, peak) [deg] after 10 s} of one simulated handheld recording
     (:func:`cf_estimator.bench.ablation.handheld_case`), 6-D."""
     import numpy as np
 
-    from cf_estimator.bench import peers as peer_mod
     from cf_estimator.bench.ablation import handheld_case
-    from cf_estimator.bench.euroc_eval import SETTLE_S
-    from cf_estimator.core.batch import estimate
-    from cf_estimator.metrics import tilt_error_rad
 
     seed, params, peers = args
     t, g, a, truth = handheld_case(seed)
-    rate = float(1.0 / np.median(np.diff(t)))
-    p6 = dataclasses.replace(params, use_mag=False)
-    qs = {col: estimate(g, a, None, timestamps_s=t, params=p6, offline=off).quaternion
-          for col, off in (("cf_estimator", False), ("cf_estimator_offline", True))}
-    if "vqf" in peers:
-        qs["vqf"] = peer_mod.run_vqf(g, a, None, rate)["6d"]
-        qs["vqf_offline"] = peer_mod.run_vqf_offline(g, a, None, rate)["6d"]
-    runners = peer_mod.runners()
-    for p in _runnable(peers):
-        if p != "vqf":
-            qs[p] = runners[p](g, a, None, rate, ("6d",))["6d"]
-    after = t >= SETTLE_S
-    out = {}
-    for col, q in qs.items():
-        e = np.degrees(tilt_error_rad(q, truth))[after]
-        out[col] = (float(np.sqrt(np.mean(e * e))), float(np.max(e)))
-    return out
+    return _simulated_6d(g, a, t, float(1.0 / np.median(np.diff(t))), truth, params, peers)[0]
 
 
 def _handheld_rows(params: FilterParams, peers: Sequence[str], jobs: int,
@@ -451,17 +461,8 @@ def _handheld_rows(params: FilterParams, peers: Sequence[str], jobs: int,
 
     runs = run_tasks(_handheld_case, [(seed, params, tuple(peers)) for seed in HANDHELD_SEEDS],
                      jobs)
-    rows = []
-    n = len(HANDHELD_SEEDS)
-    for i, what in enumerate(("inclination RMS after 10 s", "inclination peak after 10 s")):
-        cols = [c for c in columns if all(c in r for r in runs)]
-        rows.append(Row("handheld", f"simulated handheld, 250 °/s turns: {what}", "deg",
-                        {c: sum(r[c][i] for r in runs) / n for c in cols},
-                        {c: standard_error([r[c][i] for r in runs]) for c in cols},
-                        {c: {f"seed {s}": r[c][i] for s, r in zip(HANDHELD_SEEDS, runs,
-                                                                  strict=True)}
-                         for c in OURS if c in cols}))
-    return rows
+    return _seed_rows("handheld", "handheld, 250 °/s turns", INCLINATION_ROWS, runs,
+                      HANDHELD_SEEDS, columns)
 
 
 def _aided_rows(root: Path, params: FilterParams, jobs: int, loaded: _Flights
